@@ -1,0 +1,35 @@
+//! # hexacomp-core
+//!
+//! The numerics of hexacomp, after Song, Tian, Tian & Liu (2022), "Calibration of a Stewart
+//! platform by designing a robust joint compensator with artificial neural networks":
+//!
+//! - [`geometry`]: the platform geometry (DESIGN.md TOML), its validation and fingerprint, and the
+//!   built-in `prototype`;
+//! - [`pose`]: poses in LinuxCNC's convention `R = Rz(c)·Ry(b)·Rx(a)`, twists;
+//! - [`kinematics`]: allocation-free inverse kinematics and Newton forward kinematics;
+//! - [`screw`]: the paper's matrices `W`, `T = W⁻ᵀ` (Eq. 3), `P` (Eq. 4) and `cond(PT)`;
+//! - [`sampling`]: seeded uniform poses over the task workspace;
+//! - [`virtual_platform`]: a simulated real machine with realistic error sources and a simulated
+//!   point-measuring device;
+//! - [`stats`]: max/mean/std summaries of pose errors (the paper's Table 2 layout).
+//!
+//! Units everywhere: millimetres; radians in code, degrees only in files and on the command line.
+//! This crate does no inter-process communication and starts no threads.
+
+#![warn(missing_docs)]
+
+pub mod error;
+pub mod geometry;
+pub mod kinematics;
+pub mod pose;
+pub mod sampling;
+pub mod screw;
+pub mod stats;
+pub mod virtual_platform;
+
+pub use error::{Error, Result};
+pub use geometry::{Fingerprint, Geometry, LEGS, TARGETS, Workspace};
+pub use kinematics::{
+    ForwardOptions, LegLengths, LegStatus, forward_kinematics, inverse_kinematics,
+};
+pub use pose::{Pose, Twist};

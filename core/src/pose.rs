@@ -1,0 +1,210 @@
+//! Platform poses and the orientation convention.
+//!
+//! A pose places the platform frame `K_A` (origin: platform centre `A`) in the base frame `K_B`
+//! (origin `B`: centre of the base joint plane, z up). Orientation is the roll–pitch–yaw sequence of
+//! LinuxCNC's hexapod kinematics (genhexkins): `R = Rz(c)·Ry(b)·Rx(a)`.
+//!
+//! Units: millimetres for positions; radians inside the code, degrees only at the file/CLI boundary
+//! ([`Pose::from_mm_deg`], [`Pose::to_mm_deg`]).
+
+use glam::{DMat3, DVec3};
+
+/// A platform pose: position of `A` in `K_B` (mm) and roll/pitch/yaw angles (rad).
+#[derive(Debug, Clone, Copy, PartialEq, Default, serde::Serialize, serde::Deserialize)]
+pub struct Pose {
+    /// Position of the platform centre `A` in the base frame, mm.
+    pub position: DVec3,
+    /// `(a, b, c)`: rotations about x, y, z in rad, composed as `Rz(c)·Ry(b)·Rx(a)`.
+    pub angles: DVec3,
+}
+
+/// The small displacement that takes one pose to another, expressed about point `A` in axes
+/// parallel to `K_B` (the paper's frame `K'_A`): the pose-error twist `ξ_t = (δ_A, ε)` of Eq. 2.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Twist {
+    /// Translation of `A`, mm (`δ_A`).
+    pub translation: DVec3,
+    /// Rotation vector in base-frame axes, rad (`ε`): axis × angle.
+    pub rotation: DVec3,
+}
+
+impl Twist {
+    /// The twist as the 6-vector `(δ_A, ε)` used by the paper's matrices.
+    pub fn to_array(&self) -> [f64; 6] {
+        let (t, r) = (self.translation, self.rotation);
+        [t.x, t.y, t.z, r.x, r.y, r.z]
+    }
+
+    /// Builds a twist from the 6-vector `(δ_A [mm], ε [rad])`.
+    pub fn from_array(v: [f64; 6]) -> Self {
+        Self {
+            translation: DVec3::new(v[0], v[1], v[2]),
+            rotation: DVec3::new(v[3], v[4], v[5]),
+        }
+    }
+}
+
+impl Pose {
+    /// A pose from a position (mm) and roll/pitch/yaw angles (rad).
+    pub const fn new(position: DVec3, angles: DVec3) -> Self {
+        Self { position, angles }
+    }
+
+    /// A pose from the file/CLI convention `[x, y, z, a, b, c]` in mm and degrees.
+    pub fn from_mm_deg(v: [f64; 6]) -> Self {
+        Self {
+            position: DVec3::new(v[0], v[1], v[2]),
+            angles: DVec3::new(v[3].to_radians(), v[4].to_radians(), v[5].to_radians()),
+        }
+    }
+
+    /// The pose as `[x, y, z, a, b, c]` in mm and degrees.
+    pub fn to_mm_deg(&self) -> [f64; 6] {
+        let (p, a) = (self.position, self.angles);
+        [
+            p.x,
+            p.y,
+            p.z,
+            a.x.to_degrees(),
+            a.y.to_degrees(),
+            a.z.to_degrees(),
+        ]
+    }
+
+    /// True when every component is finite.
+    pub fn is_finite(&self) -> bool {
+        self.position.is_finite() && self.angles.is_finite()
+    }
+
+    /// The rotation matrix `R = Rz(c)·Ry(b)·Rx(a)` taking platform-frame vectors to base-frame axes.
+    #[inline]
+    pub fn rotation(&self) -> DMat3 {
+        DMat3::from_rotation_z(self.angles.z)
+            * DMat3::from_rotation_y(self.angles.y)
+            * DMat3::from_rotation_x(self.angles.x)
+    }
+
+    /// The pose with position `position` (mm) and orientation `rotation`, angles recovered in the
+    /// branch `b ∈ [-90°, 90°]`, `a, c ∈ (-180°, 180°]`.
+    pub fn from_rotation(position: DVec3, rotation: &DMat3) -> Self {
+        // Element (row r, column k) of a column-major glam matrix is `col(k)[r]`.
+        let r00 = rotation.x_axis.x;
+        let r10 = rotation.x_axis.y;
+        let r20 = rotation.x_axis.z;
+        let r21 = rotation.y_axis.z;
+        let r22 = rotation.z_axis.z;
+        let b = (-r20).atan2((r00 * r00 + r10 * r10).sqrt());
+        let a = r21.atan2(r22);
+        let c = r10.atan2(r00);
+        Self::new(position, DVec3::new(a, b, c))
+    }
+
+    /// A platform-frame point (mm) expressed in the base frame (mm): `t + R·p`.
+    #[inline]
+    pub fn transform_point(&self, platform_point: DVec3) -> DVec3 {
+        self.position + self.rotation() * platform_point
+    }
+
+    /// This pose displaced by a small twist: `t + δ_A`, `exp([ε×])·R` (rotation about `A` in
+    /// base-frame axes).
+    pub fn displaced(&self, twist: &Twist) -> Self {
+        let rotation = rotation_from_vector(twist.rotation) * self.rotation();
+        Self::from_rotation(self.position + twist.translation, &rotation)
+    }
+
+    /// The twist that takes `self` to `other`: `δ_A = t_other − t_self`,
+    /// `ε = log(R_other·R_selfᵀ)` in base-frame axes. Exact for any size, not only small ones.
+    pub fn twist_to(&self, other: &Pose) -> Twist {
+        let relative = other.rotation() * self.rotation().transpose();
+        Twist {
+            translation: other.position - self.position,
+            rotation: rotation_vector(&relative),
+        }
+    }
+}
+
+/// The rotation matrix of a rotation vector (axis × angle, rad): Rodrigues' formula.
+pub fn rotation_from_vector(v: DVec3) -> DMat3 {
+    let angle = v.length();
+    if angle < 1e-300 {
+        return DMat3::IDENTITY;
+    }
+    DMat3::from_axis_angle(v / angle, angle)
+}
+
+/// The rotation vector (axis × angle, rad) of a rotation matrix, accurate for small angles too
+/// (uses `atan2` of the antisymmetric and symmetric parts, not `acos` of the trace).
+pub fn rotation_vector(r: &DMat3) -> DVec3 {
+    // vee(R − Rᵀ)/2 = sin θ · axis
+    let s = 0.5
+        * DVec3::new(
+            r.y_axis.z - r.z_axis.y,
+            r.z_axis.x - r.x_axis.z,
+            r.x_axis.y - r.y_axis.x,
+        );
+    let sin_angle = s.length();
+    let cos_angle = 0.5 * (r.x_axis.x + r.y_axis.y + r.z_axis.z - 1.0);
+    let angle = sin_angle.atan2(cos_angle);
+    if sin_angle < 1e-12 {
+        // θ/sin θ → 1 as θ → 0 (angles near π do not occur for pose errors).
+        return s;
+    }
+    s * (angle / sin_angle)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rotation_follows_rz_ry_rx() {
+        // A pure yaw of 90° turns x into y; a pure roll of 90° turns y into z.
+        let yaw = Pose::from_mm_deg([0.0, 0.0, 0.0, 0.0, 0.0, 90.0]).rotation();
+        assert!((yaw * DVec3::X - DVec3::Y).length() < 1e-15);
+        let roll = Pose::from_mm_deg([0.0, 0.0, 0.0, 90.0, 0.0, 0.0]).rotation();
+        assert!((roll * DVec3::Y - DVec3::Z).length() < 1e-15);
+        // Order: roll first (innermost), then pitch, then yaw.
+        let p = Pose::from_mm_deg([0.0, 0.0, 0.0, 10.0, 20.0, 30.0]);
+        let expected = DMat3::from_rotation_z(30f64.to_radians())
+            * DMat3::from_rotation_y(20f64.to_radians())
+            * DMat3::from_rotation_x(10f64.to_radians());
+        assert!(p.rotation().abs_diff_eq(expected, 1e-15));
+    }
+
+    #[test]
+    fn euler_extraction_round_trips() {
+        for v in [
+            [1.0, 2.0, 3.0, 12.0, -7.0, 9.5],
+            [0.0, 0.0, 0.0, -170.0, 80.0, 179.0],
+            [0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+        ] {
+            let p = Pose::from_mm_deg(v);
+            let back = Pose::from_rotation(p.position, &p.rotation());
+            assert!(
+                (back.angles - p.angles).abs().max_element() < 1e-13,
+                "{v:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn rotation_vector_inverts_rodrigues() {
+        for v in [
+            DVec3::new(1e-9, -2e-9, 3e-10),
+            DVec3::new(0.1, -0.2, 0.3),
+            DVec3::new(1.0, 0.5, -2.0),
+        ] {
+            let back = rotation_vector(&rotation_from_vector(v));
+            assert!((back - v).length() < 1e-15 + 1e-13 * v.length(), "{v:?}");
+        }
+    }
+
+    #[test]
+    fn twist_to_and_displaced_are_inverse() {
+        let a = Pose::from_mm_deg([1.0, -2.0, 300.0, 5.0, -3.0, 8.0]);
+        let b = Pose::from_mm_deg([1.2, -2.1, 300.3, 5.1, -2.9, 7.7]);
+        let back = a.displaced(&a.twist_to(&b));
+        assert!((back.position - b.position).length() < 1e-12);
+        assert!((back.angles - b.angles).abs().max_element() < 1e-14);
+    }
+}

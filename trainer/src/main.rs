@@ -1,0 +1,57 @@
+//! `hexacomp-trainer`: the offline side of hexacomp — measuring plans, (simulated) acquisition,
+//! joint corrections, network training and evaluation.
+
+mod commands;
+mod table;
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+use hexacomp_core::Geometry;
+
+/// Calibrates a Stewart platform by the robust joint compensator of Song et al. (2022).
+///
+/// Units: millimetres and degrees in every file and option. Poses are (x, y, z, a, b, c): the
+/// position of the platform centre in the base frame and the orientation R = Rz(c)·Ry(b)·Rx(a),
+/// as in LinuxCNC's hexapod kinematics.
+#[derive(Debug, Parser)]
+#[command(name = "hexacomp-trainer", version, propagate_version = true)]
+struct Cli {
+    /// Geometry TOML (the layout of DESIGN.md). Default: the built-in `prototype`
+    /// (base radius 370 mm, platform radius 250 mm, stroke 280–430 mm, φ150 × 100 mm workspace,
+    /// tilt ≤ 15°, yaw ±10°).
+    #[arg(long, global = true, value_name = "FILE")]
+    geometry: Option<PathBuf>,
+
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    Survey(commands::survey::SurveyArgs),
+    Geometry(commands::geometry::GeometryArgs),
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    match run(cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn run(cli: Cli) -> anyhow::Result<()> {
+    let geometry = match &cli.geometry {
+        Some(path) => Geometry::load(path)?,
+        None => Geometry::prototype(),
+    };
+    match cli.command {
+        Command::Survey(args) => commands::survey::run(&geometry, &args),
+        Command::Geometry(args) => commands::geometry::run(&geometry, &args),
+    }
+}
