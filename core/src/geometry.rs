@@ -46,8 +46,12 @@ pub struct Geometry {
     pub base_joints: [DVec3; LEGS],
     /// Platform joint centres `A_i` in `K_A`, mm.
     pub platform_joints: [DVec3; LEGS],
-    /// Actuator stroke `[min, max]` of every leg, mm.
+    /// Actuator stroke `[min, max]` of every leg, mm (limits of the commanded/encoder length).
     pub leg_range: [f64; 2],
+    /// Leg zero offsets `o_i`: real joint-to-joint length minus commanded (encoder) length, mm.
+    /// Optional in the TOML (`leg_offsets`, default all zero); a model-based calibration
+    /// (`hexacomp-trainer identify`) writes them. Commanded length `q_i = |t + R·a_i − b_i| − o_i`.
+    pub leg_offsets: [f64; LEGS],
     /// Home pose `[x, y, z, a, b, c]`, mm and degrees.
     pub home: [f64; 6],
     /// Measured target points `P_j` in `K_A`, mm.
@@ -75,9 +79,15 @@ struct GeometryFile {
     base_joints: Vec<[f64; 3]>,
     platform_joints: Vec<[f64; 3]>,
     leg_range: [f64; 2],
+    #[serde(default, skip_serializing_if = "all_zero")]
+    leg_offsets: [f64; LEGS],
     home: [f64; 6],
     targets: Vec<[f64; 3]>,
     workspace: Workspace,
+}
+
+fn all_zero(v: &[f64; LEGS]) -> bool {
+    v.iter().all(|x| *x == 0.0)
 }
 
 /// Parameters of a symmetric 6-6 platform: joints in pairs on two circles, base pairs centred at
@@ -141,6 +151,7 @@ impl Geometry {
             base_joints,
             platform_joints,
             leg_range: [280.0, 430.0],
+            leg_offsets: [0.0; LEGS],
             home: [0.0, 0.0, home_z, 0.0, 0.0, 0.0],
             targets: [target(90.0), target(210.0), target(330.0)],
             workspace: Workspace {
@@ -161,6 +172,7 @@ impl Geometry {
             base_joints: rows("base_joints", &file.base_joints)?,
             platform_joints: rows("platform_joints", &file.platform_joints)?,
             leg_range: file.leg_range,
+            leg_offsets: file.leg_offsets,
             home: file.home,
             targets: rows("targets", &file.targets)?,
             workspace: file.workspace,
@@ -191,6 +203,7 @@ impl Geometry {
             base_joints: to_rows(&self.base_joints),
             platform_joints: to_rows(&self.platform_joints),
             leg_range: self.leg_range,
+            leg_offsets: self.leg_offsets,
             home: self.home,
             targets: to_rows(&self.targets),
             workspace: self.workspace,
@@ -211,7 +224,8 @@ impl Geometry {
         Pose::from_mm_deg(self.home)
     }
 
-    /// The stable fingerprint of this geometry's numbers.
+    /// The stable fingerprint of this geometry's numbers (leg offsets included only when any is
+    /// non-zero, so files without them keep their fingerprint).
     pub fn fingerprint(&self) -> Fingerprint {
         const CRC: crc::Crc<u64> = crc::Crc::<u64>::new(&crc::CRC_64_XZ);
         let mut digest = CRC.digest();
@@ -220,6 +234,10 @@ impl Geometry {
             p.to_array().into_iter().for_each(&mut put);
         }
         self.leg_range.into_iter().for_each(&mut put);
+        // Absent offsets (all zero) leave the fingerprint of files without them unchanged.
+        if !all_zero(&self.leg_offsets) {
+            self.leg_offsets.into_iter().for_each(&mut put);
+        }
         self.home.into_iter().for_each(&mut put);
         for p in &self.targets {
             p.to_array().into_iter().for_each(&mut put);
@@ -239,6 +257,7 @@ impl Geometry {
         check_finite_rows("platform_joints", &self.platform_joints)?;
         check_finite_rows("targets", &self.targets)?;
         check_finite("leg_range", &self.leg_range)?;
+        check_finite("leg_offsets", &self.leg_offsets)?;
         check_finite("home", &self.home)?;
         let w = &self.workspace;
         check_finite("workspace.radius", &[w.radius])?;

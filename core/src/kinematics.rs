@@ -52,7 +52,8 @@ pub fn stroke_status(length: f64, leg_range: [f64; 2]) -> LegStatus {
     }
 }
 
-/// Inverse kinematics: the nominal leg lengths (mm) of a pose, `q_i = |t + R·a_i − b_i|`, with a
+/// Inverse kinematics: the commanded leg lengths (mm) of a pose,
+/// `q_i = |t + R·a_i − b_i| − o_i` (`o_i`: the geometry's leg offsets, usually zero), with a
 /// per-leg stroke status. Allocation-free. A non-finite pose gives non-finite lengths.
 #[inline]
 pub fn inverse_kinematics(geometry: &Geometry, pose: &Pose) -> LegLengths {
@@ -60,7 +61,7 @@ pub fn inverse_kinematics(geometry: &Geometry, pose: &Pose) -> LegLengths {
     let mut out = LegLengths::default();
     for i in 0..LEGS {
         let leg = pose.position + rotation * geometry.platform_joints[i] - geometry.base_joints[i];
-        let length = leg.length();
+        let length = leg.length() - geometry.leg_offsets[i];
         out.lengths[i] = length;
         out.status[i] = stroke_status(length, geometry.leg_range);
     }
@@ -88,8 +89,9 @@ impl Default for ForwardOptions {
     }
 }
 
-/// Forward kinematics: the pose whose leg lengths equal `lengths` (mm), by Newton iteration from
-/// `seed` (a nearby pose, e.g. the commanded one or the geometry's home).
+/// Forward kinematics: the pose whose commanded leg lengths (as [`inverse_kinematics`] computes
+/// them, leg offsets included) equal `lengths` (mm), by Newton iteration from `seed` (a nearby
+/// pose, e.g. the commanded one or the geometry's home).
 ///
 /// Each step solves `Wᵀ·ξ = q − q(x)` (Eq. 3) for a twist about `A` and displaces the pose by it.
 /// Converges quadratically near the solution; returns a typed error instead of a wrong pose when a

@@ -19,6 +19,7 @@
 #![warn(missing_docs)]
 
 pub mod error;
+pub mod formats;
 pub mod geometry;
 pub mod kinematics;
 pub mod pose;

@@ -196,3 +196,26 @@ fn a_missing_file_names_the_path() {
         "{err}"
     );
 }
+
+#[test]
+fn leg_offsets_are_optional_round_trip_and_enter_the_fingerprint() {
+    let prototype = Geometry::prototype();
+    assert!(!prototype.to_toml_string().contains("leg_offsets"));
+    let mut identified = prototype.clone();
+    identified.leg_offsets = [0.1, -0.2, 0.0, 0.05, 0.3, -0.45];
+    let text = identified.to_toml_string();
+    assert!(
+        text.contains("leg_offsets = [0.1, -0.2, 0.0, 0.05, 0.3, -0.45]"),
+        "{text}"
+    );
+    let back = Geometry::from_toml_str(&text).unwrap();
+    assert_eq!(back, identified);
+    assert_ne!(back.fingerprint(), prototype.fingerprint());
+    // Commanded lengths are the joint distances minus the offsets.
+    let home = prototype.home_pose();
+    let nominal = hexacomp_core::inverse_kinematics(&prototype, &home).lengths;
+    let shifted = hexacomp_core::inverse_kinematics(&identified, &home).lengths;
+    for i in 0..6 {
+        assert!((nominal[i] - shifted[i] - identified.leg_offsets[i]).abs() < 1e-12);
+    }
+}

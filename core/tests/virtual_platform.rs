@@ -134,15 +134,14 @@ fn same_seeds_reproduce_every_number() {
 
 #[test]
 fn geometric_only_machine_is_exactly_its_true_geometry() {
-    // Commanding the true geometry's inverse kinematics minus the zero offsets lands exactly on
-    // the pose: nothing else acts on a geometric-only machine.
+    // Commanding the true geometry's inverse kinematics (its leg offsets included) lands exactly
+    // on the pose: nothing else acts on a geometric-only machine.
     let (g, poses) = workspace_poses(200, 5);
     let model = ErrorModel::variant(ErrorVariant::GeometricOnly);
     let mut vp = VirtualPlatform::new(&g, &model, 3, 0).unwrap();
     let truth = vp.machine().clone();
     for pose in poses {
-        let real = inverse_kinematics(&truth.geometry, &pose).lengths;
-        let commanded: [f64; 6] = std::array::from_fn(|i| real[i] - truth.leg_zero_mm[i]);
+        let commanded = inverse_kinematics(&truth.geometry, &pose).lengths;
         let reached = vp.move_legs(&commanded, &pose).unwrap();
         assert!((reached.position - pose.position).length() < 1e-9);
         assert!((reached.angles - pose.angles).abs().max_element() < 1e-11);

@@ -36,11 +36,10 @@ pub struct LeadScrew {
 /// One drawn "real" machine: the true geometry and every non-geometric error, fixed by a seed.
 #[derive(Debug, Clone, PartialEq)]
 pub struct TrueMachine {
-    /// The true joint centres (the nominal ones plus drawn offsets); its stroke is the nominal
-    /// one widened by a slack, since real lengths carry the errors.
+    /// The true geometry: the nominal joint centres plus drawn offsets, and drawn leg zero
+    /// offsets (`leg_offsets`: real length minus encoder length); its stroke is the nominal one
+    /// widened by a slack, since real lengths carry the errors.
     pub geometry: Geometry,
-    /// Leg zero offsets: real length minus encoder length at the reference, mm.
-    pub leg_zero_mm: [f64; LEGS],
     /// Per-leg lead-screw errors.
     pub lead_screws: [LeadScrew; LEGS],
     /// Per-leg axial compliance at mid-stroke, mm/N.
@@ -68,7 +67,7 @@ impl TrueMachine {
             nominal.leg_range[0] - TRUE_STROKE_SLACK_MM,
             nominal.leg_range[1] + TRUE_STROKE_SLACK_MM,
         ];
-        let leg_zero_mm = std::array::from_fn(|_| model.leg_zero_sigma_mm * normal(&mut rng));
+        geometry.leg_offsets = std::array::from_fn(|_| model.leg_zero_sigma_mm * normal(&mut rng));
         let p = model.pitch;
         let lead_screws = std::array::from_fn(|_| LeadScrew {
             scale: p.scale_sigma * normal(&mut rng),
@@ -82,7 +81,6 @@ impl TrueMachine {
         });
         Ok(Self {
             geometry,
-            leg_zero_mm,
             lead_screws,
             compliance_mm_per_n,
             model: *model,
@@ -96,12 +94,11 @@ impl TrueMachine {
         &self.model
     }
 
-    /// Real leg lengths (mm) for commanded encoder lengths `commanded` (mm), before gravity and
-    /// noise: `q + zero offset + lead-screw error(q)`.
+    /// Encoder-equivalent leg lengths (mm) for commanded encoder lengths `commanded` (mm), before
+    /// gravity and noise: `q + lead-screw error(q)`. The true geometry's leg offsets turn these
+    /// into real joint-to-joint lengths.
     pub fn unloaded_lengths(&self, commanded: &[f64; LEGS]) -> [f64; LEGS] {
-        std::array::from_fn(|i| {
-            commanded[i] + self.leg_zero_mm[i] + self.pitch_error(i, commanded[i])
-        })
+        std::array::from_fn(|i| commanded[i] + self.pitch_error(i, commanded[i]))
     }
 
     /// The lead-screw error of leg `leg` (0-based) at encoder length `q`, mm.
@@ -115,8 +112,9 @@ impl TrueMachine {
     }
 
     /// Axial shortening of every leg under gravity at the real pose `pose`, mm (positive:
-    /// shorter). Leg forces from static equilibrium `W·τ = −w_gravity` (Eq. 3's `W` of the true
-    /// geometry), compliance growing linearly with leg length.
+    /// shorter), for encoder-equivalent lengths `lengths`. Leg forces from static equilibrium
+    /// `W·τ = −w_gravity` (Eq. 3's `W` of the true geometry), compliance growing linearly with
+    /// leg length.
     pub fn gravity_shortening(&self, pose: &Pose, lengths: &[f64; LEGS]) -> [f64; LEGS] {
         let c = &self.model.compliance;
         if c.mass_kg == 0.0 {
@@ -142,8 +140,8 @@ impl TrueMachine {
         })
     }
 
-    /// The real pose reached for real unloaded leg lengths `unloaded` (mm), including gravity
-    /// sag, by forward kinematics of the true geometry from `seed`.
+    /// The real pose reached for encoder-equivalent unloaded leg lengths `unloaded` (mm),
+    /// including gravity sag, by forward kinematics of the true geometry from `seed`.
     pub fn settle(&self, unloaded: &[f64; LEGS], seed: &Pose) -> Result<Pose> {
         let options = ForwardOptions::default();
         let mut pose = forward_kinematics(&self.geometry, unloaded, seed, &options)?;

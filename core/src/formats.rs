@@ -1,0 +1,413 @@
+//! The CSV files of DESIGN.md: poses, measurements and joint corrections.
+//!
+//! Every file has a header row, one configuration per row, `,` separators and `#` comment lines.
+//! Readers are strict: a missing column, a row of the wrong width, an empty or duplicate id, or a
+//! number that does not parse or is not finite is an [`Error::Format`] naming the file, line and
+//! column — never a silent skip. Columns are found by name, so extra columns (such as the
+//! diagnostics after a corrections file's required ones) are allowed. Writers print numbers in
+//! their shortest exact form, so a written file reads back to the same bits.
+//!
+//! Units: mm and degrees in the files and in the rows (kept exactly as written); the rows'
+//! `pose()` methods convert to [`Pose`] (mm, radians).
+
+use std::collections::HashMap;
+use std::io::{Read, Write};
+use std::path::Path;
+
+use glam::DVec3;
+
+use crate::error::{Error, Result};
+use crate::geometry::{LEGS, TARGETS};
+use crate::pose::Pose;
+
+/// Pose columns after `id`: `x, y, z` (mm), `a, b, c` (deg).
+pub const POSE_COLUMNS: [&str; 6] = ["x", "y", "z", "a", "b", "c"];
+/// Nominal leg length columns, mm.
+pub const LEG_COLUMNS: [&str; LEGS] = ["q1", "q2", "q3", "q4", "q5", "q6"];
+/// Joint correction columns, mm.
+pub const CORRECTION_COLUMNS: [&str; LEGS] = ["dq1", "dq2", "dq3", "dq4", "dq5", "dq6"];
+/// Measured target point columns (base frame), mm.
+pub const TARGET_COLUMNS: [&str; 3 * TARGETS] = [
+    "p1x", "p1y", "p1z", "p2x", "p2y", "p2z", "p3x", "p3y", "p3z",
+];
+
+/// One row of a poses file: `id,x,y,z,a,b,c`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PoseRow {
+    /// The configuration's id, unique in its file.
+    pub id: String,
+    /// The pose `[x, y, z, a, b, c]` exactly as in the file, mm and degrees.
+    pub pose_mm_deg: [f64; 6],
+}
+
+impl PoseRow {
+    /// The row's pose (mm, rad).
+    pub fn pose(&self) -> Pose {
+        Pose::from_mm_deg(self.pose_mm_deg)
+    }
+}
+
+/// One row of a measurements file: commanded pose, the nominal legs commanded for it, and the
+/// three measured target points in the base frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MeasurementRow {
+    /// The configuration's id.
+    pub id: String,
+    /// Line of the row in its file (for messages).
+    pub line: u64,
+    /// The commanded pose `[x, y, z, a, b, c]` exactly as in the file, mm and degrees.
+    pub pose_mm_deg: [f64; 6],
+    /// The nominal leg lengths that were commanded, mm.
+    pub legs: [f64; LEGS],
+    /// The measured target points `P_1..P_3` in the base frame, mm.
+    pub targets: [DVec3; TARGETS],
+}
+
+impl MeasurementRow {
+    /// The commanded pose (mm, rad).
+    pub fn pose(&self) -> Pose {
+        Pose::from_mm_deg(self.pose_mm_deg)
+    }
+}
+
+/// One row of a corrections file: nominal legs `q` and joint corrections `dq` (mm).
+#[derive(Debug, Clone, PartialEq)]
+pub struct CorrectionRow {
+    /// The configuration's id.
+    pub id: String,
+    /// Nominal (commanded) leg lengths `q⁽⁰⁾`, mm.
+    pub legs: [f64; LEGS],
+    /// Joint corrections `Δq = q⁽⁰⁾ − q⁽ᴸ⁾` (Eq. 9), mm.
+    pub corrections: [f64; LEGS],
+}
+
+/// A parsed CSV file: header, and each data row with its line number.
+struct Table {
+    file: String,
+    columns: HashMap<String, usize>,
+    rows: Vec<(u64, csv::StringRecord)>,
+}
+
+impl Table {
+    fn read(path: &Path) -> Result<Self> {
+        let file = path.display().to_string();
+        let reader = std::fs::File::open(path).map_err(|e| Error::Format {
+            file: file.clone(),
+            line: 0,
+            column: None,
+            message: e.to_string(),
+        })?;
+        Self::parse(file, reader)
+    }
+
+    fn parse(file: String, mut reader: impl Read) -> Result<Self> {
+        let mut text = Vec::new();
+        reader.read_to_end(&mut text).map_err(|e| Error::Format {
+            file: file.clone(),
+            line: 0,
+            column: None,
+            message: e.to_string(),
+        })?;
+        let text = String::from_utf8(text).map_err(|e| Error::Format {
+            file: file.clone(),
+            line: 0,
+            column: None,
+            message: format!("not UTF-8 text: {e}"),
+        })?;
+        // Comment and blank lines are dropped here, keeping each remaining line's number, so
+        // that messages name the line as the user's editor shows it.
+        let mut kept_lines = Vec::new();
+        let mut data = String::with_capacity(text.len());
+        for (index, line) in text.lines().enumerate() {
+            let trimmed = line.trim();
+            if trimmed.is_empty() || trimmed.starts_with('#') {
+                continue;
+            }
+            kept_lines.push(index as u64 + 1);
+            data.push_str(line);
+            data.push('\n');
+        }
+        let line_at = |data_line: u64| {
+            let index = data_line.saturating_sub(1) as usize;
+            kept_lines.get(index).copied().unwrap_or(0)
+        };
+        let mut csv = csv::ReaderBuilder::new()
+            .trim(csv::Trim::All)
+            .flexible(true)
+            .has_headers(false)
+            .from_reader(data.as_bytes());
+        let mut records = csv.records();
+        let fail = |line: u64, column: Option<&str>, message: String| Error::Format {
+            file: file.clone(),
+            line,
+            column: column.map(str::to_string),
+            message,
+        };
+        let csv_error = |e: csv::Error| {
+            let line = e.position().map_or(0, |p| line_at(p.line()));
+            fail(line, None, e.to_string())
+        };
+        let header = match records.next() {
+            Some(record) => record.map_err(csv_error)?,
+            None => {
+                return Err(fail(
+                    0,
+                    None,
+                    "the file is empty: expected a header row".into(),
+                ));
+            }
+        };
+        let header_line = header.position().map_or(1, |p| line_at(p.line()));
+        let mut columns = HashMap::new();
+        for (index, name) in header.iter().enumerate() {
+            if columns.insert(name.to_string(), index).is_some() {
+                return Err(fail(
+                    header_line,
+                    Some(name),
+                    "column appears twice in the header".into(),
+                ));
+            }
+        }
+        let width = header.len();
+        let mut rows = Vec::new();
+        for record in records {
+            let record = record.map_err(csv_error)?;
+            let line = record.position().map_or(0, |p| line_at(p.line()));
+            if record.len() != width {
+                return Err(fail(
+                    line,
+                    None,
+                    format!("row has {} fields, the header has {width}", record.len()),
+                ));
+            }
+            rows.push((line, record));
+        }
+        Ok(Self {
+            file,
+            columns,
+            rows,
+        })
+    }
+
+    fn error(&self, line: u64, column: Option<&str>, message: String) -> Error {
+        Error::Format {
+            file: self.file.clone(),
+            line,
+            column: column.map(str::to_string),
+            message,
+        }
+    }
+
+    /// Indices of the named columns, or an error naming the first missing one.
+    fn require<const N: usize>(&self, names: [&str; N]) -> Result<[usize; N]> {
+        let mut out = [0; N];
+        for (slot, name) in out.iter_mut().zip(names) {
+            *slot = *self.columns.get(name).ok_or_else(|| {
+                self.error(
+                    1,
+                    Some(name),
+                    "required column is missing from the header".into(),
+                )
+            })?;
+        }
+        Ok(out)
+    }
+
+    /// The ids of all rows, checked non-empty and unique.
+    fn ids(&self) -> Result<Vec<String>> {
+        let [id] = self.require(["id"])?;
+        let mut seen: HashMap<&str, u64> = HashMap::new();
+        let mut ids = Vec::with_capacity(self.rows.len());
+        for (line, record) in &self.rows {
+            let value = &record[id];
+            if value.is_empty() {
+                return Err(self.error(*line, Some("id"), "empty id".into()));
+            }
+            if let Some(first) = seen.insert(value, *line) {
+                return Err(self.error(
+                    *line,
+                    Some("id"),
+                    format!("duplicate id {value:?} (first on line {first})"),
+                ));
+            }
+            ids.push(value.to_string());
+        }
+        Ok(ids)
+    }
+
+    /// The finite numbers of the named columns in row `row`.
+    fn numbers<const N: usize>(
+        &self,
+        row: usize,
+        names: [&str; N],
+        indices: [usize; N],
+    ) -> Result<[f64; N]> {
+        let (line, record) = &self.rows[row];
+        let mut out = [0.0; N];
+        for k in 0..N {
+            let text = &record[indices[k]];
+            let value: f64 = text.parse().map_err(|_| {
+                self.error(*line, Some(names[k]), format!("{text:?} is not a number"))
+            })?;
+            if !value.is_finite() {
+                return Err(self.error(
+                    *line,
+                    Some(names[k]),
+                    format!("{text} is not a finite number"),
+                ));
+            }
+            out[k] = value;
+        }
+        Ok(out)
+    }
+}
+
+/// Reads a poses file (`id,x,y,z,a,b,c`).
+pub fn read_poses(path: &Path) -> Result<Vec<PoseRow>> {
+    let table = Table::read(path)?;
+    let ids = table.ids()?;
+    let pose_cols = table.require(POSE_COLUMNS)?;
+    ids.into_iter()
+        .enumerate()
+        .map(|(row, id)| {
+            Ok(PoseRow {
+                id,
+                pose_mm_deg: table.numbers(row, POSE_COLUMNS, pose_cols)?,
+            })
+        })
+        .collect()
+}
+
+/// Reads a measurements file (`id,x,y,z,a,b,c,q1..q6,p1x..p3z`).
+pub fn read_measurements(path: &Path) -> Result<Vec<MeasurementRow>> {
+    let table = Table::read(path)?;
+    let ids = table.ids()?;
+    let pose_cols = table.require(POSE_COLUMNS)?;
+    let leg_cols = table.require(LEG_COLUMNS)?;
+    let target_cols = table.require(TARGET_COLUMNS)?;
+    ids.into_iter()
+        .enumerate()
+        .map(|(row, id)| {
+            let p = table.numbers(row, TARGET_COLUMNS, target_cols)?;
+            Ok(MeasurementRow {
+                id,
+                line: table.rows[row].0,
+                pose_mm_deg: table.numbers(row, POSE_COLUMNS, pose_cols)?,
+                legs: table.numbers(row, LEG_COLUMNS, leg_cols)?,
+                targets: std::array::from_fn(|j| DVec3::new(p[3 * j], p[3 * j + 1], p[3 * j + 2])),
+            })
+        })
+        .collect()
+}
+
+/// Reads a corrections file (`id,q1..q6,dq1..dq6`, diagnostic columns ignored).
+pub fn read_corrections(path: &Path) -> Result<Vec<CorrectionRow>> {
+    let table = Table::read(path)?;
+    let ids = table.ids()?;
+    let leg_cols = table.require(LEG_COLUMNS)?;
+    let dq_cols = table.require(CORRECTION_COLUMNS)?;
+    ids.into_iter()
+        .enumerate()
+        .map(|(row, id)| {
+            Ok(CorrectionRow {
+                id,
+                legs: table.numbers(row, LEG_COLUMNS, leg_cols)?,
+                corrections: table.numbers(row, CORRECTION_COLUMNS, dq_cols)?,
+            })
+        })
+        .collect()
+}
+
+/// Writes a CSV file: a header and rows of already formatted cells.
+fn write_rows<W: Write>(
+    writer: W,
+    header: &[&str],
+    rows: impl IntoIterator<Item = Vec<String>>,
+) -> Result<()> {
+    let io = |e: csv::Error| Error::Format {
+        file: "<output>".into(),
+        line: 0,
+        column: None,
+        message: e.to_string(),
+    };
+    let mut csv = csv::Writer::from_writer(writer);
+    csv.write_record(header).map_err(io)?;
+    for row in rows {
+        csv.write_record(&row).map_err(io)?;
+    }
+    csv.flush().map_err(|e| io(e.into()))
+}
+
+fn cells(values: &[f64]) -> impl Iterator<Item = String> + '_ {
+    values.iter().map(|v| v.to_string())
+}
+
+fn header<'a>(parts: &[&[&'a str]]) -> Vec<&'a str> {
+    std::iter::once("id")
+        .chain(parts.iter().flat_map(|p| p.iter().copied()))
+        .collect()
+}
+
+/// Writes a poses file.
+pub fn write_poses<W: Write>(writer: W, rows: &[PoseRow]) -> Result<()> {
+    write_rows(
+        writer,
+        &header(&[&POSE_COLUMNS]),
+        rows.iter().map(|r| {
+            std::iter::once(r.id.clone())
+                .chain(cells(&r.pose_mm_deg))
+                .collect()
+        }),
+    )
+}
+
+/// Writes a measurements file.
+pub fn write_measurements<W: Write>(writer: W, rows: &[MeasurementRow]) -> Result<()> {
+    write_rows(
+        writer,
+        &header(&[&POSE_COLUMNS, &LEG_COLUMNS, &TARGET_COLUMNS]),
+        rows.iter().map(|r| {
+            let targets: Vec<f64> = r.targets.iter().flat_map(|p| p.to_array()).collect();
+            std::iter::once(r.id.clone())
+                .chain(cells(&r.pose_mm_deg))
+                .chain(cells(&r.legs))
+                .chain(cells(&targets))
+                .collect()
+        }),
+    )
+}
+
+/// Writes a corrections file: the DESIGN.md columns, then diagnostic columns named by
+/// `diagnostic_columns` whose cells come from `diagnostics` (one `Vec` per row).
+pub fn write_corrections<W: Write>(
+    writer: W,
+    rows: &[CorrectionRow],
+    diagnostic_columns: &[&str],
+    diagnostics: &[Vec<String>],
+) -> Result<()> {
+    let mut head = header(&[&LEG_COLUMNS, &CORRECTION_COLUMNS]);
+    head.extend_from_slice(diagnostic_columns);
+    write_rows(
+        writer,
+        &head,
+        rows.iter().enumerate().map(|(i, r)| {
+            std::iter::once(r.id.clone())
+                .chain(cells(&r.legs))
+                .chain(cells(&r.corrections))
+                .chain(diagnostics.get(i).into_iter().flatten().cloned())
+                .collect()
+        }),
+    )
+}
+
+/// Creates (truncates) `path` for writing, with the error naming the file.
+pub fn create_file(path: &Path) -> Result<std::io::BufWriter<std::fs::File>> {
+    std::fs::File::create(path)
+        .map(std::io::BufWriter::new)
+        .map_err(|e| Error::Format {
+            file: path.display().to_string(),
+            line: 0,
+            column: None,
+            message: format!("cannot create: {e}"),
+        })
+}

@@ -1,0 +1,180 @@
+//! The CSV formats: exact round trips and strict refusal naming file, line and column.
+
+use glam::DVec3;
+use hexacomp_core::Error;
+use hexacomp_core::formats::{
+    CorrectionRow, MeasurementRow, PoseRow, read_corrections, read_measurements, read_poses,
+    write_corrections, write_measurements, write_poses,
+};
+
+fn write(dir: &tempfile::TempDir, name: &str, text: &str) -> std::path::PathBuf {
+    let path = dir.path().join(name);
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+fn format_error(result: Result<impl std::fmt::Debug, Error>) -> (u64, Option<String>, String) {
+    match result {
+        Err(Error::Format {
+            line,
+            column,
+            message,
+            ..
+        }) => (line, column, message),
+        other => panic!("expected a format error, got {other:?}"),
+    }
+}
+
+const MEASUREMENT_HEADER: &str =
+    "id,x,y,z,a,b,c,q1,q2,q3,q4,q5,q6,p1x,p1y,p1z,p2x,p2y,p2z,p3x,p3y,p3z";
+
+#[test]
+fn poses_round_trip_to_the_bit() {
+    let dir = tempfile::tempdir().unwrap();
+    let rows = vec![
+        PoseRow {
+            id: "1".into(),
+            pose_mm_deg: [0.1, -2.0 / 3.0, 280.0, 1e-7, -3.3, 9.9],
+        },
+        PoseRow {
+            id: "p-2".into(),
+            pose_mm_deg: [1.0, 2.0, 3.0, 4.0, 5.0, 6.0],
+        },
+    ];
+    let path = dir.path().join("poses.csv");
+    write_poses(std::fs::File::create(&path).unwrap(), &rows).unwrap();
+    let text = std::fs::read_to_string(&path).unwrap();
+    assert!(text.starts_with("id,x,y,z,a,b,c\n"), "{text}");
+    assert_eq!(read_poses(&path).unwrap(), rows);
+}
+
+#[test]
+fn measurements_and_corrections_round_trip() {
+    let dir = tempfile::tempdir().unwrap();
+    let m = vec![MeasurementRow {
+        id: "7".into(),
+        line: 2,
+        pose_mm_deg: [1.5, 2.5, 290.0, 3.0, -4.0, 5.0],
+        legs: [350.1, 351.2, 352.3, 353.4, 354.5, 355.6],
+        targets: [
+            DVec3::new(1.0, 2.0, 3.0),
+            DVec3::new(4.0, 5.0, 6.0),
+            DVec3::new(7.0, 8.0, 9.0),
+        ],
+    }];
+    let path = dir.path().join("m.csv");
+    write_measurements(std::fs::File::create(&path).unwrap(), &m).unwrap();
+    assert_eq!(
+        std::fs::read_to_string(&path)
+            .unwrap()
+            .lines()
+            .next()
+            .unwrap(),
+        MEASUREMENT_HEADER
+    );
+    assert_eq!(read_measurements(&path).unwrap(), m);
+
+    let c = vec![CorrectionRow {
+        id: "7".into(),
+        legs: [350.1, 351.2, 352.3, 353.4, 354.5, 355.6],
+        corrections: [0.1, -0.2, 0.3, -0.4, 0.5, -0.6],
+    }];
+    let path = dir.path().join("c.csv");
+    write_corrections(
+        std::fs::File::create(&path).unwrap(),
+        &c,
+        &["cond_pt"],
+        &[vec!["3.5".into()]],
+    )
+    .unwrap();
+    let text = std::fs::read_to_string(&path).unwrap();
+    assert!(
+        text.starts_with("id,q1,q2,q3,q4,q5,q6,dq1,dq2,dq3,dq4,dq5,dq6,cond_pt\n"),
+        "{text}"
+    );
+    assert_eq!(read_corrections(&path).unwrap(), c);
+}
+
+#[test]
+fn comments_blank_columns_order_and_extra_columns_are_accepted() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write(
+        &dir,
+        "p.csv",
+        "# written by a laser tracker export\nc,b,a,z,y,x,id,operator\n# a comment row\n3,2,1,300,0,0,a1,kim\n",
+    );
+    let rows = read_poses(&path).unwrap();
+    assert_eq!(rows[0].id, "a1");
+    assert_eq!(rows[0].pose_mm_deg, [0.0, 0.0, 300.0, 1.0, 2.0, 3.0]);
+    assert!((rows[0].pose().angles.z - 3f64.to_radians()).abs() < 1e-16);
+}
+
+#[test]
+fn missing_column_is_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let header = MEASUREMENT_HEADER.replace(",q4", "");
+    let path = write(&dir, "m.csv", &format!("{header}\n"));
+    let (line, column, message) = format_error(read_measurements(&path));
+    assert_eq!((line, column.as_deref()), (1, Some("q4")));
+    assert_eq!(message, "required column is missing from the header");
+}
+
+#[test]
+fn nan_is_refused_with_line_and_column() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write(
+        &dir,
+        "p.csv",
+        "id,x,y,z,a,b,c\n1,0,0,300,0,0,0\n# note\n2,0,NaN,300,0,0,0\n",
+    );
+    let err = read_poses(&path).unwrap_err();
+    assert_eq!(
+        err.to_string(),
+        format!("{}:4: column y: NaN is not a finite number", path.display())
+    );
+}
+
+#[test]
+fn duplicate_ids_name_both_lines() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write(
+        &dir,
+        "p.csv",
+        "id,x,y,z,a,b,c\n1,0,0,300,0,0,0\n1,0,0,301,0,0,0\n",
+    );
+    let (line, column, message) = format_error(read_poses(&path));
+    assert_eq!((line, column.as_deref()), (3, Some("id")));
+    assert_eq!(message, "duplicate id \"1\" (first on line 2)");
+}
+
+#[test]
+fn wrong_width_text_and_empty_files_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let short = write(&dir, "a.csv", "id,x,y,z,a,b,c\n1,0,0,300,0,0\n");
+    assert_eq!(
+        format_error(read_poses(&short)),
+        (2, None, "row has 6 fields, the header has 7".into())
+    );
+    let text = write(&dir, "b.csv", "id,x,y,z,a,b,c\n1,0,zero,300,0,0,0\n");
+    assert_eq!(
+        format_error(read_poses(&text)),
+        (2, Some("y".into()), "\"zero\" is not a number".into())
+    );
+    let empty = write(&dir, "c.csv", "");
+    assert_eq!(
+        format_error(read_poses(&empty)).2,
+        "the file is empty: expected a header row"
+    );
+    let no_id = write(&dir, "d.csv", "id,x,y,z,a,b,c\n,0,0,300,0,0,0\n");
+    assert_eq!(
+        format_error(read_poses(&no_id)),
+        (2, Some("id".into()), "empty id".into())
+    );
+    let missing = dir.path().join("missing.csv");
+    assert!(
+        read_poses(&missing)
+            .unwrap_err()
+            .to_string()
+            .contains("missing.csv")
+    );
+}
