@@ -30,6 +30,10 @@ struct Cli {
 
 #[derive(Debug, Subcommand)]
 enum Command {
+    Plan(commands::plan::PlanArgs),
+    Simulate(commands::simulate::SimulateArgs),
+    Solve(commands::solve::SolveArgs),
+    Identify(commands::identify::IdentifyArgs),
     Survey(commands::survey::SurveyArgs),
     Geometry(commands::geometry::GeometryArgs),
 }
@@ -51,6 +55,10 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         None => Geometry::prototype(),
     };
     match cli.command {
+        Command::Plan(args) => commands::plan::run(&geometry, &args),
+        Command::Simulate(args) => commands::simulate::run(&geometry, &args),
+        Command::Solve(args) => commands::solve::run(&geometry, &args),
+        Command::Identify(args) => commands::identify::run(&geometry, &args),
         Command::Survey(args) => commands::survey::run(&geometry, &args),
         Command::Geometry(args) => commands::geometry::run(&geometry, &args),
     }

@@ -1,4 +1,21 @@
 //! One module per subcommand.
 
 pub mod geometry;
+pub mod identify;
+pub mod plan;
+pub mod simulate;
+pub mod solve;
 pub mod survey;
+
+use std::path::Path;
+
+use anyhow::Context;
+
+/// Writes a file through `write`, reporting the path on failure.
+pub fn write_file(
+    path: &Path,
+    write: impl FnOnce(std::io::BufWriter<std::fs::File>) -> hexacomp_core::Result<()>,
+) -> anyhow::Result<()> {
+    let file = hexacomp_core::formats::create_file(path)?;
+    write(file).with_context(|| format!("writing {}", path.display()))
+}

@@ -1,0 +1,217 @@
+//! `hexacomp-trainer plan → simulate → solve → identify` as a user runs it, and its answers to
+//! bad measurement files.
+
+use hexacomp_core::Geometry;
+use hexacomp_core::formats::{read_corrections, read_measurements, read_poses};
+use hexacomp_tests::run;
+
+fn text(bytes: &[u8]) -> String {
+    String::from_utf8_lossy(bytes).into_owned()
+}
+
+/// Runs the trainer with `args` in `dir`, asserting success; returns stderr.
+fn trainer_ok(dir: &std::path::Path, args: &[&str]) -> String {
+    let args: Vec<String> = args
+        .iter()
+        .map(|a| {
+            if a.ends_with(".csv") || a.ends_with(".toml") {
+                dir.join(a).display().to_string()
+            } else {
+                a.to_string()
+            }
+        })
+        .collect();
+    let refs: Vec<&str> = args.iter().map(String::as_str).collect();
+    let output = run("hexacomp-trainer", &refs);
+    assert!(
+        output.status.success(),
+        "{refs:?}: {}",
+        text(&output.stderr)
+    );
+    text(&output.stderr)
+}
+
+#[test]
+fn plan_simulate_solve_identify_produce_the_design_formats() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    trainer_ok(
+        d,
+        &["plan", "--count", "60", "--seed", "3", "--out", "poses.csv"],
+    );
+    trainer_ok(
+        d,
+        &[
+            "simulate",
+            "--plan",
+            "poses.csv",
+            "--seed",
+            "2",
+            "--out",
+            "m.csv",
+        ],
+    );
+    let solved = trainer_ok(d, &["solve", "--measurements", "m.csv", "--out", "c.csv"]);
+    assert!(
+        solved.contains("robust compensator: solved 60/60 configurations"),
+        "{solved}"
+    );
+    let ordinary = trainer_ok(
+        d,
+        &[
+            "solve",
+            "--ordinary",
+            "--measurements",
+            "m.csv",
+            "--out",
+            "o.csv",
+        ],
+    );
+    assert!(ordinary.contains("ordinary compensator"), "{ordinary}");
+    let identified = trainer_ok(
+        d,
+        &["identify", "--measurements", "m.csv", "--out", "id.toml"],
+    );
+    assert!(
+        identified.contains("identified 42/42 parameter directions"),
+        "{identified}"
+    );
+
+    let poses = read_poses(&d.join("poses.csv")).unwrap();
+    let measurements = read_measurements(&d.join("m.csv")).unwrap();
+    let corrections = read_corrections(&d.join("c.csv")).unwrap();
+    assert_eq!(
+        (poses.len(), measurements.len(), corrections.len()),
+        (60, 60, 60)
+    );
+    for ((p, m), c) in poses.iter().zip(&measurements).zip(&corrections) {
+        assert_eq!((&p.id, &p.pose_mm_deg), (&m.id, &m.pose_mm_deg));
+        assert_eq!((&m.id, m.legs), (&c.id, c.legs));
+        // Corrections of the default machine are a fraction of a millimetre up to ~2 mm.
+        assert!(c.corrections.iter().all(|d| d.abs() < 3.0), "{c:?}");
+    }
+    let header = std::fs::read_to_string(d.join("c.csv")).unwrap();
+    assert!(header.starts_with(
+        "id,q1,q2,q3,q4,q5,q6,dq1,dq2,dq3,dq4,dq5,dq6,cond_pt,iterations,converged,residual_mm\n"
+    ));
+    // With the same seeds the robust and ordinary solves coincide inside the workspace.
+    assert_eq!(header, std::fs::read_to_string(d.join("o.csv")).unwrap());
+    // The identified geometry loads on its own and carries leg offsets.
+    let g = Geometry::load(&d.join("id.toml")).unwrap();
+    assert!(
+        g.leg_offsets.iter().any(|o| o.abs() > 0.01),
+        "{:?}",
+        g.leg_offsets
+    );
+}
+
+#[test]
+fn bad_measurement_files_are_refused_with_file_line_and_column() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    trainer_ok(d, &["plan", "--count", "5", "--out", "poses.csv"]);
+    trainer_ok(d, &["simulate", "--plan", "poses.csv", "--out", "m.csv"]);
+    let good = std::fs::read_to_string(d.join("m.csv")).unwrap();
+    let lines: Vec<&str> = good.lines().collect();
+    let cases = [
+        (
+            "missing.csv",
+            good.replacen(",q3,", ",q3x,", 1),
+            "m.csv:1: column q3: required column is missing from the header",
+        ),
+        (
+            "dup.csv",
+            format!("{}\n{}\n{}\n", lines[0], lines[1], lines[1]),
+            "dup.csv:3: column id: duplicate id \"1\" (first on line 2)",
+        ),
+    ];
+    for (name, content, expected) in cases {
+        let path = d.join(name);
+        std::fs::write(&path, &content).unwrap();
+        let output = run(
+            "hexacomp-trainer",
+            &[
+                "solve",
+                "--measurements",
+                path.to_str().unwrap(),
+                "--out",
+                d.join("c.csv").to_str().unwrap(),
+            ],
+        );
+        let message = text(&output.stderr);
+        assert_eq!(output.status.code(), Some(1), "{name}: {message}");
+        assert!(message.starts_with("error: "), "{name}: {message}");
+        let expected = expected.replace("m.csv", name);
+        assert!(message.contains(&expected), "{name}: {message}");
+    }
+    // A NaN in a named place: line 3 is the second data row; x is its second column.
+    let mut rows: Vec<String> = lines.iter().map(|l| l.to_string()).collect();
+    let mut cells: Vec<&str> = rows[2].split(',').collect();
+    cells[1] = "NaN";
+    rows[2] = cells.join(",");
+    let path = d.join("nan.csv");
+    std::fs::write(&path, rows.join("\n")).unwrap();
+    let output = run(
+        "hexacomp-trainer",
+        &[
+            "solve",
+            "--measurements",
+            path.to_str().unwrap(),
+            "--out",
+            d.join("c.csv").to_str().unwrap(),
+        ],
+    );
+    assert!(
+        text(&output.stderr).contains("nan.csv:3: column x: NaN is not a finite number"),
+        "{}",
+        text(&output.stderr)
+    );
+}
+
+#[test]
+fn rows_that_cannot_be_solved_are_named_and_the_rest_is_written() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    trainer_ok(d, &["plan", "--count", "6", "--out", "poses.csv"]);
+    trainer_ok(d, &["simulate", "--plan", "poses.csv", "--out", "m.csv"]);
+    let good = std::fs::read_to_string(d.join("m.csv")).unwrap();
+    let mut rows: Vec<String> = good.lines().map(str::to_string).collect();
+    // Row id 2: a commanded leg beyond the stroke. Row id 4: a target 40 mm away.
+    let mut cells: Vec<String> = rows[2].split(',').map(str::to_string).collect();
+    cells[7] = "445".into();
+    rows[2] = cells.join(",");
+    let mut cells: Vec<String> = rows[4].split(',').map(str::to_string).collect();
+    let p2x: f64 = cells[16].parse().unwrap();
+    cells[16] = (p2x + 40.0).to_string();
+    rows[4] = cells.join(",");
+    std::fs::write(d.join("bad.csv"), rows.join("\n") + "\n").unwrap();
+    let report = trainer_ok(d, &["solve", "--measurements", "bad.csv", "--out", "c.csv"]);
+    assert!(
+        report.contains("error: configuration 2 (line 3): cannot be solved: leg 1 length 445"),
+        "{report}"
+    );
+    assert!(
+        report.contains("warning: configuration 4 (line 5): residual"),
+        "{report}"
+    );
+    let written = read_corrections(&d.join("c.csv")).unwrap();
+    let ids: Vec<&str> = written.iter().map(|c| c.id.as_str()).collect();
+    assert_eq!(ids, ["1", "3", "4", "5", "6"]);
+    trainer_ok(
+        d,
+        &[
+            "solve",
+            "--measurements",
+            "bad.csv",
+            "--out",
+            "c.csv",
+            "--exclude-flagged",
+        ],
+    );
+    let ids: Vec<String> = read_corrections(&d.join("c.csv"))
+        .unwrap()
+        .into_iter()
+        .map(|c| c.id)
+        .collect();
+    assert_eq!(ids, ["1", "3", "5", "6"]);
+}

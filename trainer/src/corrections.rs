@@ -1,0 +1,319 @@
+//! Joint corrections by the robust Levenberg–Marquardt iteration of the paper's Fig. 2.
+//!
+//! For one measured configuration with commanded legs `q⁽⁰⁾` and measured target points `r_Pm`
+//! (base frame), iterate from `q⁽⁰⁾`:
+//!
+//! 1. `r_Pc = f(q⁽ˡ⁾)`: the target points of the nominal forward kinematics, `ζ = r_Pm − r_Pc`
+//!    (Eq. 4);
+//! 2. `P` (Eq. 4) and `T = W⁻ᵀ` (Eq. 3) at that iterate; `λ = λ₀` if `cond(PT) > c`, else 0;
+//! 3. `ρ⁽ˡ⁾ = ((PT)ᵀ(PT) + λI)⁻¹(PT)ᵀζ` (Eq. 7), `q⁽ˡ⁺¹⁾ = q⁽ˡ⁾ + ρ⁽ˡ⁾` (Eq. 8);
+//!
+//! until `‖ρ⁽ˡ⁾‖ < κ`. The joint corrections are `Δq = q⁽⁰⁾ − q⁽ᴸ⁾` (Eq. 9): the machine
+//! commanded with `q⁽⁰⁾` behaves like the nominal model at `q⁽ᴸ⁾`, so commanding `q⁽⁰⁾ + Δq`
+//! cancels the error to first order. The "ordinary" compensator of the paper's comparison is the
+//! same iteration with `λ = 0` always.
+
+use glam::DVec3;
+use hexacomp_core::formats::{CorrectionRow, MeasurementRow};
+use hexacomp_core::kinematics::target_points;
+use hexacomp_core::screw::{ActuationScrews, condition_number, point_matrix};
+use hexacomp_core::{
+    ForwardOptions, Geometry, LEGS, Pose, TARGETS, forward_kinematics, inverse_kinematics,
+};
+use nalgebra::{Matrix6, SVector, Vector6};
+
+use crate::error::{Error, Result};
+
+/// Settings of the joint-correction iteration. Defaults are the paper's (Sec. 4.2).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SolverOptions {
+    /// Regularisation `λ₀` applied when `cond(PT) > c` (Eq. 6–7), mm²/mm² (dimensionless).
+    pub lambda0: f64,
+    /// Condition-number threshold `c` of `PT`.
+    pub cond_threshold: f64,
+    /// Stop when `‖ρ⁽ˡ⁾‖ < κ`, mm. The paper: √6 × the 0.002 mm encoder resolution.
+    pub kappa_mm: f64,
+    /// Give up (not converged) after this many iterations.
+    pub max_iterations: usize,
+    /// `false` gives the paper's ordinary compensator: `λ = 0` at every iterate.
+    pub robust: bool,
+}
+
+impl Default for SolverOptions {
+    fn default() -> Self {
+        Self {
+            lambda0: 0.05,
+            cond_threshold: 1e3,
+            kappa_mm: 6f64.sqrt() * 0.002,
+            max_iterations: 100,
+            robust: true,
+        }
+    }
+}
+
+impl SolverOptions {
+    /// Checks that every setting is usable.
+    pub fn validate(&self) -> Result<()> {
+        let positive = [
+            ("lambda0", self.lambda0, true),
+            ("cond-threshold", self.cond_threshold, false),
+            ("kappa", self.kappa_mm, false),
+        ];
+        for (name, value, zero_ok) in positive {
+            if !(value.is_finite() && (value > 0.0 || (zero_ok && value == 0.0))) {
+                return Err(Error::InvalidSetting(format!(
+                    "{name} = {value} must be a finite number > 0"
+                )));
+            }
+        }
+        if self.max_iterations == 0 {
+            return Err(Error::InvalidSetting("max-iterations must be ≥ 1".into()));
+        }
+        Ok(())
+    }
+}
+
+/// The result of the iteration for one configuration.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Solution {
+    /// Joint corrections `Δq = q⁽⁰⁾ − q⁽ᴸ⁾`, mm.
+    pub corrections: [f64; LEGS],
+    /// The equivalent legs `q⁽ᴸ⁾` at which the nominal model reproduces the measurement, mm.
+    pub equivalent_legs: [f64; LEGS],
+    /// Iterations performed (`L`).
+    pub iterations: usize,
+    /// Whether `‖ρ‖ < κ` was reached within the iteration limit.
+    pub converged: bool,
+    /// Largest `cond(PT)` met over the iterates.
+    pub max_cond_pt: f64,
+    /// Whether `λ₀` was applied at any iterate.
+    pub regularised: bool,
+    /// `‖ζ‖` at `q⁽ᴸ⁾`: how far the nominal model there is from the measured points, mm.
+    pub residual_mm: f64,
+}
+
+/// Runs the Fig. 2 iteration for one configuration: commanded legs `commanded` (mm), measured
+/// target points `measured` (base frame, mm), `seed` a pose near the configuration (normally the
+/// commanded pose) for forward kinematics.
+///
+/// Fails when forward kinematics fails at an iterate (a leg leaves the stroke, a singular
+/// Jacobian): the measurement cannot be explained by leg corrections inside the stroke.
+pub fn solve(
+    geometry: &Geometry,
+    commanded: &[f64; LEGS],
+    measured: &[DVec3; TARGETS],
+    seed: &Pose,
+    options: &SolverOptions,
+) -> Result<Solution> {
+    let fk = ForwardOptions::default();
+    let mut legs = *commanded;
+    let mut pose = forward_kinematics(geometry, &legs, seed, &fk)?;
+    let mut max_cond_pt: f64 = 0.0;
+    let mut regularised = false;
+    let mut iterations = 0;
+    let mut converged = false;
+    while iterations < options.max_iterations {
+        let zeta = misfit(geometry, &pose, measured);
+        let t = ActuationScrews::at(geometry, &pose)
+            .motion_jacobian()
+            .ok_or(hexacomp_core::Error::SingularJacobian { ratio: 0.0 })?;
+        let pt = point_matrix(geometry, &pose) * t;
+        let cond = condition_number(&pt);
+        max_cond_pt = max_cond_pt.max(cond);
+        let lambda = if options.robust && cond > options.cond_threshold {
+            regularised = true;
+            options.lambda0
+        } else {
+            0.0
+        };
+        let rho = regularised_step(&pt.transpose(), &(pt.transpose() * pt), &zeta, lambda)?;
+        for (q, r) in legs.iter_mut().zip(rho.iter()) {
+            *q += r;
+        }
+        iterations += 1;
+        pose = forward_kinematics(geometry, &legs, &pose, &fk)?;
+        if rho.norm() < options.kappa_mm {
+            converged = true;
+            break;
+        }
+    }
+    Ok(Solution {
+        corrections: std::array::from_fn(|i| commanded[i] - legs[i]),
+        equivalent_legs: legs,
+        iterations,
+        converged,
+        max_cond_pt,
+        regularised,
+        residual_mm: misfit(geometry, &pose, measured).norm(),
+    })
+}
+
+/// `ζ = r_Pm − r_Pc` (Eq. 4) at `pose`, mm.
+fn misfit(geometry: &Geometry, pose: &Pose, measured: &[DVec3; TARGETS]) -> SVector<f64, 9> {
+    let computed = target_points(geometry, pose);
+    SVector::<f64, 9>::from_fn(|k, _| measured[k / 3][k % 3] - computed[k / 3][k % 3])
+}
+
+/// `ρ = (AᵀA + λI)⁻¹Aᵀζ` (Eq. 7) with `Aᵀ` and `AᵀA` given.
+fn regularised_step(
+    at: &nalgebra::SMatrix<f64, 6, 9>,
+    ata: &Matrix6<f64>,
+    zeta: &SVector<f64, 9>,
+    lambda: f64,
+) -> Result<Vector6<f64>> {
+    let normal = ata + Matrix6::identity() * lambda;
+    let rhs = at * zeta;
+    normal
+        .cholesky()
+        .map(|c| c.solve(&rhs))
+        .or_else(|| normal.lu().solve(&rhs))
+        .ok_or_else(|| hexacomp_core::Error::SingularJacobian { ratio: 0.0 }.into())
+}
+
+/// Why a configuration's corrections deserve a look before training on them.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Flag {
+    /// The iteration hit its limit before `‖ρ‖ < κ`.
+    NotConverged,
+    /// `‖ζ‖` at `q⁽ᴸ⁾` is far above the measurement noise: a bad reading or a target knocked.
+    LargeResidual {
+        /// The residual, mm.
+        residual_mm: f64,
+    },
+    /// A correction is larger than any plausible leg error.
+    LargeCorrection {
+        /// The largest `|Δq_i|`, mm.
+        max_mm: f64,
+    },
+    /// The file's commanded legs differ from the nominal inverse kinematics of its pose: the
+    /// geometry file may not be the one the measurements were taken with.
+    LegsDisagreeWithPose {
+        /// Largest difference, mm.
+        max_mm: f64,
+    },
+}
+
+impl std::fmt::Display for Flag {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Flag::NotConverged => write!(f, "did not converge"),
+            Flag::LargeResidual { residual_mm } => write!(
+                f,
+                "residual {residual_mm:.4} mm is far above the measurement noise (bad reading?)"
+            ),
+            Flag::LargeCorrection { max_mm } => {
+                write!(f, "correction of {max_mm:.3} mm is implausibly large")
+            }
+            Flag::LegsDisagreeWithPose { max_mm } => write!(
+                f,
+                "commanded legs differ from the pose's inverse kinematics by {max_mm:.3e} mm \
+                 (wrong geometry file?)"
+            ),
+        }
+    }
+}
+
+/// Thresholds of the per-configuration checks.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Checks {
+    /// Flag a configuration whose residual `‖ζ‖` exceeds this, mm. With 9 measured coordinates
+    /// and 6 unknowns, pure noise of σ per coordinate leaves `‖ζ‖ ≈ √3·σ`.
+    pub max_residual_mm: f64,
+    /// Flag a configuration with any `|Δq_i|` above this, mm.
+    pub max_correction_mm: f64,
+    /// Flag a configuration whose commanded legs differ from the pose's nominal inverse
+    /// kinematics by more than this, mm.
+    pub legs_tolerance_mm: f64,
+}
+
+impl Default for Checks {
+    fn default() -> Self {
+        Self {
+            max_residual_mm: 0.1,
+            max_correction_mm: 5.0,
+            legs_tolerance_mm: 1e-4,
+        }
+    }
+}
+
+/// What happened to one measured configuration.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Outcome {
+    /// The configuration's id.
+    pub id: String,
+    /// Its line in the measurements file.
+    pub line: u64,
+    /// The commanded legs `q⁽⁰⁾`, mm.
+    pub commanded: [f64; LEGS],
+    /// The solution, or why there is none.
+    pub solution: std::result::Result<Solution, String>,
+    /// Reasons to look at the configuration (empty for a clean one).
+    pub flags: Vec<Flag>,
+}
+
+impl Outcome {
+    /// The corrections row, when the configuration was solved.
+    pub fn correction_row(&self) -> Option<CorrectionRow> {
+        self.solution.as_ref().ok().map(|s| CorrectionRow {
+            id: self.id.clone(),
+            legs: self.commanded,
+            corrections: s.corrections,
+        })
+    }
+}
+
+/// Solves every row of a measurements file and checks each result.
+pub fn solve_all(
+    geometry: &Geometry,
+    rows: &[MeasurementRow],
+    options: &SolverOptions,
+    checks: &Checks,
+) -> Result<Vec<Outcome>> {
+    options.validate()?;
+    Ok(rows
+        .iter()
+        .map(|row| solve_row(geometry, row, options, checks))
+        .collect())
+}
+
+fn solve_row(
+    geometry: &Geometry,
+    row: &MeasurementRow,
+    options: &SolverOptions,
+    checks: &Checks,
+) -> Outcome {
+    let pose = row.pose();
+    let mut flags = Vec::new();
+    let nominal = inverse_kinematics(geometry, &pose).lengths;
+    let disagreement = (0..LEGS)
+        .map(|i| (nominal[i] - row.legs[i]).abs())
+        .fold(0.0, f64::max);
+    if disagreement > checks.legs_tolerance_mm {
+        flags.push(Flag::LegsDisagreeWithPose {
+            max_mm: disagreement,
+        });
+    }
+    let solution =
+        solve(geometry, &row.legs, &row.targets, &pose, options).map_err(|e| e.to_string());
+    if let Ok(s) = &solution {
+        if !s.converged {
+            flags.push(Flag::NotConverged);
+        }
+        if s.residual_mm > checks.max_residual_mm {
+            flags.push(Flag::LargeResidual {
+                residual_mm: s.residual_mm,
+            });
+        }
+        let largest = s.corrections.iter().fold(0.0_f64, |m, d| m.max(d.abs()));
+        if largest > checks.max_correction_mm {
+            flags.push(Flag::LargeCorrection { max_mm: largest });
+        }
+    }
+    Outcome {
+        id: row.id.clone(),
+        line: row.line,
+        commanded: row.legs,
+        solution,
+        flags,
+    }
+}

@@ -1,0 +1,171 @@
+//! The model-based baseline: identification of the geometric parameters from point measurements.
+//!
+//! Parameters (42): the base joint centres `b_i` (18), the platform joint centres `a_i` (18) and
+//! the leg zero offsets `o_i` (6). The targets are known in the platform frame and measured in the
+//! base frame, which fixes both frames. For measured configuration `k` with commanded legs `q_k`,
+//! the model's pose is the forward kinematics of the parameters, and its residual is
+//! `r_k = r_Pm − r_Pc` (9 values). Differentiating the leg constraint
+//! `|t + R·a_i − b_i| − o_i = q_i` with the legs held gives `Wᵀ·ξ = G·δθ` with row `i` of `G`
+//! being `s_iᵀ` on `b_i`, `−(Rᵀs_i)ᵀ` on `a_i` and 1 on `o_i`; so `∂r_Pc/∂θ = P·T·G` (Eq. 3–4).
+//!
+//! Gauss–Newton steps solve `J·δθ = r` by SVD, dropping directions whose singular value is below
+//! a fraction of the largest: parameter combinations the measurements cannot see stay at their
+//! nominal values. Compensation is then the identified geometry's inverse kinematics.
+
+use hexacomp_core::formats::MeasurementRow;
+use hexacomp_core::kinematics::target_points;
+use hexacomp_core::screw::{ActuationScrews, point_matrix};
+use hexacomp_core::{ForwardOptions, Geometry, LEGS, Pose, forward_kinematics};
+use nalgebra::{DMatrix, DVector, SMatrix};
+
+use crate::error::{Error, Result};
+
+/// Number of identified parameters: 6 × (3 + 3 + 1).
+pub const PARAMETERS: usize = 42;
+
+/// Settings of the identification.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct IdentifyOptions {
+    /// Gauss–Newton iterations at most.
+    pub max_iterations: usize,
+    /// Stop when the largest parameter step is below this, mm.
+    pub step_tolerance_mm: f64,
+    /// Stop when an iteration lowers the residual RMS by less than this fraction (noisy data
+    /// never reaches the step tolerance: the fit stalls at the noise).
+    pub stall_fraction: f64,
+    /// Singular values below this fraction of the largest are treated as zero (unidentifiable).
+    pub relative_cutoff: f64,
+}
+
+impl Default for IdentifyOptions {
+    fn default() -> Self {
+        Self {
+            max_iterations: 30,
+            step_tolerance_mm: 1e-10,
+            stall_fraction: 1e-9,
+            relative_cutoff: 1e-9,
+        }
+    }
+}
+
+/// The identified geometry and how the identification went.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Identification {
+    /// The nominal geometry with identified joint centres and leg offsets.
+    pub geometry: Geometry,
+    /// Gauss–Newton iterations performed.
+    pub iterations: usize,
+    /// Parameter directions the measurements determine (≤ 42).
+    pub rank: usize,
+    /// RMS of the target residuals with the nominal geometry, mm.
+    pub rms_before_mm: f64,
+    /// RMS of the target residuals with the identified geometry, mm.
+    pub rms_after_mm: f64,
+}
+
+/// Identifies the geometric parameters of `nominal` from measured configurations.
+pub fn identify(
+    nominal: &Geometry,
+    rows: &[MeasurementRow],
+    options: &IdentifyOptions,
+) -> Result<Identification> {
+    // 9 equations per configuration; 42 unknowns need at least 5 configurations, and far more
+    // for a well-conditioned answer.
+    if rows.len() < 5 {
+        return Err(Error::InsufficientData(format!(
+            "identification needs at least 5 measured configurations, got {}",
+            rows.len()
+        )));
+    }
+    let mut geometry = nominal.clone();
+    let mut poses: Vec<Pose> = rows.iter().map(MeasurementRow::pose).collect();
+    let mut rms_before = None;
+    let mut rms_previous = f64::INFINITY;
+    let mut rank = 0;
+    let mut iterations = 0;
+    for _ in 0..options.max_iterations {
+        let (jacobian, residual) = linearise(&geometry, rows, &mut poses)?;
+        let rms = (residual.norm_squared() / residual.len() as f64).sqrt();
+        rms_before.get_or_insert(rms);
+        if rms_previous.is_finite() && rms_previous - rms <= options.stall_fraction * rms_previous {
+            break;
+        }
+        rms_previous = rms;
+        let svd = jacobian.svd(true, true);
+        let cutoff = options.relative_cutoff * svd.singular_values.max();
+        rank = svd.singular_values.iter().filter(|s| **s > cutoff).count();
+        let step = svd
+            .solve(&residual, cutoff)
+            .map_err(|e| Error::InsufficientData(format!("identification step: {e}")))?;
+        apply(&mut geometry, &step);
+        iterations += 1;
+        if step.amax() < options.step_tolerance_mm {
+            break;
+        }
+    }
+    let (_, residual) = linearise(&geometry, rows, &mut poses)?;
+    Ok(Identification {
+        geometry,
+        iterations,
+        rank,
+        rms_before_mm: rms_before.unwrap_or(0.0),
+        rms_after_mm: (residual.norm_squared() / residual.len() as f64).sqrt(),
+    })
+}
+
+/// The Jacobian `∂r_Pc/∂θ` (9K × 42) and the residual `r_Pm − r_Pc` (9K) at the current
+/// parameters; `poses` are updated to the model's poses (and seed the next call).
+fn linearise(
+    geometry: &Geometry,
+    rows: &[MeasurementRow],
+    poses: &mut [Pose],
+) -> Result<(DMatrix<f64>, DVector<f64>)> {
+    let mut jacobian = DMatrix::zeros(9 * rows.len(), PARAMETERS);
+    let mut residual = DVector::zeros(9 * rows.len());
+    let fk = ForwardOptions::default();
+    for (k, (row, pose)) in rows.iter().zip(poses.iter_mut()).enumerate() {
+        *pose = forward_kinematics(geometry, &row.legs, pose, &fk).map_err(|e| {
+            Error::InsufficientData(format!(
+                "configuration {} (line {}): forward kinematics of the identified geometry: {e}",
+                row.id, row.line
+            ))
+        })?;
+        let screws = ActuationScrews::at(geometry, pose);
+        let t = screws.motion_jacobian().ok_or_else(|| {
+            Error::InsufficientData(format!("configuration {} is singular", row.id))
+        })?;
+        let rotation_t = pose.rotation().transpose();
+        let mut g = SMatrix::<f64, LEGS, PARAMETERS>::zeros();
+        for i in 0..LEGS {
+            let s = screws.directions[i];
+            let s_platform = rotation_t * s;
+            for axis in 0..3 {
+                g[(i, 3 * i + axis)] = s[axis];
+                g[(i, 18 + 3 * i + axis)] = -s_platform[axis];
+            }
+            g[(i, 36 + i)] = 1.0;
+        }
+        let block = point_matrix(geometry, pose) * t * g;
+        jacobian
+            .view_mut((9 * k, 0), (9, PARAMETERS))
+            .copy_from(&block);
+        let computed = target_points(geometry, pose);
+        for j in 0..3 {
+            for axis in 0..3 {
+                residual[9 * k + 3 * j + axis] = row.targets[j][axis] - computed[j][axis];
+            }
+        }
+    }
+    Ok((jacobian, residual))
+}
+
+/// Adds a parameter step (the order of [`linearise`]'s columns) to the geometry.
+fn apply(geometry: &mut Geometry, step: &DVector<f64>) {
+    for i in 0..LEGS {
+        for axis in 0..3 {
+            geometry.base_joints[i][axis] += step[3 * i + axis];
+            geometry.platform_joints[i][axis] += step[18 + 3 * i + axis];
+        }
+        geometry.leg_offsets[i] += step[36 + i];
+    }
+}

@@ -1,0 +1,21 @@
+//! # hexacomp-trainer (library)
+//!
+//! The offline numerics behind the `hexacomp-trainer` binary:
+//!
+//! - [`plan`]: measuring configurations spread over the task workspace (the paper's Fig. 8);
+//! - [`acquire`]: measuring a plan on the virtual platform;
+//! - [`corrections`]: the robust Levenberg–Marquardt joint-correction solver (Fig. 2, Eq. 5–9);
+//! - [`identify`]: the model-based baseline — identification of the geometric parameters by
+//!   iterative least squares, compensation by the identified inverse kinematics.
+//!
+//! Units: mm and radians in memory, mm and degrees in files.
+
+#![warn(missing_docs)]
+
+pub mod acquire;
+pub mod corrections;
+pub mod error;
+pub mod identify;
+pub mod plan;
+
+pub use error::{Error, Result};

@@ -1,0 +1,53 @@
+//! The model-based baseline: identification of the geometric parameters.
+
+mod common;
+
+use hexacomp_core::virtual_platform::{DEFAULT_MACHINE_SEED, ErrorModel, ErrorVariant};
+use hexacomp_core::{Geometry, inverse_kinematics};
+use hexacomp_trainer::Error;
+use hexacomp_trainer::identify::{IdentifyOptions, PARAMETERS, identify};
+
+#[test]
+fn geometric_only_machine_is_recovered_below_a_micrometre() {
+    let g = Geometry::prototype();
+    let rows = common::plan_rows(&g, 150, 7);
+    let model = ErrorModel::variant(ErrorVariant::GeometricOnly);
+    let (platform, measurements) = common::measure(&g, &model, DEFAULT_MACHINE_SEED, 1, &rows);
+    let result = identify(&g, &measurements, &IdentifyOptions::default()).unwrap();
+    assert_eq!(result.rank, PARAMETERS);
+    assert!(result.rms_after_mm < 1e-6, "{result:?}");
+    let truth = &platform.machine().geometry;
+    for i in 0..6 {
+        assert!(result.geometry.base_joints[i].distance(truth.base_joints[i]) < 1e-3);
+        assert!(result.geometry.platform_joints[i].distance(truth.platform_joints[i]) < 1e-3);
+        assert!((result.geometry.leg_offsets[i] - truth.leg_offsets[i]).abs() < 1e-3);
+    }
+    // And the identified inverse kinematics is the machine's own: commanding it is exact.
+    let pose = g.home_pose();
+    let a = inverse_kinematics(&result.geometry, &pose).lengths;
+    let b = inverse_kinematics(truth, &pose).lengths;
+    assert!((0..6).all(|i| (a[i] - b[i]).abs() < 1e-6));
+}
+
+#[test]
+fn non_geometric_errors_leave_a_residual_identification_cannot_remove() {
+    let g = Geometry::prototype();
+    let rows = common::plan_rows(&g, 150, 8);
+    let model = ErrorModel::variant(ErrorVariant::NoiseFree);
+    let (_, measurements) = common::measure(&g, &model, DEFAULT_MACHINE_SEED, 1, &rows);
+    let result = identify(&g, &measurements, &IdentifyOptions::default()).unwrap();
+    assert!(result.rms_before_mm > 0.3, "{result:?}");
+    // Pitch errors and gravity compliance are not geometry: tens of micrometres remain.
+    assert!((0.01..0.1).contains(&result.rms_after_mm), "{result:?}");
+}
+
+#[test]
+fn too_few_configurations_are_refused() {
+    let g = Geometry::prototype();
+    let rows = common::plan_rows(&g, 4, 9);
+    let (_, measurements) = common::measure(&g, &ErrorModel::default(), 1, 1, &rows);
+    assert!(matches!(
+        identify(&g, &measurements, &IdentifyOptions::default()),
+        Err(Error::InsufficientData(_))
+    ));
+}
