@@ -85,9 +85,65 @@ pub enum Error {
         message: String,
     },
 
+    /// A model (network, normalisation, bounds) is inconsistent or not finite.
+    #[error("invalid model: {0}")]
+    InvalidModel(String),
+
+    /// A model file could not be read: wrong kind of file, another format version, truncated,
+    /// corrupted, or for another geometry.
+    #[error("model file {path}: {problem}")]
+    ModelFile {
+        /// The file.
+        path: String,
+        /// What is wrong with it.
+        problem: ModelFileProblem,
+    },
+
     /// An error-model or sampler setting is out of its valid range.
     #[error("invalid setting: {0}")]
     InvalidSetting(String),
+}
+
+/// Why a model file was refused.
+#[derive(Debug, Clone, PartialEq, Error)]
+#[non_exhaustive]
+pub enum ModelFileProblem {
+    /// The file does not start with the model magic bytes.
+    #[error("not a hexacomp model file")]
+    NotAModel,
+    /// The file has a format version this build does not read.
+    #[error("format version {found}, this build reads version {supported}")]
+    Version {
+        /// Version in the file.
+        found: u16,
+        /// Version this build reads.
+        supported: u16,
+    },
+    /// The file is shorter than its header says.
+    #[error("truncated: {actual} bytes, expected {expected}")]
+    Truncated {
+        /// Bytes present.
+        actual: usize,
+        /// Bytes the header announces.
+        expected: usize,
+    },
+    /// The checksum does not match the contents.
+    #[error("checksum mismatch (file corrupted)")]
+    Checksum,
+    /// The payload does not decode or is inconsistent.
+    #[error("corrupt contents: {0}")]
+    Corrupt(String),
+    /// The model was trained for another geometry.
+    #[error("trained for geometry {model}, not for this geometry {geometry}")]
+    Geometry {
+        /// Fingerprint in the model.
+        model: String,
+        /// Fingerprint of the geometry in use.
+        geometry: String,
+    },
+    /// The file could not be read or written.
+    #[error("{0}")]
+    Io(String),
 }
 
 /// `Result` with the core [`enum@Error`].

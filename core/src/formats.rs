@@ -16,6 +16,7 @@ use std::path::Path;
 
 use glam::DVec3;
 
+use crate::compensator::Compensated;
 use crate::error::{Error, Result};
 use crate::geometry::{LEGS, TARGETS};
 use crate::pose::Pose;
@@ -79,6 +80,24 @@ pub struct CorrectionRow {
     pub legs: [f64; LEGS],
     /// Joint corrections `Δq = q⁽⁰⁾ − q⁽ᴸ⁾` (Eq. 9), mm.
     pub corrections: [f64; LEGS],
+}
+
+/// One row of a joints file: `id,q1..q6` (nominal leg lengths, mm).
+#[derive(Debug, Clone, PartialEq)]
+pub struct JointsRow {
+    /// The point's id.
+    pub id: String,
+    /// Nominal leg lengths, mm.
+    pub legs: [f64; LEGS],
+}
+
+/// One row of a compensated-output file: the legs to command, the corrections and a status.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CompensatedRow {
+    /// The point's id.
+    pub id: String,
+    /// The compensated point.
+    pub point: Compensated,
 }
 
 /// A parsed CSV file: header, and each data row with its line number.
@@ -316,6 +335,39 @@ pub fn read_corrections(path: &Path) -> Result<Vec<CorrectionRow>> {
             })
         })
         .collect()
+}
+
+/// Reads a joints file (`id,q1..q6`).
+pub fn read_joints(path: &Path) -> Result<Vec<JointsRow>> {
+    let table = Table::read(path)?;
+    let ids = table.ids()?;
+    let leg_cols = table.require(LEG_COLUMNS)?;
+    ids.into_iter()
+        .enumerate()
+        .map(|(row, id)| {
+            Ok(JointsRow {
+                id,
+                legs: table.numbers(row, LEG_COLUMNS, leg_cols)?,
+            })
+        })
+        .collect()
+}
+
+/// Writes a compensated-output file: `id,q1..q6` (the legs to command), `dq1..dq6`, `status`.
+pub fn write_compensated<W: Write>(writer: W, rows: &[CompensatedRow]) -> Result<()> {
+    let mut head = header(&[&LEG_COLUMNS, &CORRECTION_COLUMNS]);
+    head.push("status");
+    write_rows(
+        writer,
+        &head,
+        rows.iter().map(|r| {
+            std::iter::once(r.id.clone())
+                .chain(cells(&r.point.legs))
+                .chain(cells(&r.point.corrections))
+                .chain(std::iter::once(r.point.status.name().to_string()))
+                .collect()
+        }),
+    )
 }
 
 /// Writes a CSV file: a header and rows of already formatted cells.

@@ -11,6 +11,8 @@
 //! - [`sampling`]: seeded uniform poses over the task workspace;
 //! - [`virtual_platform`]: a simulated real machine with realistic error sources and a simulated
 //!   point-measuring device;
+//! - [`network`], [`model`]: the trained networks, their normalisation and the model file;
+//! - [`compensator`]: run-time compensation with a status per point (Eq. 19–20);
 //! - [`stats`]: max/mean/std summaries of pose errors (the paper's Table 2 layout).
 //!
 //! Units everywhere: millimetres; radians in code, degrees only in files and on the command line.
@@ -18,10 +20,13 @@
 
 #![warn(missing_docs)]
 
+pub mod compensator;
 pub mod error;
 pub mod formats;
 pub mod geometry;
 pub mod kinematics;
+pub mod model;
+pub mod network;
 pub mod pose;
 pub mod sampling;
 pub mod screw;

@@ -15,7 +15,10 @@
 pub mod acquire;
 pub mod corrections;
 pub mod error;
+pub mod evaluate;
 pub mod identify;
 pub mod plan;
+pub mod svg;
+pub mod train;
 
 pub use error::{Error, Result};

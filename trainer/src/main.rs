@@ -30,10 +30,15 @@ struct Cli {
 
 #[derive(Debug, Subcommand)]
 enum Command {
+    Calibrate(commands::calibrate::CalibrateArgs),
     Plan(commands::plan::PlanArgs),
     Simulate(commands::simulate::SimulateArgs),
     Solve(commands::solve::SolveArgs),
     Identify(commands::identify::IdentifyArgs),
+    Train(commands::train::TrainArgs),
+    Inspect(commands::inspect::InspectArgs),
+    Predict(commands::predict::PredictArgs),
+    Evaluate(commands::evaluate::EvaluateArgs),
     Survey(commands::survey::SurveyArgs),
     Geometry(commands::geometry::GeometryArgs),
 }
@@ -55,10 +60,15 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         None => Geometry::prototype(),
     };
     match cli.command {
+        Command::Calibrate(args) => commands::calibrate::run(&geometry, &args),
         Command::Plan(args) => commands::plan::run(&geometry, &args),
         Command::Simulate(args) => commands::simulate::run(&geometry, &args),
         Command::Solve(args) => commands::solve::run(&geometry, &args),
         Command::Identify(args) => commands::identify::run(&geometry, &args),
+        Command::Train(args) => commands::train::run(&geometry, &args),
+        Command::Inspect(args) => commands::inspect::run(&geometry, &args),
+        Command::Predict(args) => commands::predict::run(&geometry, &args),
+        Command::Evaluate(args) => commands::evaluate::run(&geometry, &args),
         Command::Survey(args) => commands::survey::run(&geometry, &args),
         Command::Geometry(args) => commands::geometry::run(&geometry, &args),
     }

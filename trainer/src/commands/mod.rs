@@ -1,11 +1,16 @@
 //! One module per subcommand.
 
+pub mod calibrate;
+pub mod evaluate;
 pub mod geometry;
 pub mod identify;
+pub mod inspect;
 pub mod plan;
+pub mod predict;
 pub mod simulate;
 pub mod solve;
 pub mod survey;
+pub mod train;
 
 use std::path::Path;
 

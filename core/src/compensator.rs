@@ -1,0 +1,136 @@
+//! Run-time compensation (Eq. 19–20): nominal inverse kinematics, the model's correction, and a
+//! status for every point. The service and `hexacomp-trainer predict` both call this, so they
+//! return the same numbers.
+
+use crate::geometry::{Geometry, LEGS};
+use crate::kinematics::{LegStatus, inverse_kinematics, stroke_status};
+use crate::model::Model;
+use crate::pose::Pose;
+
+/// How a point was compensated. The numeric values are part of the wire contract.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[repr(u8)]
+pub enum PointStatus {
+    /// Compensated inside the trained range.
+    Ok = 0,
+    /// A nominal or corrected leg is outside the stroke: the legs returned are uncorrected.
+    OutOfStroke = 1,
+    /// Compensated, but the legs lie outside the range the model was trained on.
+    OutsideTrainedRange = 2,
+    /// A correction exceeded the model's bounds and was clamped to them.
+    Clamped = 3,
+    /// A non-finite input: nothing computed, the legs returned are the input.
+    InvalidInput = 4,
+    /// No model loaded: the legs returned are the nominal ones.
+    NoModel = 5,
+}
+
+impl PointStatus {
+    /// Every status, in numeric order.
+    pub const ALL: [PointStatus; 6] = [
+        PointStatus::Ok,
+        PointStatus::OutOfStroke,
+        PointStatus::OutsideTrainedRange,
+        PointStatus::Clamped,
+        PointStatus::InvalidInput,
+        PointStatus::NoModel,
+    ];
+
+    /// The status's name in files (`status` column).
+    pub fn name(self) -> &'static str {
+        match self {
+            PointStatus::Ok => "ok",
+            PointStatus::OutOfStroke => "out_of_stroke",
+            PointStatus::OutsideTrainedRange => "outside_trained_range",
+            PointStatus::Clamped => "clamped",
+            PointStatus::InvalidInput => "invalid_input",
+            PointStatus::NoModel => "no_model",
+        }
+    }
+
+    /// The status of a wire value, if it is one.
+    pub fn from_u8(value: u8) -> Option<Self> {
+        Self::ALL.get(value as usize).copied()
+    }
+}
+
+/// One compensated point.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Compensated {
+    /// Leg lengths to command, `q + Δq`, mm.
+    pub legs: [f64; LEGS],
+    /// The corrections applied, `Δq`, mm.
+    pub corrections: [f64; LEGS],
+    /// How the point was compensated.
+    pub status: PointStatus,
+}
+
+/// Tolerance on the trained range before a point counts as outside it, mm.
+const RANGE_TOLERANCE_MM: f64 = 1e-6;
+
+/// Compensates nominal leg lengths `q` (mm) with `model` (or reports `NoModel`).
+/// Allocation-free.
+pub fn compensate_legs(geometry: &Geometry, model: Option<&Model>, q: &[f64; LEGS]) -> Compensated {
+    let unchanged = |status| Compensated {
+        legs: *q,
+        corrections: [0.0; LEGS],
+        status,
+    };
+    if q.iter().any(|v| !v.is_finite()) {
+        return unchanged(PointStatus::InvalidInput);
+    }
+    if q.iter()
+        .any(|v| stroke_status(*v, geometry.leg_range) != LegStatus::Ok)
+    {
+        return unchanged(PointStatus::OutOfStroke);
+    }
+    let Some(model) = model else {
+        return unchanged(PointStatus::NoModel);
+    };
+    // Whatever the networks were fitted to (see `NetworkInput`), at run time their input is the
+    // nominal legs.
+    let raw = model.raw_corrections(q);
+    let mut status = PointStatus::Ok;
+    let outside = (0..LEGS).any(|i| {
+        let [lo, hi] = model.training_range[i];
+        q[i] < lo - RANGE_TOLERANCE_MM || q[i] > hi + RANGE_TOLERANCE_MM
+    });
+    if outside {
+        status = PointStatus::OutsideTrainedRange;
+    }
+    let mut corrections = raw;
+    for (i, c) in corrections.iter_mut().enumerate() {
+        let [lo, hi] = model.correction_bounds[i];
+        if !c.is_finite() {
+            return unchanged(PointStatus::InvalidInput);
+        }
+        if *c < lo || *c > hi {
+            *c = c.clamp(lo, hi);
+            status = PointStatus::Clamped;
+        }
+    }
+    let legs: [f64; LEGS] = std::array::from_fn(|i| q[i] + corrections[i]);
+    if legs
+        .iter()
+        .any(|v| stroke_status(*v, geometry.leg_range) != LegStatus::Ok)
+    {
+        return unchanged(PointStatus::OutOfStroke);
+    }
+    Compensated {
+        legs,
+        corrections,
+        status,
+    }
+}
+
+/// Compensates a pose (mm, rad): nominal inverse kinematics, then [`compensate_legs`].
+pub fn compensate_pose(geometry: &Geometry, model: Option<&Model>, pose: &Pose) -> Compensated {
+    if !pose.is_finite() {
+        return Compensated {
+            legs: [f64::NAN; LEGS],
+            corrections: [0.0; LEGS],
+            status: PointStatus::InvalidInput,
+        };
+    }
+    compensate_legs(geometry, model, &inverse_kinematics(geometry, pose).lengths)
+}

@@ -1,0 +1,247 @@
+//! The trained compensation model and its file (DESIGN.md "Model file").
+//!
+//! File layout: 8 magic bytes `HXCMODEL`, the format version (u16, little-endian), the payload
+//! length (u32 LE), the postcard-encoded [`Model`], and a CRC-64/XZ (u64 LE) of everything
+//! before it. A model binds itself to the fingerprint of the geometry it was trained for.
+
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Error, ModelFileProblem, Result};
+use crate::geometry::{Fingerprint, Geometry, LEGS};
+use crate::network::{Network, Normalisation};
+
+/// Magic bytes at the start of every model file.
+pub const MAGIC: &[u8; 8] = b"HXCMODEL";
+/// The model-file format version this build writes and reads.
+pub const FORMAT_VERSION: u16 = 1;
+const HEADER: usize = 8 + 2 + 4;
+const CHECKSUM: crc::Crc<u64> = crc::Crc::<u64>::new(&crc::CRC_64_XZ);
+
+/// How the joint-correction function is split into networks (Sec. 3.2, Fig. 3–4).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub enum Networks {
+    /// One network with six outputs.
+    Coupled(Network),
+    /// Six single-output networks, one per leg.
+    Decoupled(Vec<Network>),
+}
+
+/// Which leg lengths the networks take as input.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum NetworkInput {
+    /// The commanded nominal legs `q⁽⁰⁾` (the paper): `Δq = N(q⁽⁰⁾)`.
+    Commanded,
+    /// The equivalent legs `q⁽ᴸ⁾ = q⁽⁰⁾ − Δq`: `N` inverts the machine's map, so `q + N(q)` is
+    /// right at the corrected point rather than only at `q⁽⁰⁾`.
+    Equivalent,
+}
+
+impl NetworkInput {
+    /// The name used on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            NetworkInput::Commanded => "commanded",
+            NetworkInput::Equivalent => "equivalent",
+        }
+    }
+}
+
+/// Where a model came from.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Provenance {
+    /// Creation time, seconds since the Unix epoch (UTC).
+    pub created_unix_s: u64,
+    /// Configurations the corrections came from.
+    pub configurations: usize,
+    /// Samples in the final fit.
+    pub training_samples: usize,
+    /// Samples held out to choose the hidden-node count.
+    pub validation_samples: usize,
+    /// Holdout validation RMSE of the chosen size (Eq. 18, or Eq. 21 for decoupled), mm.
+    pub validation_rmse_mm: f64,
+    /// Free text: the tool, its version, the source files.
+    pub source: String,
+}
+
+/// A trained compensation model: `Δq = N(normalise(q))`, clamped to the correction bounds.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Model {
+    /// The network(s).
+    pub networks: Networks,
+    /// The networks' input.
+    pub input: NetworkInput,
+    /// Input normalisation (Eq. 13).
+    pub normalisation: Normalisation,
+    /// `[min, max]` of each leg over the training samples, mm.
+    pub training_range: [[f64; 2]; LEGS],
+    /// `[min, max]` of each correction the model may return, mm.
+    pub correction_bounds: [[f64; 2]; LEGS],
+    /// Fingerprint of the geometry the model was trained for.
+    pub geometry: Fingerprint,
+    /// Where the model came from.
+    pub provenance: Provenance,
+}
+
+impl Model {
+    /// The raw network output `Δq` (mm) for network input legs `q` (mm), before clamping.
+    /// Allocation-free.
+    #[inline]
+    pub fn raw_corrections(&self, q: &[f64; LEGS]) -> [f64; LEGS] {
+        let x = self.normalisation.apply(q);
+        let mut out = [0.0; LEGS];
+        match &self.networks {
+            Networks::Coupled(n) => n.evaluate(&x, &mut out),
+            Networks::Decoupled(nets) => {
+                for (leg, n) in nets.iter().enumerate() {
+                    n.evaluate(&x, &mut out[leg..=leg]);
+                }
+            }
+        }
+        out
+    }
+
+    /// Hidden nodes of each network.
+    pub fn hidden_nodes(&self) -> Vec<usize> {
+        match &self.networks {
+            Networks::Coupled(n) => vec![n.hidden()],
+            Networks::Decoupled(nets) => nets.iter().map(Network::hidden).collect(),
+        }
+    }
+
+    /// Checks the networks' shapes, that every number is finite and ranges are ordered.
+    pub fn validate(&self) -> Result<()> {
+        match &self.networks {
+            Networks::Coupled(n) => {
+                n.validate()?;
+                if n.outputs() != LEGS {
+                    return Err(Error::InvalidModel(format!(
+                        "a coupled network needs {LEGS} outputs, has {}",
+                        n.outputs()
+                    )));
+                }
+            }
+            Networks::Decoupled(nets) => {
+                if nets.len() != LEGS || nets.iter().any(|n| n.outputs() != 1) {
+                    return Err(Error::InvalidModel(format!(
+                        "decoupled models need {LEGS} single-output networks"
+                    )));
+                }
+                nets.iter().try_for_each(Network::validate)?;
+            }
+        }
+        let n = &self.normalisation;
+        if n.mean.iter().chain(&n.span).any(|v| !v.is_finite()) || n.span.iter().any(|s| *s <= 0.0)
+        {
+            return Err(Error::InvalidModel(
+                "normalisation must be finite with positive spans".into(),
+            ));
+        }
+        for (name, ranges) in [
+            ("training range", &self.training_range),
+            ("correction bounds", &self.correction_bounds),
+        ] {
+            for (leg, [lo, hi]) in ranges.iter().enumerate() {
+                if !(lo.is_finite() && hi.is_finite() && lo <= hi) {
+                    return Err(Error::InvalidModel(format!(
+                        "{name} of leg {} is [{lo}, {hi}]",
+                        leg + 1
+                    )));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The model-file bytes.
+    pub fn to_bytes(&self) -> Vec<u8> {
+        let payload = postcard::to_stdvec(self).expect("a model always serialises");
+        let mut bytes = Vec::with_capacity(HEADER + payload.len() + 8);
+        bytes.extend_from_slice(MAGIC);
+        bytes.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
+        bytes.extend_from_slice(&(payload.len() as u32).to_le_bytes());
+        bytes.extend_from_slice(&payload);
+        let checksum = CHECKSUM.checksum(&bytes);
+        bytes.extend_from_slice(&checksum.to_le_bytes());
+        bytes
+    }
+
+    /// Decodes and validates model-file bytes.
+    pub fn from_bytes(bytes: &[u8]) -> std::result::Result<Self, ModelFileProblem> {
+        if bytes.len() < MAGIC.len() || &bytes[..MAGIC.len()] != MAGIC {
+            return Err(ModelFileProblem::NotAModel);
+        }
+        if bytes.len() < HEADER {
+            return Err(ModelFileProblem::Truncated {
+                actual: bytes.len(),
+                expected: HEADER,
+            });
+        }
+        let version = u16::from_le_bytes([bytes[8], bytes[9]]);
+        if version != FORMAT_VERSION {
+            return Err(ModelFileProblem::Version {
+                found: version,
+                supported: FORMAT_VERSION,
+            });
+        }
+        let length = u32::from_le_bytes([bytes[10], bytes[11], bytes[12], bytes[13]]) as usize;
+        let expected = HEADER + length + 8;
+        if bytes.len() < expected {
+            return Err(ModelFileProblem::Truncated {
+                actual: bytes.len(),
+                expected,
+            });
+        }
+        if bytes.len() > expected {
+            return Err(ModelFileProblem::Corrupt(format!(
+                "{} bytes after the checksum",
+                bytes.len() - expected
+            )));
+        }
+        let (body, tail) = bytes.split_at(HEADER + length);
+        let stored = u64::from_le_bytes(tail.try_into().expect("8 checksum bytes"));
+        if CHECKSUM.checksum(body) != stored {
+            return Err(ModelFileProblem::Checksum);
+        }
+        let model: Model = postcard::from_bytes(&body[HEADER..])
+            .map_err(|e| ModelFileProblem::Corrupt(e.to_string()))?;
+        model
+            .validate()
+            .map_err(|e| ModelFileProblem::Corrupt(e.to_string()))?;
+        Ok(model)
+    }
+
+    /// Reads a model file and checks that it was trained for `geometry`.
+    pub fn load(path: &Path, geometry: &Geometry) -> Result<Self> {
+        let fail = |problem| Error::ModelFile {
+            path: path.display().to_string(),
+            problem,
+        };
+        let bytes = std::fs::read(path).map_err(|e| fail(ModelFileProblem::Io(e.to_string())))?;
+        let model = Self::from_bytes(&bytes).map_err(fail)?;
+        if model.geometry != geometry.fingerprint() {
+            return Err(fail(ModelFileProblem::Geometry {
+                model: model.geometry.to_string(),
+                geometry: geometry.fingerprint().to_string(),
+            }));
+        }
+        Ok(model)
+    }
+
+    /// Writes the model file atomically: to a temporary file beside `path`, flushed to disk,
+    /// then renamed over it, so a crash never leaves a half-written model.
+    pub fn save(&self, path: &Path) -> Result<()> {
+        use std::io::Write;
+        let io = |e: std::io::Error| Error::ModelFile {
+            path: path.display().to_string(),
+            problem: ModelFileProblem::Io(e.to_string()),
+        };
+        let name = path.file_name().map(|n| n.to_string_lossy().into_owned());
+        let temporary = path.with_file_name(format!(".{}.tmp", name.unwrap_or_default()));
+        let mut file = std::fs::File::create(&temporary).map_err(io)?;
+        file.write_all(&self.to_bytes()).map_err(io)?;
+        file.sync_all().map_err(io)?;
+        std::fs::rename(&temporary, path).map_err(io)
+    }
+}

@@ -1,0 +1,92 @@
+//! The hot path allocates nothing: a counting global allocator around model inference and pose
+//! compensation.
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use hexacomp_core::Geometry;
+use hexacomp_core::compensator::compensate_pose;
+use hexacomp_core::model::{Model, NetworkInput, Networks, Provenance};
+use hexacomp_core::network::{Network, Normalisation};
+use hexacomp_core::sampling::{SamplerOptions, WorkspaceSampler};
+
+struct Counting;
+
+static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
+
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        unsafe { System.dealloc(ptr, layout) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+#[test]
+fn the_counter_sees_allocations() {
+    let before = ALLOCATIONS.load(Ordering::Relaxed);
+    let v = std::hint::black_box(vec![1u8; 10]);
+    assert!(ALLOCATIONS.load(Ordering::Relaxed) > before);
+    drop(v);
+}
+
+#[test]
+fn inference_and_compensation_allocate_nothing() {
+    let g = Geometry::prototype();
+    let network = |outputs| {
+        let count = Network::weight_count(13, outputs);
+        Network::from_weights(
+            13,
+            outputs,
+            (0..count).map(|i| (i as f64).sin() * 0.01).collect(),
+        )
+        .unwrap()
+    };
+    let model = |networks| Model {
+        networks,
+        input: NetworkInput::Equivalent,
+        normalisation: Normalisation {
+            mean: [355.0; 6],
+            span: [140.0; 6],
+        },
+        training_range: [[280.0, 430.0]; 6],
+        correction_bounds: [[-2.0, 2.0]; 6],
+        geometry: g.fingerprint(),
+        provenance: Provenance {
+            created_unix_s: 0,
+            configurations: 0,
+            training_samples: 0,
+            validation_samples: 0,
+            validation_rmse_mm: 0.0,
+            source: String::new(),
+        },
+    };
+    let models = [
+        model(Networks::Coupled(network(6))),
+        model(Networks::Decoupled((0..6).map(|_| network(1)).collect())),
+    ];
+    let poses = WorkspaceSampler::new(&g, 1, SamplerOptions::default())
+        .unwrap()
+        .samples(1000)
+        .unwrap();
+    for m in &models {
+        let before = ALLOCATIONS.load(Ordering::Relaxed);
+        let mut checksum = 0.0;
+        for pose in &poses {
+            checksum += compensate_pose(&g, Some(m), pose).legs[0];
+        }
+        let after = ALLOCATIONS.load(Ordering::Relaxed);
+        assert!(checksum.is_finite());
+        assert_eq!(
+            after - before,
+            0,
+            "{} allocations in 1000 compensations",
+            after - before
+        );
+    }
+}

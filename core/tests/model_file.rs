@@ -1,0 +1,125 @@
+//! The model file: exact round trip, and each kind of bad file refused with its own reason.
+
+use hexacomp_core::Geometry;
+use hexacomp_core::error::{Error, ModelFileProblem};
+use hexacomp_core::model::{FORMAT_VERSION, Model, NetworkInput, Networks, Provenance};
+use hexacomp_core::network::{Network, Normalisation};
+
+fn model(geometry: &Geometry) -> Model {
+    let network = |seed: f64| {
+        let count = Network::weight_count(3, 1);
+        Network::from_weights(
+            3,
+            1,
+            (0..count)
+                .map(|i| (i as f64 * 0.37 + seed).sin() * 0.1)
+                .collect(),
+        )
+        .unwrap()
+    };
+    Model {
+        networks: Networks::Decoupled((0..6).map(|i| network(i as f64)).collect()),
+        input: NetworkInput::Equivalent,
+        normalisation: Normalisation {
+            mean: [355.0; 6],
+            span: [140.0; 6],
+        },
+        training_range: [[282.0, 428.0]; 6],
+        correction_bounds: [[-1.5, 1.5]; 6],
+        geometry: geometry.fingerprint(),
+        provenance: Provenance {
+            created_unix_s: 1_790_000_000,
+            configurations: 150,
+            training_samples: 150,
+            validation_samples: 50,
+            validation_rmse_mm: 0.0462,
+            source: "test".into(),
+        },
+    }
+}
+
+fn problem(bytes: &[u8]) -> ModelFileProblem {
+    Model::from_bytes(bytes).unwrap_err()
+}
+
+#[test]
+fn model_round_trips_through_a_file_exactly() {
+    let g = Geometry::prototype();
+    let m = model(&g);
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("m.hxm");
+    m.save(&path).unwrap();
+    assert_eq!(Model::load(&path, &g).unwrap(), m);
+    // No temporary file is left beside it.
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
+}
+
+#[test]
+fn each_kind_of_bad_file_has_its_own_reason() {
+    let g = Geometry::prototype();
+    let bytes = model(&g).to_bytes();
+    assert_eq!(
+        problem(b"PK\x03\x04 a zip file"),
+        ModelFileProblem::NotAModel
+    );
+    assert!(matches!(
+        problem(&bytes[..bytes.len() - 3]),
+        ModelFileProblem::Truncated { .. }
+    ));
+    assert!(matches!(
+        problem(&bytes[..12]),
+        ModelFileProblem::Truncated {
+            actual: 12,
+            expected: 14
+        }
+    ));
+    let mut corrupted = bytes.clone();
+    corrupted[40] ^= 0x01;
+    assert_eq!(problem(&corrupted), ModelFileProblem::Checksum);
+    let mut newer = bytes.clone();
+    newer[8..10].copy_from_slice(&(FORMAT_VERSION + 1).to_le_bytes());
+    assert_eq!(
+        problem(&newer),
+        ModelFileProblem::Version {
+            found: FORMAT_VERSION + 1,
+            supported: FORMAT_VERSION
+        }
+    );
+    let mut longer = bytes.clone();
+    longer.push(0);
+    assert!(matches!(problem(&longer), ModelFileProblem::Corrupt(_)));
+}
+
+#[test]
+fn a_model_for_another_geometry_is_refused_by_fingerprint() {
+    let g = Geometry::prototype();
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("m.hxm");
+    model(&g).save(&path).unwrap();
+    let mut other = g.clone();
+    other.base_joints[0].x += 0.1;
+    match Model::load(&path, &other) {
+        Err(Error::ModelFile {
+            problem: ModelFileProblem::Geometry { model, geometry },
+            ..
+        }) => {
+            assert_eq!(model, g.fingerprint().to_string());
+            assert_eq!(geometry, other.fingerprint().to_string());
+        }
+        other => panic!("expected a geometry mismatch, got {other:?}"),
+    }
+}
+
+#[test]
+fn non_finite_weights_and_inconsistent_shapes_are_refused() {
+    assert!(Network::from_weights(3, 1, vec![f64::NAN; Network::weight_count(3, 1)]).is_err());
+    assert!(Network::from_weights(3, 1, vec![0.0; 5]).is_err());
+    assert!(Network::from_weights(0, 1, vec![0.0; 1]).is_err());
+    let g = Geometry::prototype();
+    let mut m = model(&g);
+    m.correction_bounds[2] = [1.0, -1.0];
+    assert!(m.validate().is_err());
+    m = model(&g);
+    m.networks = Networks::Decoupled(vec![]);
+    assert!(m.validate().is_err());
+}

@@ -1,0 +1,284 @@
+//! `train → inspect → predict` and `calibrate` as a user runs them; bad model and corrections
+//! files refused, each with its own reason.
+
+use std::path::{Path, PathBuf};
+
+use hexacomp_core::Geometry;
+use hexacomp_core::compensator::{compensate_legs, compensate_pose};
+use hexacomp_core::model::Model;
+use hexacomp_tests::run;
+
+fn text(bytes: &[u8]) -> String {
+    String::from_utf8_lossy(bytes).into_owned()
+}
+
+fn trainer(args: &[&str]) -> std::process::Output {
+    run("hexacomp-trainer", args)
+}
+
+fn ok(args: &[&str]) -> String {
+    let output = trainer(args);
+    assert!(
+        output.status.success(),
+        "{args:?}: {}",
+        text(&output.stderr)
+    );
+    text(&output.stdout) + &text(&output.stderr)
+}
+
+fn p(path: &Path) -> &str {
+    path.to_str().unwrap()
+}
+
+/// Plans, simulates and solves 40 configurations; returns the corrections file.
+fn corrections(dir: &Path) -> PathBuf {
+    let (poses, m, c) = (dir.join("poses.csv"), dir.join("m.csv"), dir.join("c.csv"));
+    ok(&["plan", "--count", "40", "--out", p(&poses)]);
+    ok(&["simulate", "--plan", p(&poses), "--out", p(&m)]);
+    ok(&["solve", "--measurements", p(&m), "--out", p(&c)]);
+    c
+}
+
+fn train_small(dir: &Path, arch: &str) -> PathBuf {
+    let model = dir.join(format!("{arch}.hxm"));
+    let c = corrections(dir);
+    let out = ok(&[
+        "train",
+        "--corrections",
+        p(&c),
+        "--arch",
+        arch,
+        "--hidden-max",
+        "4",
+        "--restarts",
+        "1",
+        "--out",
+        p(&model),
+    ]);
+    assert!(out.contains("Selection of hidden nodes"), "{out}");
+    assert!(dir.join(format!("{arch}.selection.svg")).exists());
+    model
+}
+
+#[test]
+fn predict_returns_exactly_the_library_compensation() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let model_path = train_small(d, "decoupled");
+    let inspected = ok(&["inspect", p(&model_path)]);
+    assert!(
+        inspected.contains("decoupled (six single-output networks)"),
+        "{inspected}"
+    );
+    assert!(
+        inspected.contains("matches geometry prototype"),
+        "{inspected}"
+    );
+    assert!(
+        inspected.contains("trained on     40 configurations"),
+        "{inspected}"
+    );
+
+    let out = d.join("out.csv");
+    ok(&[
+        "predict",
+        "--model",
+        p(&model_path),
+        "--poses",
+        p(&d.join("poses.csv")),
+        "--out",
+        p(&out),
+    ]);
+    let g = Geometry::prototype();
+    let model = Model::load(&model_path, &g).unwrap();
+    let poses = hexacomp_core::formats::read_poses(&d.join("poses.csv")).unwrap();
+    let written = std::fs::read_to_string(&out).unwrap();
+    let mut lines = written.lines();
+    assert_eq!(
+        lines.next().unwrap(),
+        "id,q1,q2,q3,q4,q5,q6,dq1,dq2,dq3,dq4,dq5,dq6,status"
+    );
+    let mut joints = String::from("id,q1,q2,q3,q4,q5,q6\n");
+    for (line, row) in lines.zip(&poses) {
+        let expected = compensate_pose(&g, Some(&model), &row.pose());
+        let cells: Vec<&str> = line.split(',').collect();
+        assert_eq!(cells[0], row.id);
+        for i in 0..6 {
+            assert_eq!(cells[1 + i].parse::<f64>().unwrap(), expected.legs[i]);
+            assert_eq!(
+                cells[7 + i].parse::<f64>().unwrap(),
+                expected.corrections[i]
+            );
+        }
+        assert_eq!(cells[13], expected.status.name());
+        let nominal = hexacomp_core::inverse_kinematics(&g, &row.pose()).lengths;
+        joints += &format!("{},{}\n", row.id, nominal.map(|q| q.to_string()).join(","));
+    }
+    // --joints gives the same numbers from the nominal legs.
+    std::fs::write(d.join("joints.csv"), joints).unwrap();
+    let out2 = d.join("out2.csv");
+    ok(&[
+        "predict",
+        "--model",
+        p(&model_path),
+        "--joints",
+        p(&d.join("joints.csv")),
+        "--out",
+        p(&out2),
+    ]);
+    let legs = hexacomp_core::formats::read_joints(&d.join("joints.csv")).unwrap();
+    for (line, row) in std::fs::read_to_string(&out2)
+        .unwrap()
+        .lines()
+        .skip(1)
+        .zip(&legs)
+    {
+        let expected = compensate_legs(&g, Some(&model), &row.legs);
+        let q1: f64 = line.split(',').nth(1).unwrap().parse().unwrap();
+        assert_eq!(q1, expected.legs[0]);
+    }
+}
+
+#[test]
+fn bad_model_files_are_refused_each_with_its_reason() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let model_path = train_small(d, "coupled");
+    let bytes = std::fs::read(&model_path).unwrap();
+    let mut corrupted = bytes.clone();
+    corrupted[30] ^= 0x40;
+    let mut newer = bytes.clone();
+    newer[8] = 9;
+    let cases: [(&str, Vec<u8>, &str); 4] = [
+        (
+            "truncated.hxm",
+            bytes[..bytes.len() / 2].to_vec(),
+            "truncated",
+        ),
+        ("corrupted.hxm", corrupted, "checksum mismatch"),
+        (
+            "newer.hxm",
+            newer,
+            "format version 9, this build reads version 1",
+        ),
+        ("text.hxm", b"id,q1\n".to_vec(), "not a hexacomp model file"),
+    ];
+    for (name, content, reason) in cases {
+        let path = d.join(name);
+        std::fs::write(&path, content).unwrap();
+        for args in [
+            vec![
+                "predict",
+                "--model",
+                p(&path),
+                "--poses",
+                p(&d.join("poses.csv")),
+                "--out",
+                p(&d.join("o.csv")),
+            ],
+            vec!["inspect", p(&path)],
+        ] {
+            let output = trainer(&args);
+            assert_eq!(output.status.code(), Some(1), "{name}");
+            let message = text(&output.stderr);
+            assert!(
+                message.contains(name) && message.contains(reason),
+                "{name}: {message}"
+            );
+        }
+    }
+    // Another geometry: the same file, refused by fingerprint.
+    let mut other = Geometry::prototype();
+    other.platform_joints[2].z += 0.5;
+    let geometry = d.join("other.toml");
+    other.save(&geometry).unwrap();
+    let output = trainer(&[
+        "predict",
+        "--geometry",
+        p(&geometry),
+        "--model",
+        p(&model_path),
+        "--poses",
+        p(&d.join("poses.csv")),
+        "--out",
+        p(&d.join("o.csv")),
+    ]);
+    assert_eq!(output.status.code(), Some(1));
+    assert!(
+        text(&output.stderr).contains("trained for geometry"),
+        "{}",
+        text(&output.stderr)
+    );
+}
+
+#[test]
+fn empty_and_one_row_corrections_files_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let header = "id,q1,q2,q3,q4,q5,q6,dq1,dq2,dq3,dq4,dq5,dq6\n";
+    for (name, content, reason) in [
+        ("empty.csv", String::new(), "the file is empty"),
+        (
+            "header.csv",
+            header.to_string(),
+            "training needs at least 6 configurations, got 0",
+        ),
+        (
+            "one.csv",
+            format!("{header}1,350,350,350,350,350,350,0.1,0.1,0.1,0.1,0.1,0.1\n"),
+            "got 1",
+        ),
+    ] {
+        let path = d.join(name);
+        std::fs::write(&path, content).unwrap();
+        let output = trainer(&[
+            "train",
+            "--corrections",
+            p(&path),
+            "--out",
+            p(&d.join("m.hxm")),
+        ]);
+        assert_eq!(output.status.code(), Some(1), "{name}");
+        assert!(
+            text(&output.stderr).contains(reason),
+            "{name}: {}",
+            text(&output.stderr)
+        );
+        assert!(!d.join("m.hxm").exists());
+    }
+}
+
+#[test]
+fn calibrate_runs_the_whole_pipeline_and_summarises() {
+    let dir = tempfile::tempdir().unwrap();
+    let out_dir = dir.path().join("cal");
+    let report = ok(&[
+        "calibrate",
+        "--count",
+        "60",
+        "--validation",
+        "30",
+        "--out-dir",
+        p(&out_dir),
+    ]);
+    for file in [
+        "poses.csv",
+        "measurements.csv",
+        "corrections.csv",
+        "model.hxm",
+        "model-coupled.hxm",
+        "model-decoupled.hxm",
+        "model-decoupled.selection.svg",
+    ] {
+        assert!(out_dir.join(file).exists(), "{file} missing");
+    }
+    assert!(
+        report.contains("Calibration summary (60 configurations, virtual platform)"),
+        "{report}"
+    );
+    assert!(
+        report.contains("robust decoupled") && report.contains("time: "),
+        "{report}"
+    );
+    Model::load(&out_dir.join("model.hxm"), &Geometry::prototype()).unwrap();
+}

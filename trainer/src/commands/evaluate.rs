@@ -1,0 +1,288 @@
+//! `hexacomp-trainer evaluate`: the paper's comparison on the virtual platform.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+use hexacomp_core::Geometry;
+use hexacomp_core::stats::{ErrorStats, PoseErrorStats};
+use hexacomp_core::virtual_platform::{DEFAULT_MACHINE_SEED, ErrorModel, ErrorVariant};
+use hexacomp_trainer::evaluate::{Evaluation, EvaluationOptions, Method, evaluate};
+use hexacomp_trainer::svg::{Chart, Series};
+use hexacomp_trainer::train::TrainOptions;
+
+use super::train::InputArg;
+use crate::table::Table;
+
+/// Compare the compensation methods on the virtual platform, on fresh validation poses that no
+/// training used: uncompensated, the model-based baseline (identified geometry), the ordinary
+/// compensator (coupled network, λ = 0) and the robust coupled and decoupled compensators.
+///
+/// Prints the paper's Table 2 (max/mean/std of the position error ‖δ_A‖ in mm and the
+/// orientation error ‖ε‖ in degrees) and Table 1 (hidden nodes, training time, validation RMSE),
+/// compares the two network inputs, and writes Fig. 12 (error per validation pose) and Fig. 13
+/// (mean error against the number of training configurations, ±1 std) as SVG to --out-dir.
+#[derive(Debug, clap::Args)]
+pub struct EvaluateArgs {
+    /// Training sizes, comma-separated (the paper: 50, 100, 150).
+    #[arg(long, value_delimiter = ',', default_value = "50,100,150")]
+    sizes: Vec<usize>,
+    /// Fresh validation poses.
+    #[arg(long, default_value_t = 100)]
+    validation: usize,
+    /// Seed of the measuring plan.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Seed of the validation poses.
+    #[arg(long, default_value_t = 1001)]
+    validation_seed: u64,
+    /// Seed that draws the virtual machine.
+    #[arg(long, default_value_t = DEFAULT_MACHINE_SEED)]
+    machine_seed: u64,
+    /// Error variant: paper, noise-free, geometric-only, strong-pitch.
+    #[arg(long, default_value_t = ErrorVariant::Paper)]
+    error_variant: ErrorVariant,
+    /// Network input of the compensators (the other one is compared at the largest size).
+    #[arg(long, value_enum, default_value_t = InputArg::Equivalent)]
+    input: InputArg,
+    /// Folder for the SVG figures.
+    #[arg(long, value_name = "DIR", default_value = "evaluation")]
+    out_dir: PathBuf,
+}
+
+pub fn run(geometry: &Geometry, args: &EvaluateArgs) -> anyhow::Result<()> {
+    anyhow::ensure!(args.validation > 0, "--validation must be at least 1");
+    let options = EvaluationOptions {
+        training_sizes: args.sizes.clone(),
+        validation_count: args.validation,
+        plan_seed: args.seed,
+        validation_seed: args.validation_seed,
+        error_model: ErrorModel::variant(args.error_variant),
+        machine_seed: args.machine_seed,
+        noise_seed: args.seed,
+        train: TrainOptions {
+            input: args.input.into(),
+            ..Default::default()
+        },
+    };
+    let evaluation = evaluate(geometry, &options, &|stage| eprintln!("{stage}…"))?;
+    print_evaluation(&evaluation, args.validation);
+    std::fs::create_dir_all(&args.out_dir)
+        .with_context(|| format!("creating {}", args.out_dir.display()))?;
+    write_figures(&evaluation, &args.out_dir)?;
+    eprintln!("figures → {}", args.out_dir.display());
+    Ok(())
+}
+
+/// Prints Table 2 (largest size), Fig. 13's numbers, Table 1 and the input comparison.
+pub fn print_evaluation(evaluation: &Evaluation, validation: usize) {
+    let last = evaluation.sizes.last().expect("at least one size");
+    println!(
+        "Table 2: pose errors at {validation} fresh validation poses, {} training configurations",
+        last.configurations
+    );
+    let mut header = vec!["pose error", ""];
+    header.extend(Method::ALL.iter().map(|m| m.label()));
+    let mut table = Table::<7>::new(header.try_into().expect("7 columns"));
+    let stats: Vec<PoseErrorStats> = Method::ALL.iter().map(|m| last.stats(*m)).collect();
+    for (name, pick) in [
+        (
+            "‖δ_A‖ (mm)",
+            (|s: &PoseErrorStats| s.position_mm) as fn(&PoseErrorStats) -> ErrorStats,
+        ),
+        ("‖ε‖ (deg)", |s: &PoseErrorStats| s.orientation_deg),
+    ] {
+        for (label, value) in [
+            ("max", (|e: ErrorStats| e.max) as fn(ErrorStats) -> f64),
+            ("mean", |e| e.mean),
+            ("std", |e| e.std),
+        ] {
+            let mut row = vec![name.to_string(), label.to_string()];
+            row.extend(stats.iter().map(|s| format!("{:.4}", value(pick(s)))));
+            table.row(row.try_into().expect("7 cells"));
+        }
+    }
+    println!("{table}");
+
+    println!(
+        "Fig. 13: mean position error (mm) / mean orientation error (deg) against training configurations"
+    );
+    let mut header = vec!["configurations".to_string()];
+    header.extend(Method::ALL.iter().map(|m| m.label().to_string()));
+    let refs: Vec<&str> = header.iter().map(String::as_str).collect();
+    let mut table = Table::<6>::new(refs.try_into().expect("6 columns"));
+    for size in &evaluation.sizes {
+        let mut row = vec![size.configurations.to_string()];
+        row.extend(Method::ALL.iter().map(|m| {
+            let s = size.stats(*m);
+            format!("{:.4} / {:.4}", s.position_mm.mean, s.orientation_deg.mean)
+        }));
+        table.row(row.try_into().expect("6 cells"));
+    }
+    println!("{table}");
+
+    println!(
+        "Table 1: robust networks at {} configurations",
+        last.configurations
+    );
+    let mut table = Table::new([
+        "architecture",
+        "hidden nodes",
+        "average hidden nodes",
+        "training time (s)",
+        "validation RMSE (mm)",
+    ]);
+    for (name, trained) in [("coupled", &last.coupled), ("decoupled", &last.decoupled)] {
+        let nodes = trained.model.hidden_nodes();
+        table.row([
+            name.into(),
+            format!("{nodes:?}"),
+            format!(
+                "{:.1}",
+                nodes.iter().sum::<usize>() as f64 / nodes.len() as f64
+            ),
+            format!("{:.2}", trained.seconds),
+            format!("{:.4}", trained.validation_rmse_mm),
+        ]);
+    }
+    println!("{table}");
+    println!(
+        "{} of the training configurations had cond(PT) above c = 1e3 (where none does, robust and ordinary corrections coincide)",
+        evaluation.above_threshold
+    );
+    if !evaluation.inputs.is_empty() {
+        println!(
+            "\nNetwork input, robust decoupled at {} configurations:",
+            last.configurations
+        );
+        let mut table = Table::new([
+            "input",
+            "mean ‖δ_A‖ (mm)",
+            "max ‖δ_A‖ (mm)",
+            "mean ‖ε‖ (deg)",
+        ]);
+        for (input, s) in &evaluation.inputs {
+            table.row([
+                format!("{} legs", input.name()),
+                format!("{:.4}", s.position_mm.mean),
+                format!("{:.4}", s.position_mm.max),
+                format!("{:.4}", s.orientation_deg.mean),
+            ]);
+        }
+        println!("{table}");
+    }
+}
+
+/// Writes Fig. 12 and Fig. 13 (position and orientation each) as SVG into `dir`.
+pub fn write_figures(evaluation: &Evaluation, dir: &Path) -> anyhow::Result<()> {
+    let last = evaluation.sizes.last().expect("at least one size");
+    let shown = [
+        Method::Uncompensated,
+        Method::RobustCoupled,
+        Method::RobustDecoupled,
+    ];
+    for (file, title, unit, position) in [
+        (
+            "fig12_position.svg",
+            "Position error per validation pose",
+            "‖δ_A‖ (mm)",
+            true,
+        ),
+        (
+            "fig12_orientation.svg",
+            "Orientation error per validation pose",
+            "‖ε‖ (deg)",
+            false,
+        ),
+    ] {
+        let series = last
+            .errors
+            .iter()
+            .filter(|(m, _)| shown.contains(m))
+            .map(|(m, errors)| {
+                Series::line(
+                    m.label(),
+                    errors
+                        .iter()
+                        .enumerate()
+                        .map(|(i, e)| {
+                            (
+                                (i + 1) as f64,
+                                if position {
+                                    e.position_mm
+                                } else {
+                                    e.orientation_deg
+                                },
+                            )
+                        })
+                        .collect(),
+                )
+            })
+            .collect();
+        let chart = Chart {
+            title: format!("{title} ({} training configurations)", last.configurations),
+            x_label: "validation pose".into(),
+            y_label: unit.into(),
+            series,
+        };
+        write(dir, file, &chart)?;
+    }
+    for (file, title, unit, position) in [
+        (
+            "fig13_position.svg",
+            "Mean position error against training configurations",
+            "mean ‖δ_A‖ (mm), ±1 std",
+            true,
+        ),
+        (
+            "fig13_orientation.svg",
+            "Mean orientation error against training configurations",
+            "mean ‖ε‖ (deg), ±1 std",
+            false,
+        ),
+    ] {
+        let series = Method::ALL
+            .iter()
+            .filter(|m| **m != Method::Uncompensated)
+            .map(|m| {
+                let stats: Vec<ErrorStats> = evaluation
+                    .sizes
+                    .iter()
+                    .map(|s| {
+                        if position {
+                            s.stats(*m).position_mm
+                        } else {
+                            s.stats(*m).orientation_deg
+                        }
+                    })
+                    .collect();
+                Series {
+                    label: m.label().into(),
+                    points: evaluation
+                        .sizes
+                        .iter()
+                        .zip(&stats)
+                        .map(|(s, e)| (s.configurations as f64, e.mean))
+                        .collect(),
+                    error_bars: Some(stats.iter().map(|e| e.std).collect()),
+                    markers_only: false,
+                }
+            })
+            .collect();
+        write(
+            dir,
+            file,
+            &Chart {
+                title: title.into(),
+                x_label: "training configurations".into(),
+                y_label: unit.into(),
+                series,
+            },
+        )?;
+    }
+    Ok(())
+}
+
+fn write(dir: &Path, file: &str, chart: &Chart) -> anyhow::Result<()> {
+    let path = dir.join(file);
+    std::fs::write(&path, chart.to_svg()).with_context(|| format!("writing {}", path.display()))
+}

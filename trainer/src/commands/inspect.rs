@@ -1,0 +1,70 @@
+//! `hexacomp-trainer inspect`: prints what a model file holds.
+
+use std::path::PathBuf;
+use std::time::{Duration, UNIX_EPOCH};
+
+use anyhow::Context;
+use hexacomp_core::Geometry;
+use hexacomp_core::error::Error;
+use hexacomp_core::model::{FORMAT_VERSION, Model, Networks};
+
+/// Print a model file: architecture, hidden nodes, input, the geometry it is bound to, training
+/// joint ranges, correction bounds and provenance. Refuses truncated, corrupted or foreign files
+/// with the reason.
+#[derive(Debug, clap::Args)]
+pub struct InspectArgs {
+    /// The model file.
+    #[arg(value_name = "MODEL")]
+    model: PathBuf,
+}
+
+pub fn run(geometry: &Geometry, args: &InspectArgs) -> anyhow::Result<()> {
+    let bytes =
+        std::fs::read(&args.model).with_context(|| format!("reading {}", args.model.display()))?;
+    let model = Model::from_bytes(&bytes).map_err(|problem| Error::ModelFile {
+        path: args.model.display().to_string(),
+        problem,
+    })?;
+    let p = &model.provenance;
+    let created =
+        humantime::format_rfc3339_seconds(UNIX_EPOCH + Duration::from_secs(p.created_unix_s));
+    let architecture = match &model.networks {
+        Networks::Coupled(_) => "coupled (one network, six outputs)",
+        Networks::Decoupled(_) => "decoupled (six single-output networks)",
+    };
+    let bound = if model.geometry == geometry.fingerprint() {
+        format!("matches geometry {}", geometry.name)
+    } else {
+        format!(
+            "does NOT match geometry {} ({})",
+            geometry.name,
+            geometry.fingerprint()
+        )
+    };
+    println!(
+        "model file     {} ({} bytes, format version {FORMAT_VERSION}, checksum ok)",
+        args.model.display(),
+        bytes.len()
+    );
+    println!("architecture   {architecture}");
+    println!("hidden nodes   {:?}", model.hidden_nodes());
+    println!("network input  {} legs", model.input.name());
+    println!("geometry       {} ({bound})", model.geometry);
+    println!("created        {created}");
+    println!(
+        "trained on     {} configurations ({} in the final fit, {} held out to choose the size)",
+        p.configurations, p.training_samples, p.validation_samples
+    );
+    println!("validation     RMSE {:.4} mm", p.validation_rmse_mm);
+    println!("source         {}", p.source);
+    println!("leg   trained range (mm)         correction bounds (mm)");
+    for leg in 0..6 {
+        let [lo, hi] = model.training_range[leg];
+        let [clo, chi] = model.correction_bounds[leg];
+        println!(
+            "{:>3}   {lo:>9.3} – {hi:>9.3}       {clo:>8.4} – {chi:>8.4}",
+            leg + 1
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,289 @@
+//! Evaluation on the virtual platform: the paper's Table 1, Table 2, Fig. 12 and Fig. 13.
+//!
+//! A plan of configurations is measured once on a virtual machine and solved by the robust and
+//! the ordinary iteration. For each training size (a prefix of the plan, itself spread over the
+//! workspace), the model-based baseline is identified and the networks are trained; every method
+//! then drives the same machine to fresh validation poses that no training used, and the pose
+//! errors actually reached are compared.
+
+use hexacomp_core::compensator::compensate_pose;
+use hexacomp_core::formats::{CorrectionRow, PoseRow};
+use hexacomp_core::model::{Model, NetworkInput};
+use hexacomp_core::sampling::{SamplerOptions, WorkspaceSampler};
+use hexacomp_core::stats::{PoseErrorNorm, PoseErrorStats};
+use hexacomp_core::virtual_platform::{ErrorModel, VirtualPlatform};
+use hexacomp_core::{Geometry, Pose, inverse_kinematics};
+
+use crate::acquire::measure_plan;
+use crate::corrections::{Checks, SolverOptions, solve_all};
+use crate::error::{Error, Result};
+use crate::identify::{IdentifyOptions, identify};
+use crate::plan::{PlanOptions, plan};
+use crate::train::{Architecture, TrainOptions, Trained, train};
+
+/// A compensation method of the comparison.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Method {
+    /// Nominal inverse kinematics, no compensation.
+    Uncompensated,
+    /// Inverse kinematics of the identified geometry (the paper's POE-based comparison).
+    ModelBased,
+    /// Coupled network on corrections solved with λ = 0 (the paper's ordinary compensator).
+    OrdinaryCoupled,
+    /// Coupled network on robust corrections.
+    RobustCoupled,
+    /// Decoupled networks on robust corrections.
+    RobustDecoupled,
+}
+
+impl Method {
+    /// Every method, in table order.
+    pub const ALL: [Method; 5] = [
+        Method::Uncompensated,
+        Method::ModelBased,
+        Method::OrdinaryCoupled,
+        Method::RobustCoupled,
+        Method::RobustDecoupled,
+    ];
+
+    /// A short label for tables and legends.
+    pub fn label(self) -> &'static str {
+        match self {
+            Method::Uncompensated => "before",
+            Method::ModelBased => "model-based",
+            Method::OrdinaryCoupled => "ordinary coupled",
+            Method::RobustCoupled => "robust coupled",
+            Method::RobustDecoupled => "robust decoupled",
+        }
+    }
+}
+
+/// Settings of an evaluation.
+#[derive(Debug, Clone)]
+pub struct EvaluationOptions {
+    /// Training sizes (configurations); the plan has as many as the largest.
+    pub training_sizes: Vec<usize>,
+    /// Fresh validation poses.
+    pub validation_count: usize,
+    /// Seed of the plan.
+    pub plan_seed: u64,
+    /// Seed of the validation poses.
+    pub validation_seed: u64,
+    /// The virtual machine's errors.
+    pub error_model: ErrorModel,
+    /// Seed of the virtual machine.
+    pub machine_seed: u64,
+    /// Seed of its noise.
+    pub noise_seed: u64,
+    /// Network training settings (the input is set per model).
+    pub train: TrainOptions,
+}
+
+/// Errors reached by every method at every validation pose, for one training size.
+#[derive(Debug, Clone)]
+pub struct SizeResult {
+    /// Training configurations.
+    pub configurations: usize,
+    /// Per method, the error at each validation pose.
+    pub errors: Vec<(Method, Vec<PoseErrorNorm>)>,
+    /// The trained robust coupled and decoupled models, for Table 1.
+    pub coupled: Trained,
+    /// See `coupled`.
+    pub decoupled: Trained,
+}
+
+impl SizeResult {
+    /// Table 2 statistics of `method`.
+    pub fn stats(&self, method: Method) -> PoseErrorStats {
+        let errors = &self
+            .errors
+            .iter()
+            .find(|(m, _)| *m == method)
+            .expect("every method")
+            .1;
+        PoseErrorStats::of(errors)
+    }
+}
+
+/// The whole evaluation.
+#[derive(Debug, Clone)]
+pub struct Evaluation {
+    /// One result per training size, in the order given.
+    pub sizes: Vec<SizeResult>,
+    /// Configurations whose cond(PT) exceeded the threshold in the robust solve.
+    pub above_threshold: usize,
+    /// Input comparison at the largest size: decoupled networks with each input.
+    pub inputs: Vec<(NetworkInput, PoseErrorStats)>,
+}
+
+/// Runs the evaluation. `progress` receives a line per stage.
+pub fn evaluate(
+    geometry: &Geometry,
+    options: &EvaluationOptions,
+    progress: &dyn Fn(&str),
+) -> Result<Evaluation> {
+    let largest = *options
+        .training_sizes
+        .iter()
+        .max()
+        .ok_or_else(|| Error::InvalidSetting("at least one training size is needed".into()))?;
+    let plan_options = PlanOptions {
+        count: largest,
+        seed: options.plan_seed,
+        ..Default::default()
+    };
+    let planned: Vec<PoseRow> = plan(geometry, &plan_options)?
+        .iter()
+        .enumerate()
+        .map(|(i, p)| PoseRow {
+            id: (i + 1).to_string(),
+            pose_mm_deg: p.to_mm_deg(),
+        })
+        .collect();
+    let mut platform = VirtualPlatform::new(
+        geometry,
+        &options.error_model,
+        options.machine_seed,
+        options.noise_seed,
+    )?;
+    progress(&format!(
+        "measuring {largest} configurations on the virtual machine"
+    ));
+    let measurements = measure_plan(&mut platform, &planned)?;
+    let robust_options = SolverOptions::default();
+    let ordinary_options = SolverOptions {
+        robust: false,
+        ..robust_options
+    };
+    let robust = solve_all(geometry, &measurements, &robust_options, &Checks::default())?;
+    let ordinary = solve_all(
+        geometry,
+        &measurements,
+        &ordinary_options,
+        &Checks::default(),
+    )?;
+    let above_threshold = robust
+        .iter()
+        .filter_map(|o| o.solution.as_ref().ok())
+        .filter(|s| s.max_cond_pt > robust_options.cond_threshold)
+        .count();
+    let rows = |outcomes: &[crate::corrections::Outcome], n: usize| -> Vec<CorrectionRow> {
+        outcomes[..n]
+            .iter()
+            .filter_map(|o| o.correction_row())
+            .collect()
+    };
+    let validation =
+        WorkspaceSampler::new(geometry, options.validation_seed, SamplerOptions::default())?
+            .samples(options.validation_count)?;
+
+    let fit = |corrections: &[CorrectionRow], architecture, input| {
+        let train_options = TrainOptions {
+            input,
+            ..options.train.clone()
+        };
+        train(
+            corrections,
+            architecture,
+            geometry.fingerprint(),
+            &train_options,
+            &|| {},
+        )
+    };
+    let mut sizes = Vec::new();
+    let mut inputs = Vec::new();
+    for &n in &options.training_sizes {
+        progress(&format!(
+            "{n} configurations: identifying the geometry, training three networks"
+        ));
+        let identified =
+            identify(geometry, &measurements[..n], &IdentifyOptions::default())?.geometry;
+        let input = options.train.input;
+        let ordinary_coupled = fit(&rows(&ordinary, n), Architecture::Coupled, input)?;
+        let coupled = fit(&rows(&robust, n), Architecture::Coupled, input)?;
+        let decoupled = fit(&rows(&robust, n), Architecture::Decoupled, input)?;
+        // Every method meets the same repeatability noise: each drives a copy of the machine in
+        // the same state.
+        let machine = platform.clone();
+        let mut errors = Vec::new();
+        for method in Method::ALL {
+            let mut platform = machine.clone();
+            let command = |pose: &Pose| -> [f64; 6] {
+                match method {
+                    Method::Uncompensated => inverse_kinematics(geometry, pose).lengths,
+                    Method::ModelBased => inverse_kinematics(&identified, pose).lengths,
+                    Method::OrdinaryCoupled => {
+                        compensate_pose(geometry, Some(&ordinary_coupled.model), pose).legs
+                    }
+                    Method::RobustCoupled => {
+                        compensate_pose(geometry, Some(&coupled.model), pose).legs
+                    }
+                    Method::RobustDecoupled => {
+                        compensate_pose(geometry, Some(&decoupled.model), pose).legs
+                    }
+                }
+            };
+            errors.push((method, drive(&mut platform, &validation, command)?));
+        }
+        if n == largest {
+            let other = match input {
+                NetworkInput::Equivalent => NetworkInput::Commanded,
+                NetworkInput::Commanded => NetworkInput::Equivalent,
+            };
+            let alternative = fit(&rows(&robust, n), Architecture::Decoupled, other)?;
+            let own = PoseErrorStats::of(
+                &errors
+                    .iter()
+                    .find(|(m, _)| *m == Method::RobustDecoupled)
+                    .expect("decoupled")
+                    .1,
+            );
+            let alt = PoseErrorStats::of(&drive_model(
+                &mut machine.clone(),
+                geometry,
+                &alternative.model,
+                &validation,
+            )?);
+            inputs = vec![(input, own), (other, alt)];
+        }
+        platform = machine;
+        sizes.push(SizeResult {
+            configurations: n,
+            errors,
+            coupled,
+            decoupled,
+        });
+    }
+    Ok(Evaluation {
+        sizes,
+        above_threshold,
+        inputs,
+    })
+}
+
+/// Drives the machine to every pose with the legs `command` gives; the errors reached.
+fn drive(
+    platform: &mut VirtualPlatform,
+    poses: &[Pose],
+    command: impl Fn(&Pose) -> [f64; 6],
+) -> Result<Vec<PoseErrorNorm>> {
+    poses
+        .iter()
+        .map(|pose| {
+            let reached = platform.move_legs(&command(pose), pose)?;
+            Ok(PoseErrorNorm::between(pose, &reached))
+        })
+        .collect()
+}
+
+/// Drives the machine with a model's compensation.
+pub fn drive_model(
+    platform: &mut VirtualPlatform,
+    geometry: &Geometry,
+    model: &Model,
+    poses: &[Pose],
+) -> Result<Vec<PoseErrorNorm>> {
+    drive(platform, poses, |pose| {
+        compensate_pose(geometry, Some(model), pose).legs
+    })
+}

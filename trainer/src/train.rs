@@ -1,0 +1,516 @@
+//! Training the joint-correction networks (Sec. 3.2).
+//!
+//! Each network is fitted by Levenberg–Marquardt on the mean squared error (Eq. 15–17) with the
+//! analytic Jacobian of Eq. 16, an adaptive μ (÷10 after an accepted step, ×10 after a rejected
+//! one), stopping when an accepted step changes the loss by less than a relative tolerance;
+//! several restarts from standard-normal weights (the paper's initialisation), keeping the one
+//! with the lowest training loss. The hidden-node count is chosen by holdout validation (Eq. 18;
+//! Eq. 21 for the decoupled networks) over a sweep of sizes: the smallest size whose validation
+//! RMSE is within 2 % of the best. The final model is then refitted on all samples at that size
+//! unless asked not to.
+
+use std::time::Instant;
+
+use hexacomp_core::formats::CorrectionRow;
+use hexacomp_core::model::{Model, NetworkInput, Networks, Provenance};
+use hexacomp_core::network::{Network, Normalisation};
+use hexacomp_core::{Fingerprint, LEGS};
+use nalgebra::{DMatrix, DVector};
+use rand::{RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, StandardNormal};
+
+use crate::error::{Error, Result};
+
+/// The two architectures of Fig. 3–4.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Architecture {
+    /// One network, six outputs.
+    Coupled,
+    /// Six networks, one output each.
+    Decoupled,
+}
+
+/// Settings of the training.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TrainOptions {
+    /// Hidden-node counts tried by the sweep.
+    pub hidden_sizes: Vec<usize>,
+    /// Restarts per fit; the best training loss is kept.
+    pub restarts: usize,
+    /// LM iterations per fit at most.
+    pub max_iterations: usize,
+    /// Stop when an accepted step lowers the loss by less than this fraction.
+    pub relative_tolerance: f64,
+    /// Fraction of the samples held out for choosing the hidden-node count.
+    pub validation_fraction: f64,
+    /// Refit on all samples at the chosen size (otherwise keep the holdout fit).
+    pub refit_on_all: bool,
+    /// The networks' input.
+    pub input: NetworkInput,
+    /// Seed of the split and the initial weights.
+    pub seed: u64,
+}
+
+impl Default for TrainOptions {
+    fn default() -> Self {
+        Self {
+            hidden_sizes: (1..=16).collect(),
+            restarts: 3,
+            max_iterations: 100,
+            relative_tolerance: 1e-5,
+            validation_fraction: 1.0 / 3.0,
+            refit_on_all: true,
+            input: NetworkInput::Equivalent,
+            seed: 1,
+        }
+    }
+}
+
+/// Training and validation RMSE of one hidden-node count (a point of Fig. 10/11).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SweepPoint {
+    /// Hidden nodes.
+    pub hidden: usize,
+    /// RMSE on the training subset, mm (Eq. 18).
+    pub training_rmse_mm: f64,
+    /// RMSE on the validation subset, mm (Eq. 18).
+    pub validation_rmse_mm: f64,
+}
+
+/// The selection curve and choice for one network.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Selection {
+    /// Every size tried.
+    pub sweep: Vec<SweepPoint>,
+    /// The chosen hidden-node count.
+    pub chosen: usize,
+}
+
+impl Selection {
+    /// The sweep point of the chosen size.
+    pub fn chosen_point(&self) -> SweepPoint {
+        *self
+            .sweep
+            .iter()
+            .find(|p| p.hidden == self.chosen)
+            .expect("chosen size was swept")
+    }
+}
+
+/// What training produced.
+#[derive(Debug, Clone)]
+pub struct Trained {
+    /// The model, ready to save.
+    pub model: Model,
+    /// One selection per network (one for coupled, six for decoupled).
+    pub selections: Vec<Selection>,
+    /// Validation performance, mm: Eq. 18 for coupled, Eq. 21 (√Σ RMSE_i²) for decoupled.
+    pub validation_rmse_mm: f64,
+    /// Wall-clock seconds of the whole training.
+    pub seconds: f64,
+}
+
+/// Inputs (network input legs, mm) and targets (corrections, mm) of training rows.
+fn samples(rows: &[CorrectionRow], input: NetworkInput) -> (Vec<[f64; LEGS]>, Vec<[f64; LEGS]>) {
+    let x = rows
+        .iter()
+        .map(|r| match input {
+            NetworkInput::Commanded => r.legs,
+            NetworkInput::Equivalent => std::array::from_fn(|i| r.legs[i] - r.corrections[i]),
+        })
+        .collect();
+    (x, rows.iter().map(|r| r.corrections).collect())
+}
+
+/// Trains a model on corrections rows for the geometry with fingerprint `geometry`.
+/// `progress` is called once per fit of the sweep (for progress bars), from worker threads.
+pub fn train(
+    rows: &[CorrectionRow],
+    architecture: Architecture,
+    geometry: Fingerprint,
+    options: &TrainOptions,
+    progress: &(dyn Fn() + Sync),
+) -> Result<Trained> {
+    let start = Instant::now();
+    if rows.len() < 6 {
+        return Err(Error::InsufficientData(format!(
+            "training needs at least 6 configurations, got {}",
+            rows.len()
+        )));
+    }
+    if options.hidden_sizes.is_empty() || options.restarts == 0 {
+        return Err(Error::InvalidSetting(
+            "training needs at least one hidden size and one restart".into(),
+        ));
+    }
+    let (inputs, targets) = samples(rows, options.input);
+    let normalisation = Normalisation::of(&inputs)?;
+    let x: Vec<[f64; LEGS]> = inputs.iter().map(|q| normalisation.apply(q)).collect();
+
+    // Holdout split, seeded.
+    let mut order: Vec<usize> = (0..rows.len()).collect();
+    let mut rng = ChaCha8Rng::seed_from_u64(options.seed);
+    for i in (1..order.len()).rev() {
+        order.swap(i, rng.random_range(0..=i));
+    }
+    let validation_count = ((rows.len() as f64 * options.validation_fraction).round() as usize)
+        .clamp(1, rows.len() - 1);
+    let (validation, training) = order.split_at(validation_count);
+
+    let outputs: Vec<Vec<usize>> = match architecture {
+        Architecture::Coupled => vec![(0..LEGS).collect()],
+        Architecture::Decoupled => (0..LEGS).map(|leg| vec![leg]).collect(),
+    };
+    let targets = &targets;
+    let data = |indices: &[usize], legs: &[usize]| Data {
+        x: indices.iter().map(|&k| x[k]).collect(),
+        y: indices
+            .iter()
+            .flat_map(|&k| legs.iter().map(move |&l| targets[k][l]))
+            .collect(),
+        outputs: legs.len(),
+    };
+
+    let mut selections = Vec::new();
+    let mut networks = Vec::new();
+    for (net_index, legs) in outputs.iter().enumerate() {
+        let (train_data, validation_data) = (data(training, legs), data(validation, legs));
+        let sweep = sweep(
+            &train_data,
+            &validation_data,
+            options,
+            net_index as u64,
+            progress,
+        );
+        let best = sweep
+            .iter()
+            .map(|p| p.validation_rmse_mm)
+            .fold(f64::INFINITY, f64::min);
+        let chosen = sweep
+            .iter()
+            .find(|p| p.validation_rmse_mm <= 1.02 * best)
+            .expect("non-empty sweep")
+            .hidden;
+        let final_data = if options.refit_on_all {
+            data(&order, legs)
+        } else {
+            train_data
+        };
+        let (network, _) = fit(
+            &final_data,
+            chosen,
+            options,
+            seed_for(options.seed, net_index as u64, chosen),
+        );
+        networks.push(network);
+        selections.push(Selection { sweep, chosen });
+    }
+    let validation_rmse_mm = selections
+        .iter()
+        .map(|s| s.chosen_point().validation_rmse_mm.powi(2))
+        .sum::<f64>()
+        .sqrt();
+    let networks = match architecture {
+        Architecture::Coupled => Networks::Coupled(networks.remove(0)),
+        Architecture::Decoupled => Networks::Decoupled(networks),
+    };
+    let range = |values: &[[f64; LEGS]], leg: usize| -> [f64; 2] {
+        values
+            .iter()
+            .fold([f64::INFINITY, f64::NEG_INFINITY], |[lo, hi], v| {
+                [lo.min(v[leg]), hi.max(v[leg])]
+            })
+    };
+    // The run-time input is the nominal legs: cover both the commanded and the network-input
+    // legs of the samples (they differ by the corrections when the input is the equivalent legs).
+    let commanded: Vec<[f64; LEGS]> = rows.iter().map(|r| r.legs).collect();
+    let training_range = std::array::from_fn(|leg| {
+        let ([a, b], [c, d]) = (range(&inputs, leg), range(&commanded, leg));
+        [a.min(c), b.max(d)]
+    });
+    // Corrections may exceed the measured ones by half their spread, no more.
+    let correction_bounds = std::array::from_fn(|leg| {
+        let [lo, hi] = range(targets, leg);
+        let margin = 0.5 * (hi - lo) + 0.01;
+        [lo - margin, hi + margin]
+    });
+    let created_unix_s = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs());
+    let model = Model {
+        networks,
+        input: options.input,
+        normalisation,
+        training_range,
+        correction_bounds,
+        geometry,
+        provenance: Provenance {
+            created_unix_s,
+            configurations: rows.len(),
+            training_samples: if options.refit_on_all {
+                rows.len()
+            } else {
+                training.len()
+            },
+            validation_samples: validation.len(),
+            validation_rmse_mm,
+            source: String::new(),
+        },
+    };
+    model.validate()?;
+    Ok(Trained {
+        model,
+        selections,
+        validation_rmse_mm,
+        seconds: start.elapsed().as_secs_f64(),
+    })
+}
+
+/// Normalised inputs and row-major targets (`outputs` per sample) of one network.
+struct Data {
+    x: Vec<[f64; LEGS]>,
+    y: Vec<f64>,
+    outputs: usize,
+}
+
+fn seed_for(base: u64, network: u64, hidden: usize) -> u64 {
+    base.wrapping_mul(0x9e37_79b9_7f4a_7c15) ^ (network << 32) ^ hidden as u64
+}
+
+/// Fits every size on the training data and scores it on the validation data, spread over the
+/// machine's cores.
+fn sweep(
+    training: &Data,
+    validation: &Data,
+    options: &TrainOptions,
+    network: u64,
+    progress: &(dyn Fn() + Sync),
+) -> Vec<SweepPoint> {
+    let workers = std::thread::available_parallelism()
+        .map_or(1, |n| n.get())
+        .min(options.hidden_sizes.len());
+    let mut points: Vec<SweepPoint> = std::thread::scope(|scope| {
+        let handles: Vec<_> = (0..workers)
+            .map(|w| {
+                scope.spawn(move || {
+                    options
+                        .hidden_sizes
+                        .iter()
+                        .skip(w)
+                        .step_by(workers)
+                        .map(|&hidden| {
+                            let seed = seed_for(options.seed, network, hidden);
+                            let (net, training_rmse_mm) = fit(training, hidden, options, seed);
+                            progress();
+                            SweepPoint {
+                                hidden,
+                                training_rmse_mm,
+                                validation_rmse_mm: rmse(&net, validation),
+                            }
+                        })
+                        .collect::<Vec<_>>()
+                })
+            })
+            .collect();
+        handles
+            .into_iter()
+            .flat_map(|h| h.join().expect("sweep worker"))
+            .collect()
+    });
+    points.sort_by_key(|p| p.hidden);
+    points
+}
+
+/// RMSE of Eq. 18: `√(1/K Σ‖y − N(x)‖²)`, mm.
+fn rmse(network: &Network, data: &Data) -> f64 {
+    let mut out = [0.0; LEGS];
+    let o = data.outputs;
+    let sum: f64 = data
+        .x
+        .iter()
+        .enumerate()
+        .map(|(k, x)| {
+            network.evaluate(x, &mut out[..o]);
+            (0..o)
+                .map(|j| (data.y[k * o + j] - out[j]).powi(2))
+                .sum::<f64>()
+        })
+        .sum();
+    (sum / data.x.len() as f64).sqrt()
+}
+
+/// The best of `options.restarts` LM fits of a `hidden`-node network; returns it and its
+/// training RMSE (mm).
+fn fit(data: &Data, hidden: usize, options: &TrainOptions, seed: u64) -> (Network, f64) {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let count = Network::weight_count(hidden, data.outputs);
+    (0..options.restarts)
+        .map(|_| {
+            let initial: Vec<f64> = (0..count)
+                .map(|_| StandardNormal.sample(&mut rng))
+                .collect();
+            let weights = levenberg_marquardt(data, hidden, initial, options);
+            let network = Network::from_weights(hidden, data.outputs, weights)
+                .expect("LM keeps weights finite");
+            let score = rmse(&network, data);
+            (network, score)
+        })
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .expect("at least one restart")
+}
+
+/// Residuals `e = y − N(x)` and the Jacobian `J = ∂N/∂w` (rows: sample × output) of Eq. 16.
+fn residuals_and_jacobian(
+    data: &Data,
+    hidden: usize,
+    w: &[f64],
+    jacobian: Option<&mut DMatrix<f64>>,
+) -> DVector<f64> {
+    let o = data.outputs;
+    let network = Network::from_weights(hidden, o, w.to_vec());
+    let mut e = DVector::zeros(data.x.len() * o);
+    let Ok(network) = network else {
+        e.fill(f64::INFINITY);
+        return e;
+    };
+    let mut a = [0.0; hexacomp_core::network::MAX_HIDDEN];
+    let mut out = [0.0; LEGS];
+    let w2_start = hidden * LEGS + hidden;
+    let b2_start = w2_start + o * hidden;
+    let mut jacobian = jacobian;
+    for (k, x) in data.x.iter().enumerate() {
+        network.hidden_layer(x, &mut a);
+        network.evaluate(x, &mut out[..o]);
+        for j in 0..o {
+            let row = k * o + j;
+            e[row] = data.y[row] - out[j];
+            if let Some(jac) = jacobian.as_deref_mut() {
+                for h in 0..hidden {
+                    let w2 = w[w2_start + j * hidden + h];
+                    let d = w2 * (1.0 - a[h] * a[h]);
+                    for (i, xi) in x.iter().enumerate() {
+                        jac[(row, h * LEGS + i)] = d * xi;
+                    }
+                    jac[(row, hidden * LEGS + h)] = d;
+                    jac[(row, w2_start + j * hidden + h)] = a[h];
+                }
+                jac[(row, b2_start + j)] = 1.0;
+            }
+        }
+    }
+    e
+}
+
+/// Levenberg–Marquardt on the sum of squared residuals (Eq. 15–17).
+fn levenberg_marquardt(
+    data: &Data,
+    hidden: usize,
+    mut w: Vec<f64>,
+    options: &TrainOptions,
+) -> Vec<f64> {
+    let n = w.len();
+    let rows = data.x.len() * data.outputs;
+    let mut jacobian = DMatrix::zeros(rows, n);
+    let mut mu = 1e-3;
+    let mut e = residuals_and_jacobian(data, hidden, &w, Some(&mut jacobian));
+    let mut loss = e.norm_squared();
+    for _ in 0..options.max_iterations {
+        let jt = jacobian.transpose();
+        let jtj = &jt * &jacobian;
+        let jte = &jt * &e;
+        let mut accepted = false;
+        while mu < 1e10 {
+            let mut system = jtj.clone();
+            for d in 0..n {
+                system[(d, d)] += mu;
+            }
+            let Some(step) = system.cholesky().map(|c| c.solve(&jte)) else {
+                mu *= 10.0;
+                continue;
+            };
+            let candidate: Vec<f64> = w.iter().zip(step.iter()).map(|(a, b)| a + b).collect();
+            let candidate_e = residuals_and_jacobian(data, hidden, &candidate, None);
+            let candidate_loss = candidate_e.norm_squared();
+            if candidate_loss < loss {
+                let improvement = (loss - candidate_loss) / loss.max(f64::MIN_POSITIVE);
+                w = candidate;
+                loss = candidate_loss;
+                mu = (mu * 0.1).max(1e-12);
+                accepted = true;
+                if improvement < options.relative_tolerance {
+                    return w;
+                }
+                e = residuals_and_jacobian(data, hidden, &w, Some(&mut jacobian));
+                break;
+            }
+            mu *= 10.0;
+        }
+        if !accepted {
+            break;
+        }
+    }
+    w
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn toy_data(outputs: usize) -> Data {
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        let x: Vec<[f64; LEGS]> = (0..40)
+            .map(|_| std::array::from_fn(|_| rng.random_range(-0.5..0.5)))
+            .collect();
+        let y = x
+            .iter()
+            .flat_map(|x| (0..outputs).map(move |j| (x[j] * 2.0).sin() + 0.3 * x[(j + 1) % LEGS]))
+            .collect();
+        Data { x, y, outputs }
+    }
+
+    #[test]
+    fn analytic_jacobian_matches_finite_differences() {
+        for outputs in [1, LEGS] {
+            let data = toy_data(outputs);
+            let hidden = 4;
+            let mut rng = ChaCha8Rng::seed_from_u64(9);
+            let w: Vec<f64> = (0..Network::weight_count(hidden, outputs))
+                .map(|_| StandardNormal.sample(&mut rng))
+                .collect();
+            let mut jac = DMatrix::zeros(data.x.len() * outputs, w.len());
+            residuals_and_jacobian(&data, hidden, &w, Some(&mut jac));
+            let h = 1e-6;
+            for p in 0..w.len() {
+                let (mut plus, mut minus) = (w.clone(), w.clone());
+                plus[p] += h;
+                minus[p] -= h;
+                // e = y − N, so ∂N/∂w = −∂e/∂w.
+                let fd = (residuals_and_jacobian(&data, hidden, &minus, None)
+                    - residuals_and_jacobian(&data, hidden, &plus, None))
+                    / (2.0 * h);
+                let worst = (fd - jac.column(p)).amax();
+                assert!(worst < 1e-8, "outputs {outputs} weight {p}: {worst}");
+            }
+        }
+    }
+
+    #[test]
+    fn levenberg_marquardt_fits_a_smooth_function_and_never_raises_the_loss() {
+        let data = toy_data(2);
+        let options = TrainOptions {
+            restarts: 1,
+            ..Default::default()
+        };
+        let mut rng = ChaCha8Rng::seed_from_u64(4);
+        let initial: Vec<f64> = (0..Network::weight_count(6, 2))
+            .map(|_| StandardNormal.sample(&mut rng))
+            .collect();
+        let before = residuals_and_jacobian(&data, 6, &initial, None).norm_squared();
+        let fitted = levenberg_marquardt(&data, 6, initial, &options);
+        let after = residuals_and_jacobian(&data, 6, &fitted, None).norm_squared();
+        assert!(after <= before);
+        let network = Network::from_weights(6, 2, fitted).unwrap();
+        assert!(rmse(&network, &data) < 1e-3, "{}", rmse(&network, &data));
+    }
+}
