@@ -49,7 +49,7 @@ impl NetworkInput {
 }
 
 /// Where a model came from.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 pub struct Provenance {
     /// Creation time, seconds since the Unix epoch (UTC).
     pub created_unix_s: u64,

@@ -57,14 +57,7 @@ fn inference_and_compensation_allocate_nothing() {
         training_range: [[280.0, 430.0]; 6],
         correction_bounds: [[-2.0, 2.0]; 6],
         geometry: g.fingerprint(),
-        provenance: Provenance {
-            created_unix_s: 0,
-            configurations: 0,
-            training_samples: 0,
-            validation_samples: 0,
-            validation_rmse_mm: 0.0,
-            source: String::new(),
-        },
+        provenance: Provenance::default(),
     };
     let models = [
         model(Networks::Coupled(network(6))),

@@ -24,14 +24,7 @@ fn constant_model(geometry: &Geometry, offsets: [f64; 6], bounds: [f64; 2]) -> M
         training_range: [[300.0, 400.0]; 6],
         correction_bounds: [bounds; 6],
         geometry: geometry.fingerprint(),
-        provenance: Provenance {
-            created_unix_s: 0,
-            configurations: 0,
-            training_samples: 0,
-            validation_samples: 0,
-            validation_rmse_mm: 0.0,
-            source: String::new(),
-        },
+        provenance: Provenance::default(),
     }
 }
 

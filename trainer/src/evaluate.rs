@@ -7,7 +7,7 @@
 //! errors actually reached are compared.
 
 use hexacomp_core::compensator::compensate_pose;
-use hexacomp_core::formats::{CorrectionRow, PoseRow};
+use hexacomp_core::formats::CorrectionRow;
 use hexacomp_core::model::{Model, NetworkInput};
 use hexacomp_core::sampling::{SamplerOptions, WorkspaceSampler};
 use hexacomp_core::stats::{PoseErrorNorm, PoseErrorStats};
@@ -18,7 +18,7 @@ use crate::acquire::measure_plan;
 use crate::corrections::{Checks, SolverOptions, solve_all};
 use crate::error::{Error, Result};
 use crate::identify::{IdentifyOptions, identify};
-use crate::plan::{PlanOptions, plan};
+use crate::plan::{PlanOptions, numbered_rows, plan};
 use crate::train::{Architecture, TrainOptions, Trained, train};
 
 /// A compensation method of the comparison.
@@ -132,14 +132,7 @@ pub fn evaluate(
         seed: options.plan_seed,
         ..Default::default()
     };
-    let planned: Vec<PoseRow> = plan(geometry, &plan_options)?
-        .iter()
-        .enumerate()
-        .map(|(i, p)| PoseRow {
-            id: (i + 1).to_string(),
-            pose_mm_deg: p.to_mm_deg(),
-        })
-        .collect();
+    let planned = numbered_rows(&plan(geometry, &plan_options)?);
     let mut platform = VirtualPlatform::new(
         geometry,
         &options.error_model,

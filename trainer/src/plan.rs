@@ -6,6 +6,7 @@
 //! farthest from those already chosen, in coordinates normalised by the workspace's extent. The
 //! result is still random and uniform in density, but evenly spread.
 
+use hexacomp_core::formats::PoseRow;
 use hexacomp_core::sampling::{SamplerOptions, WorkspaceSampler};
 use hexacomp_core::{Geometry, Pose};
 
@@ -64,6 +65,18 @@ pub fn plan(geometry: &Geometry, options: &PlanOptions) -> Result<Vec<Pose>> {
         chosen_coords.push(coords);
     }
     Ok(chosen)
+}
+
+/// Poses as rows of a poses file, with ids 1, 2, … in order.
+pub fn numbered_rows(poses: &[Pose]) -> Vec<PoseRow> {
+    poses
+        .iter()
+        .enumerate()
+        .map(|(i, pose)| PoseRow {
+            id: (i + 1).to_string(),
+            pose_mm_deg: pose.to_mm_deg(),
+        })
+        .collect()
 }
 
 /// Maps a pose to coordinates in which the workspace spans about [-1, 1] on every axis.

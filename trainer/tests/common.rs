@@ -3,11 +3,11 @@
 //! Compiled into each test binary; not every binary uses every helper.
 #![allow(dead_code)]
 
+use hexacomp_core::Geometry;
 use hexacomp_core::formats::{MeasurementRow, PoseRow};
 use hexacomp_core::virtual_platform::{ErrorModel, VirtualPlatform};
-use hexacomp_core::{Geometry, Pose};
 use hexacomp_trainer::acquire::measure_plan;
-use hexacomp_trainer::plan::{PlanOptions, plan};
+use hexacomp_trainer::plan::{PlanOptions, numbered_rows, plan};
 
 /// `count` planned poses as file rows (ids 1..).
 pub fn plan_rows(geometry: &Geometry, count: usize, seed: u64) -> Vec<PoseRow> {
@@ -16,19 +16,7 @@ pub fn plan_rows(geometry: &Geometry, count: usize, seed: u64) -> Vec<PoseRow> {
         seed,
         ..Default::default()
     };
-    rows_of(&plan(geometry, &options).unwrap())
-}
-
-/// Poses as file rows (ids 1..).
-fn rows_of(poses: &[Pose]) -> Vec<PoseRow> {
-    poses
-        .iter()
-        .enumerate()
-        .map(|(i, p)| PoseRow {
-            id: (i + 1).to_string(),
-            pose_mm_deg: p.to_mm_deg(),
-        })
-        .collect()
+    numbered_rows(&plan(geometry, &options).unwrap())
 }
 
 /// Measures `rows` on a virtual platform with `model`.

@@ -4,9 +4,7 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::Context;
-use hexacomp_core::formats::{
-    PoseRow, read_measurements, write_corrections, write_measurements, write_poses,
-};
+use hexacomp_core::formats::{read_measurements, write_measurements, write_poses};
 use hexacomp_core::sampling::{SamplerOptions, WorkspaceSampler};
 use hexacomp_core::stats::PoseErrorStats;
 use hexacomp_core::virtual_platform::{
@@ -14,12 +12,13 @@ use hexacomp_core::virtual_platform::{
 };
 use hexacomp_core::{Geometry, inverse_kinematics};
 use hexacomp_trainer::acquire::measure_plan;
-use hexacomp_trainer::corrections::{Checks, SolverOptions, solve_all};
+use hexacomp_trainer::corrections::{Checks, Outcome, SolverOptions, solve_all};
 use hexacomp_trainer::evaluate::drive_model;
 use hexacomp_trainer::identify::{IdentifyOptions, identify};
-use hexacomp_trainer::plan::{PlanOptions, plan};
+use hexacomp_trainer::plan::{PlanOptions, numbered_rows, plan};
 use hexacomp_trainer::train::{Architecture, TrainOptions};
 
+use super::solve::{print_problems, write_outcomes};
 use super::train::{
     InputArg, arch_name, print_selection, train_with_progress, write_selection_plot,
 };
@@ -84,14 +83,7 @@ pub fn run(geometry: &Geometry, args: &CalibrateArgs) -> anyhow::Result<()> {
                     ..Default::default()
                 },
             )?;
-            let rows: Vec<PoseRow> = poses
-                .iter()
-                .enumerate()
-                .map(|(i, p)| PoseRow {
-                    id: (i + 1).to_string(),
-                    pose_mm_deg: p.to_mm_deg(),
-                })
-                .collect();
+            let rows = numbered_rows(&poses);
             write_file(&dir.join("poses.csv"), |w| write_poses(w, &rows))?;
             let measured = measure_plan(&mut platform, &rows)?;
             write_file(&dir.join("measurements.csv"), |w| {
@@ -116,41 +108,10 @@ pub fn run(geometry: &Geometry, args: &CalibrateArgs) -> anyhow::Result<()> {
         &SolverOptions::default(),
         &Checks::default(),
     )?;
-    for o in &outcomes {
-        if let Err(e) = &o.solution {
-            eprintln!(
-                "error: configuration {} (line {}): cannot be solved: {e}",
-                o.id, o.line
-            );
-        }
-        for flag in &o.flags {
-            eprintln!(
-                "warning: configuration {} (line {}): {flag} (kept)",
-                o.id, o.line
-            );
-        }
-    }
+    print_problems(&outcomes, " (kept)");
+    let solved: Vec<&Outcome> = outcomes.iter().collect();
+    write_outcomes(&dir.join("corrections.csv"), &solved)?;
     let corrections: Vec<_> = outcomes.iter().filter_map(|o| o.correction_row()).collect();
-    let diagnostics: Vec<Vec<String>> = outcomes
-        .iter()
-        .filter_map(|o| o.solution.as_ref().ok())
-        .map(|s| {
-            vec![
-                s.max_cond_pt.to_string(),
-                s.iterations.to_string(),
-                s.converged.to_string(),
-                s.residual_mm.to_string(),
-            ]
-        })
-        .collect();
-    write_file(&dir.join("corrections.csv"), |w| {
-        write_corrections(
-            w,
-            &corrections,
-            &["cond_pt", "iterations", "converged", "residual_mm"],
-            &diagnostics,
-        )
-    })?;
     stage("solve corrections", start);
 
     let options = TrainOptions {

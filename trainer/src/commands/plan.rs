@@ -3,9 +3,9 @@
 use std::path::PathBuf;
 
 use hexacomp_core::Geometry;
-use hexacomp_core::formats::{PoseRow, write_poses};
+use hexacomp_core::formats::write_poses;
 use hexacomp_core::sampling::SamplerOptions;
-use hexacomp_trainer::plan::{PlanOptions, plan};
+use hexacomp_trainer::plan::{PlanOptions, numbered_rows, plan};
 
 use super::write_file;
 
@@ -45,14 +45,7 @@ pub fn run(geometry: &Geometry, args: &PlanArgs) -> anyhow::Result<()> {
             ..Default::default()
         },
     };
-    let rows: Vec<PoseRow> = plan(geometry, &options)?
-        .iter()
-        .enumerate()
-        .map(|(i, pose)| PoseRow {
-            id: (i + 1).to_string(),
-            pose_mm_deg: pose.to_mm_deg(),
-        })
-        .collect();
+    let rows = numbered_rows(&plan(geometry, &options)?);
     write_file(&args.out, |w| write_poses(w, &rows))?;
     eprintln!(
         "planned {} configurations over the workspace of {} → {}",

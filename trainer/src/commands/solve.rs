@@ -1,12 +1,12 @@
 //! `hexacomp-trainer solve`: joint corrections by the paper's robust Levenberg–Marquardt
 //! iteration (Fig. 2).
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use hexacomp_core::Geometry;
 use hexacomp_core::formats::{read_measurements, write_corrections};
-use hexacomp_trainer::corrections::{Checks, Outcome, SolverOptions, solve_all};
+use hexacomp_trainer::corrections::{Checks, Outcome, Solution, SolverOptions, solve_all};
 
 use super::write_file;
 
@@ -85,36 +85,10 @@ pub fn run(geometry: &Geometry, args: &SolveArgs) -> anyhow::Result<()> {
         .iter()
         .filter(|o| o.solution.is_ok() && (o.flags.is_empty() || !args.exclude_flagged))
         .collect();
-    let corrections: Vec<_> = kept.iter().filter_map(|o| o.correction_row()).collect();
-    let diagnostics: Vec<Vec<String>> = kept
-        .iter()
-        .filter_map(|o| o.solution.as_ref().ok())
-        .map(|s| {
-            vec![
-                s.max_cond_pt.to_string(),
-                s.iterations.to_string(),
-                s.converged.to_string(),
-                s.residual_mm.to_string(),
-            ]
-        })
-        .collect();
-    write_file(&args.out, |w| {
-        write_corrections(
-            w,
-            &corrections,
-            &["cond_pt", "iterations", "converged", "residual_mm"],
-            &diagnostics,
-        )
-    })?;
-    report(
-        &outcomes,
-        &options,
-        elapsed.as_secs_f64(),
-        corrections.len(),
-        args,
-    );
+    let written = write_outcomes(&args.out, &kept)?;
+    report(&outcomes, &options, elapsed.as_secs_f64(), written, args);
     anyhow::ensure!(
-        !corrections.is_empty(),
+        written > 0,
         "no configuration could be solved; nothing to train on"
     );
     Ok(())
@@ -152,17 +126,7 @@ fn report(
         options.cond_threshold,
         mean_residual,
     );
-    for o in outcomes {
-        if let Err(e) = &o.solution {
-            eprintln!(
-                "error: configuration {} (line {}): cannot be solved: {e}",
-                o.id, o.line
-            );
-        }
-        for flag in &o.flags {
-            eprintln!("warning: configuration {} (line {}): {flag}", o.id, o.line);
-        }
-    }
+    print_problems(outcomes, "");
     let flagged = outcomes.iter().filter(|o| !o.flags.is_empty()).count();
     if flagged > 0 {
         eprintln!(
@@ -175,4 +139,56 @@ fn report(
         );
     }
     eprintln!("wrote {written} rows → {}", args.out.display());
+}
+
+/// Writes the corrections file of `outcomes` that have a solution: the DESIGN.md columns and the
+/// diagnostics. Returns the rows written.
+pub fn write_outcomes(path: &Path, outcomes: &[&Outcome]) -> anyhow::Result<usize> {
+    let solved: Vec<(&Outcome, &Solution)> = outcomes
+        .iter()
+        .filter_map(|o| o.solution.as_ref().ok().map(|s| (*o, s)))
+        .collect();
+    let corrections: Vec<_> = solved
+        .iter()
+        .filter_map(|(o, _)| o.correction_row())
+        .collect();
+    let diagnostics: Vec<Vec<String>> = solved
+        .iter()
+        .map(|(_, s)| {
+            vec![
+                s.max_cond_pt.to_string(),
+                s.iterations.to_string(),
+                s.converged.to_string(),
+                s.residual_mm.to_string(),
+            ]
+        })
+        .collect();
+    write_file(path, |w| {
+        write_corrections(
+            w,
+            &corrections,
+            &["cond_pt", "iterations", "converged", "residual_mm"],
+            &diagnostics,
+        )
+    })?;
+    Ok(corrections.len())
+}
+
+/// Prints every configuration that could not be solved (as an error) or was flagged (as a
+/// warning, followed by `flag_note`).
+pub fn print_problems(outcomes: &[Outcome], flag_note: &str) {
+    for o in outcomes {
+        if let Err(e) = &o.solution {
+            eprintln!(
+                "error: configuration {} (line {}): cannot be solved: {e}",
+                o.id, o.line
+            );
+        }
+        for flag in &o.flags {
+            eprintln!(
+                "warning: configuration {} (line {}): {flag}{flag_note}",
+                o.id, o.line
+            );
+        }
+    }
 }
