@@ -1,16 +1,41 @@
 //! # hexacomp-client
 //!
-//! The wire contract between hexacomp's service and its clients, and (with the service issue) the
-//! client library an NC interpolator links. Today it holds the naming of the service's iceoryx2
-//! endpoints, so that the service and every client derive the same names from an instance name.
+//! The library an NC interpolator links to reach a running `hexacomp-service`, and the wire
+//! contract the two share ([`wire`]).
+//!
+//! ```no_run
+//! use hexacomp_client::{Client, ClientOptions};
+//! # fn main() -> Result<(), hexacomp_client::Error> {
+//! let mut client = Client::connect("default", &ClientOptions::default())?;
+//! // A pose: x, y, z in mm, a, b, c in degrees (LinuxCNC's convention).
+//! let point = client.compensate_pose([10.0, -5.0, 290.0, 2.0, -1.0, 3.0])?;
+//! println!("command legs {:?} (status {}, model generation {})",
+//!          point.legs, point.status.name(), point.generation);
+//! # Ok(())
+//! # }
+//! ```
+//!
+//! Requests go over iceoryx2 shared memory: the points are written straight into a loaned
+//! request, and the service's answers are read from the response in place. Every call has a
+//! deadline ([`ClientOptions::timeout`]); a service that is absent, killed or too slow gives
+//! [`Error::ServiceAbsent`] or [`Error::Timeout`] instead of a hang.
 
 #![warn(missing_docs)]
 
+pub mod wire;
+
+use std::time::{Duration, Instant};
+
+use hexacomp_core::compensator::PointStatus;
+use iceoryx2::port::client::Client as Port;
+use iceoryx2::prelude::*;
+use iceoryx2::service::port_factory::request_response::PortFactory;
 use thiserror::Error;
 
-/// Version of the request/response layout; part of every service name, so that incompatible
-/// clients and servers never meet.
-pub const PROTOCOL_VERSION: u32 = 1;
+use wire::{
+    DeployReply, MAX_BATCH, MAX_MODEL_BYTES, PROTOCOL_VERSION, PointRequest, PointResponse,
+    RequestHeader, RequestKind, RequestOutcome, ResponseHeader, StatusReport,
+};
 
 /// The instance name used when none is given.
 pub const DEFAULT_INSTANCE: &str = "default";
@@ -27,6 +52,43 @@ pub enum Error {
         /// The name as given.
         name: String,
     },
+    /// No service of this protocol version runs for the instance.
+    #[error("no hexacomp service (protocol v{PROTOCOL_VERSION}) runs for instance {instance:?}")]
+    ServiceAbsent {
+        /// The instance.
+        instance: String,
+    },
+    /// The service did not answer within the deadline (killed, stopped or overloaded).
+    #[error("the service did not answer within {timeout:?}")]
+    Timeout {
+        /// The deadline.
+        timeout: Duration,
+    },
+    /// The service speaks another protocol version.
+    #[error("protocol mismatch: this client speaks v{PROTOCOL_VERSION}, the service v{service}")]
+    ProtocolMismatch {
+        /// The service's version.
+        service: u32,
+    },
+    /// A batch larger than the wire allows.
+    #[error("a batch of {points} points exceeds the {MAX_BATCH}-point limit of a request")]
+    BatchTooLarge {
+        /// Points requested.
+        points: usize,
+    },
+    /// A model file larger than the deploy endpoint accepts.
+    #[error("a model of {bytes} bytes exceeds the {MAX_MODEL_BYTES}-byte deploy limit")]
+    ModelTooLarge {
+        /// Bytes given.
+        bytes: usize,
+    },
+    /// The shared-memory transport failed.
+    #[error("transport: {0}")]
+    Transport(String),
+}
+
+fn transport(e: impl std::fmt::Display) -> Error {
+    Error::Transport(e.to_string())
 }
 
 /// The endpoints one service instance offers.
@@ -68,6 +130,333 @@ pub fn service_name(instance: &str, endpoint: Endpoint) -> Result<String, Error>
     ))
 }
 
+/// The iceoryx2 `ServiceName` of an endpoint.
+pub fn iceoryx_name(instance: &str, endpoint: Endpoint) -> Result<ServiceName, Error> {
+    service_name(instance, endpoint)?
+        .as_str()
+        .try_into()
+        .map_err(transport)
+}
+
+/// Settings of a client.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ClientOptions {
+    /// Deadline of every call.
+    pub timeout: Duration,
+}
+
+impl Default for ClientOptions {
+    fn default() -> Self {
+        Self {
+            timeout: Duration::from_millis(500),
+        }
+    }
+}
+
+/// One compensated point.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CompensatedPoint {
+    /// Leg lengths to command, mm.
+    pub legs: [f64; 6],
+    /// Corrections applied, mm.
+    pub corrections: [f64; 6],
+    /// How the point was compensated.
+    pub status: PointStatus,
+    /// Generation of the model that computed it (0: no model).
+    pub generation: u64,
+}
+
+/// The service's status.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Status {
+    /// Fingerprint of the geometry served, 16 hex digits.
+    pub geometry_fingerprint: String,
+    /// Geometry name.
+    pub geometry_name: String,
+    /// Generation of the model serving (0: none).
+    pub generation: u64,
+    /// Model provenance (empty without a model).
+    pub model: String,
+    /// Compensation requests answered.
+    pub requests: u64,
+    /// Points answered.
+    pub points: u64,
+    /// Requests refused.
+    pub errors: u64,
+    /// Time since the service started.
+    pub uptime: Duration,
+}
+
+/// What the service said to a deployed model.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum DeployOutcome {
+    /// Accepted; it serves as this generation.
+    Accepted {
+        /// The new generation.
+        generation: u64,
+    },
+    /// Refused; the old model keeps serving.
+    Refused {
+        /// Why.
+        reason: String,
+        /// The generation still serving.
+        generation: u64,
+    },
+}
+
+type CompensateFactory =
+    PortFactory<ipc::Service, [PointRequest], RequestHeader, [PointResponse], ResponseHeader>;
+type StatusFactory = PortFactory<ipc::Service, u64, (), StatusReport, ()>;
+type DeployFactory = PortFactory<ipc::Service, [u8], (), DeployReply, ()>;
+type CompensatePort =
+    Port<ipc::Service, [PointRequest], RequestHeader, [PointResponse], ResponseHeader>;
+
+/// A connection to one service instance.
+pub struct Client {
+    compensate: CompensatePort,
+    status: Port<ipc::Service, u64, (), StatusReport, ()>,
+    deploy: Port<ipc::Service, [u8], (), DeployReply, ()>,
+    _factories: (CompensateFactory, StatusFactory, DeployFactory),
+    _node: Node<ipc::Service>,
+    timeout: Duration,
+}
+
+impl std::fmt::Debug for Client {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Client")
+            .field("timeout", &self.timeout)
+            .finish_non_exhaustive()
+    }
+}
+
+impl Client {
+    /// Connects to the service of `instance`; fails with [`Error::ServiceAbsent`] when none runs.
+    pub fn connect(instance: &str, options: &ClientOptions) -> Result<Self, Error> {
+        // iceoryx2 warns on stderr when no config file exists; keep errors only unless the user
+        // sets its log level in the environment.
+        set_log_level_from_env_or(LogLevel::Error);
+        let node = NodeBuilder::new()
+            .signal_handling_mode(SignalHandlingMode::Disabled)
+            .create::<ipc::Service>()
+            .map_err(transport)?;
+        let absent = |_| Error::ServiceAbsent {
+            instance: instance.to_string(),
+        };
+        let compensate_factory = node
+            .service_builder(&iceoryx_name(instance, Endpoint::Compensate)?)
+            .request_response::<[PointRequest], [PointResponse]>()
+            .request_user_header::<RequestHeader>()
+            .response_user_header::<ResponseHeader>()
+            .open()
+            .map_err(absent)?;
+        let status_factory = node
+            .service_builder(&iceoryx_name(instance, Endpoint::Status)?)
+            .request_response::<u64, StatusReport>()
+            .open()
+            .map_err(absent)?;
+        let deploy_factory = node
+            .service_builder(&iceoryx_name(instance, Endpoint::Deploy)?)
+            .request_response::<[u8], DeployReply>()
+            .open()
+            .map_err(absent)?;
+        let compensate = compensate_factory
+            .client_builder()
+            .initial_max_slice_len(MAX_BATCH)
+            .create()
+            .map_err(transport)?;
+        let status = status_factory
+            .client_builder()
+            .create()
+            .map_err(transport)?;
+        let deploy = deploy_factory
+            .client_builder()
+            .initial_max_slice_len(MAX_MODEL_BYTES)
+            .create()
+            .map_err(transport)?;
+        Ok(Self {
+            compensate,
+            status,
+            deploy,
+            _factories: (compensate_factory, status_factory, deploy_factory),
+            _node: node,
+            timeout: options.timeout,
+        })
+    }
+
+    /// Compensates one pose `[x, y, z, a, b, c]` (mm, degrees).
+    pub fn compensate_pose(&mut self, pose: [f64; 6]) -> Result<CompensatedPoint, Error> {
+        let mut out = [CompensatedPoint::empty()];
+        self.compensate_batch(RequestKind::Poses, &[pose], &mut out)?;
+        Ok(out[0])
+    }
+
+    /// Compensates one set of nominal leg lengths (mm).
+    pub fn compensate_joints(&mut self, legs: [f64; 6]) -> Result<CompensatedPoint, Error> {
+        let mut out = [CompensatedPoint::empty()];
+        self.compensate_batch(RequestKind::Joints, &[legs], &mut out)?;
+        Ok(out[0])
+    }
+
+    /// Compensates up to [`MAX_BATCH`] points of one kind in one request, writing one result per
+    /// point into `out` (which must be as long as `points`). Every point of a batch is computed
+    /// by the same model generation.
+    pub fn compensate_batch(
+        &mut self,
+        kind: RequestKind,
+        points: &[[f64; 6]],
+        out: &mut [CompensatedPoint],
+    ) -> Result<(), Error> {
+        if points.len() > MAX_BATCH {
+            return Err(Error::BatchTooLarge {
+                points: points.len(),
+            });
+        }
+        assert_eq!(points.len(), out.len(), "one output per point");
+        let mut request = self
+            .compensate
+            .loan_slice_uninit(points.len())
+            .map_err(transport)?;
+        *request.user_header_mut() = RequestHeader {
+            protocol: PROTOCOL_VERSION,
+            kind: kind as u32,
+        };
+        let request = request.write_from_fn(|i| PointRequest { values: points[i] });
+        let pending = request.send().map_err(transport)?;
+        let deadline = Instant::now() + self.timeout;
+        let mut spins = 0u32;
+        loop {
+            if let Some(response) = pending.receive().map_err(transport)? {
+                let header = *response.user_header();
+                if header.protocol != PROTOCOL_VERSION
+                    || header.outcome == RequestOutcome::ProtocolMismatch as u32
+                {
+                    return Err(Error::ProtocolMismatch {
+                        service: header.protocol,
+                    });
+                }
+                let payload = response.payload();
+                if payload.len() != out.len() {
+                    return Err(Error::Transport(format!(
+                        "the service answered {} points for {}",
+                        payload.len(),
+                        out.len()
+                    )));
+                }
+                for (slot, p) in out.iter_mut().zip(payload) {
+                    *slot = CompensatedPoint {
+                        legs: p.legs,
+                        corrections: p.corrections,
+                        status: PointStatus::from_u8(p.status).unwrap_or(PointStatus::InvalidInput),
+                        generation: p.generation,
+                    };
+                }
+                return Ok(());
+            }
+            if Instant::now() > deadline {
+                return Err(Error::Timeout {
+                    timeout: self.timeout,
+                });
+            }
+            wait_a_little(&mut spins);
+        }
+    }
+
+    /// The service's status.
+    pub fn status(&mut self) -> Result<Status, Error> {
+        let pending = self.status.send_copy(0).map_err(transport)?;
+        let report = self.wait(|| pending.receive().map(|r| r.map(|r| *r.payload())))?;
+        if report.protocol != PROTOCOL_VERSION {
+            return Err(Error::ProtocolMismatch {
+                service: report.protocol,
+            });
+        }
+        Ok(Status {
+            geometry_fingerprint: format!("{:016x}", report.geometry_fingerprint),
+            geometry_name: wire::field_text(&report.geometry_name),
+            generation: report.generation,
+            model: wire::field_text(&report.model),
+            requests: report.requests,
+            points: report.points,
+            errors: report.errors,
+            uptime: Duration::from_nanos(report.uptime_ns),
+        })
+    }
+
+    /// Hands a model file's bytes to the service, which validates it off its serving thread.
+    /// Waits up to ten times the call deadline (validation samples the whole training range).
+    pub fn deploy(&mut self, model_file: &[u8]) -> Result<DeployOutcome, Error> {
+        if model_file.len() > MAX_MODEL_BYTES {
+            return Err(Error::ModelTooLarge {
+                bytes: model_file.len(),
+            });
+        }
+        let request = self
+            .deploy
+            .loan_slice_uninit(model_file.len())
+            .map_err(transport)?
+            .write_from_fn(|i| model_file[i]);
+        let pending = request.send().map_err(transport)?;
+        let timeout = self.timeout;
+        self.timeout = timeout * 10;
+        let reply = self.wait(|| pending.receive().map(|r| r.map(|r| *r.payload())));
+        self.timeout = timeout;
+        let reply = reply?;
+        Ok(if reply.accepted == 1 {
+            DeployOutcome::Accepted {
+                generation: reply.generation,
+            }
+        } else {
+            DeployOutcome::Refused {
+                reason: wire::field_text(&reply.message),
+                generation: reply.generation,
+            }
+        })
+    }
+
+    /// Polls `receive` until it yields or the deadline passes.
+    fn wait<T, E: std::fmt::Display>(
+        &self,
+        mut receive: impl FnMut() -> Result<Option<T>, E>,
+    ) -> Result<T, Error> {
+        let deadline = Instant::now() + self.timeout;
+        let mut spins = 0u32;
+        loop {
+            if let Some(value) = receive().map_err(transport)? {
+                return Ok(value);
+            }
+            if Instant::now() > deadline {
+                return Err(Error::Timeout {
+                    timeout: self.timeout,
+                });
+            }
+            wait_a_little(&mut spins);
+        }
+    }
+}
+
+impl CompensatedPoint {
+    /// A placeholder to be overwritten by a response.
+    pub const fn empty() -> Self {
+        Self {
+            legs: [0.0; 6],
+            corrections: [0.0; 6],
+            status: PointStatus::NoModel,
+            generation: 0,
+        }
+    }
+}
+
+/// Spins briefly (the answer usually comes within microseconds), then yields the core so that a
+/// 2-core machine keeps the service running.
+fn wait_a_little(spins: &mut u32) {
+    *spins += 1;
+    if *spins < 2000 {
+        std::hint::spin_loop();
+    } else {
+        std::thread::yield_now();
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -94,5 +483,16 @@ mod tests {
                 })
             );
         }
+    }
+
+    #[test]
+    fn text_fields_round_trip_and_cut_at_character_boundaries() {
+        assert_eq!(
+            wire::field_text(&wire::text_field("geometry ‖δ‖")),
+            "geometry ‖δ‖"
+        );
+        let long = "é".repeat(200);
+        let cut = wire::field_text(&wire::text_field(&long));
+        assert!(cut.len() <= wire::TEXT_BYTES && cut.chars().all(|c| c == 'é'));
     }
 }

@@ -1,16 +1,27 @@
-//! `hexacomp-service`: the compensation daemon. This first version checks its configuration
-//! (geometry, instance name) and reports what it would serve; the iceoryx2 serving path arrives
-//! with the service issue.
+//! `hexacomp-service`: the compensation daemon for one hexapod.
 
 use std::path::PathBuf;
 use std::process::ExitCode;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 
+use anyhow::Context;
 use clap::Parser;
-use hexacomp_client::{DEFAULT_INSTANCE, Endpoint, service_name};
+use hexacomp_client::DEFAULT_INSTANCE;
 use hexacomp_core::Geometry;
+use hexacomp_core::model::Model;
+use hexacomp_service::control::{self, ControlSetup, summarise};
+use hexacomp_service::serving::{self, ServingSetup, WaitMode};
+use hexacomp_service::{Counters, Generation, state};
 
-/// Serve joint compensation for one hexapod over iceoryx2 (not yet: this build only validates
-/// its configuration and exits with status 2).
+/// Serve joint compensation for one hexapod over iceoryx2 shared memory.
+///
+/// Clients (`hexacomp-client`, the C library, the LinuxCNC component) send poses (mm, degrees) or
+/// nominal leg lengths (mm), singly or in batches of up to 1024, and get the legs to command with
+/// a status per point and the generation of the model that computed it. Without a model the
+/// service answers nominal inverse kinematics with the status `no_model`. Models are hot-swapped
+/// with `hexacomp-trainer deploy`; the last accepted one persists in the state directory and is
+/// served again after a restart. Stops cleanly on SIGINT/SIGTERM.
 #[derive(Debug, Parser)]
 #[command(name = "hexacomp-service", version)]
 struct Args {
@@ -20,33 +31,147 @@ struct Args {
     /// Geometry TOML (DESIGN.md layout). Default: the built-in `prototype`.
     #[arg(long, value_name = "FILE")]
     geometry: Option<PathBuf>,
+    /// Model file to serve at start (else the persisted one, else none).
+    #[arg(long, value_name = "FILE")]
+    model: Option<PathBuf>,
+    /// Where the accepted model persists. Default: $XDG_STATE_HOME/hexacomp/<instance>, or
+    /// ~/.local/state/hexacomp/<instance>.
+    #[arg(long, value_name = "DIR")]
+    state_dir: Option<PathBuf>,
+    /// spin: busy-poll (lowest latency, give it a core of its own); sleep: poll and sleep 50 µs
+    /// when idle (frees the core, adds latency to the first request after a pause).
+    #[arg(long, value_enum, default_value_t = WaitArg::Spin)]
+    wait: WaitArg,
+}
+
+#[derive(Debug, Clone, Copy, clap::ValueEnum)]
+enum WaitArg {
+    Spin,
+    Sleep,
 }
 
 fn main() -> ExitCode {
-    let args = Args::parse();
-    let checked = (|| -> anyhow::Result<(Geometry, String)> {
-        let geometry = match &args.geometry {
-            Some(path) => Geometry::load(path)?,
-            None => Geometry::prototype(),
-        };
-        Ok((
-            geometry,
-            service_name(&args.instance, Endpoint::Compensate)?,
-        ))
-    })();
-    match checked {
-        Ok((geometry, name)) => {
-            eprintln!(
-                "configuration valid: geometry {} (fingerprint {}), service {name}; \
-                 serving is not implemented in this build",
-                geometry.name,
-                geometry.fingerprint()
-            );
-            ExitCode::from(2)
-        }
+    tracing_subscriber::fmt()
+        .with_writer(std::io::stderr)
+        .init();
+    iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
+    match run(Args::parse()) {
+        Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e:#}");
             ExitCode::FAILURE
         }
     }
+}
+
+fn default_state_dir(instance: &str) -> PathBuf {
+    let base = std::env::var_os("XDG_STATE_HOME")
+        .map(PathBuf::from)
+        .or_else(|| std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".local/state")))
+        .unwrap_or_else(|| PathBuf::from("."));
+    base.join("hexacomp").join(instance)
+}
+
+fn run(args: Args) -> anyhow::Result<()> {
+    hexacomp_client::service_name(&args.instance, hexacomp_client::Endpoint::Compensate)?;
+    let geometry = match &args.geometry {
+        Some(path) => Geometry::load(path)?,
+        None => Geometry::prototype(),
+    };
+    let state_dir = args
+        .state_dir
+        .clone()
+        .unwrap_or_else(|| default_state_dir(&args.instance));
+    state::prepare(&state_dir)
+        .with_context(|| format!("state directory {}", state_dir.display()))?;
+    let initial = match &args.model {
+        Some(path) => {
+            let model = Model::load(path, &geometry)?;
+            let bytes = model.to_bytes();
+            let model = hexacomp_service::validate::validate(&bytes, &geometry)
+                .map_err(|why| anyhow::anyhow!("{}: refused: {why}", path.display()))?;
+            state::persist(&state_dir, &model, 1).map_err(anyhow::Error::msg)?;
+            Some((model, 1))
+        }
+        None => state::restore(&state_dir, &geometry),
+    };
+    let initial = initial.map(|(model, number)| {
+        let summary = summarise(&model);
+        Box::new(Generation {
+            model,
+            number,
+            summary,
+        })
+    });
+    let initial_summary = initial
+        .as_ref()
+        .map(|g| g.summary.clone())
+        .unwrap_or_default();
+    tracing::info!(
+        "instance {} geometry {} ({}), model generation {}, state {}",
+        args.instance,
+        geometry.name,
+        geometry.fingerprint(),
+        initial.as_ref().map_or(0, |g| g.number),
+        state_dir.display()
+    );
+
+    let counters = Arc::new(Counters::default());
+    let stop = Arc::new(AtomicBool::new(false));
+    let (to_serving, incoming) = crossbeam_channel::bounded(1);
+    let (retired_tx, retired_rx) = crossbeam_channel::bounded(4);
+    let (ready_tx, ready_rx) = crossbeam_channel::bounded(2);
+    let serving = {
+        let setup = ServingSetup {
+            instance: args.instance.clone(),
+            geometry: geometry.clone(),
+            initial,
+            incoming,
+            retired: retired_tx,
+            counters: counters.clone(),
+            stop: stop.clone(),
+            wait: match args.wait {
+                WaitArg::Spin => WaitMode::Spin,
+                WaitArg::Sleep => WaitMode::Sleep,
+            },
+        };
+        let ready = ready_tx.clone();
+        std::thread::Builder::new()
+            .name("serving".into())
+            .spawn(move || serving::serve(setup, ready))?
+    };
+    ready_rx
+        .recv()
+        .context("serving thread")?
+        .map_err(anyhow::Error::msg)?;
+    let control = {
+        let setup = ControlSetup {
+            instance: args.instance.clone(),
+            geometry,
+            state_dir,
+            outgoing: to_serving,
+            retired: retired_rx,
+            counters,
+            stop: stop.clone(),
+            initial_summary,
+        };
+        std::thread::Builder::new()
+            .name("control".into())
+            .spawn(move || control::run(setup, ready_tx))?
+    };
+    if let Err(e) = ready_rx
+        .recv()
+        .context("control thread")?
+        .map_err(anyhow::Error::msg)
+    {
+        stop.store(true, Ordering::Relaxed);
+        let _ = serving.join();
+        return Err(e);
+    }
+    tracing::info!("serving instance {}", args.instance);
+    let _ = serving.join();
+    stop.store(true, Ordering::Relaxed);
+    let _ = control.join();
+    tracing::info!("stopped; iceoryx2 resources released");
+    Ok(())
 }

@@ -39,6 +39,7 @@ enum Command {
     Inspect(commands::inspect::InspectArgs),
     Predict(commands::predict::PredictArgs),
     Evaluate(commands::evaluate::EvaluateArgs),
+    Deploy(commands::deploy::DeployArgs),
     Survey(commands::survey::SurveyArgs),
     Geometry(commands::geometry::GeometryArgs),
 }
@@ -69,6 +70,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Inspect(args) => commands::inspect::run(&geometry, &args),
         Command::Predict(args) => commands::predict::run(&geometry, &args),
         Command::Evaluate(args) => commands::evaluate::run(&geometry, &args),
+        Command::Deploy(args) => commands::deploy::run(&args),
         Command::Survey(args) => commands::survey::run(&geometry, &args),
         Command::Geometry(args) => commands::geometry::run(&geometry, &args),
     }

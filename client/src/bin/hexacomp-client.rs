@@ -1,0 +1,133 @@
+//! `hexacomp-client`: a small CLI over the client library.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::Duration;
+
+use clap::{Parser, Subcommand};
+use hexacomp_client::wire::{MAX_BATCH, RequestKind};
+use hexacomp_client::{Client, ClientOptions, CompensatedPoint, DEFAULT_INSTANCE};
+use hexacomp_core::compensator::Compensated;
+use hexacomp_core::formats::{CompensatedRow, read_joints, read_poses, write_compensated};
+
+/// Talk to a running hexacomp-service.
+#[derive(Debug, Parser)]
+#[command(name = "hexacomp-client", version)]
+struct Cli {
+    /// Instance name of the service.
+    #[arg(long, global = true, default_value = DEFAULT_INSTANCE)]
+    instance: String,
+    /// Deadline of each request, milliseconds.
+    #[arg(long, global = true, default_value_t = 500)]
+    timeout_ms: u64,
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Show the service's geometry, model generation and provenance, requests served, errors
+    /// and uptime.
+    Status,
+    /// Compensate a poses CSV (`id,x,y,z,a,b,c`, mm and degrees) or, with --joints, a CSV of
+    /// nominal leg lengths (`id,q1..q6`, mm), in batches of up to 1024; writes
+    /// `id,q1..q6,dq1..dq6,status`: exactly the numbers of `hexacomp-trainer predict`.
+    Compensate {
+        /// Input CSV.
+        #[arg(long, value_name = "FILE")]
+        input: PathBuf,
+        /// Output compensated CSV.
+        #[arg(long, value_name = "FILE")]
+        output: PathBuf,
+        /// The input holds nominal leg lengths instead of poses.
+        #[arg(long)]
+        joints: bool,
+    },
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    match run(cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn run(cli: Cli) -> anyhow::Result<()> {
+    let options = ClientOptions {
+        timeout: Duration::from_millis(cli.timeout_ms),
+    };
+    let mut client = Client::connect(&cli.instance, &options)?;
+    match cli.command {
+        Command::Status => {
+            let s = client.status()?;
+            println!("instance      {}", cli.instance);
+            println!(
+                "geometry      {} ({})",
+                s.geometry_name, s.geometry_fingerprint
+            );
+            if s.generation == 0 {
+                println!(
+                    "model         none (answering nominal inverse kinematics, status no_model)"
+                );
+            } else {
+                println!("model         generation {}: {}", s.generation, s.model);
+            }
+            println!(
+                "requests      {} ({} points), {} errors",
+                s.requests, s.points, s.errors
+            );
+            println!("uptime        {:.1} s", s.uptime.as_secs_f64());
+        }
+        Command::Compensate {
+            input,
+            output,
+            joints,
+        } => {
+            let (ids, points, kind): (Vec<String>, Vec<[f64; 6]>, _) = if joints {
+                let rows = read_joints(&input)?;
+                (
+                    rows.iter().map(|r| r.id.clone()).collect(),
+                    rows.iter().map(|r| r.legs).collect(),
+                    RequestKind::Joints,
+                )
+            } else {
+                let rows = read_poses(&input)?;
+                (
+                    rows.iter().map(|r| r.id.clone()).collect(),
+                    rows.iter().map(|r| r.pose_mm_deg).collect(),
+                    RequestKind::Poses,
+                )
+            };
+            let mut results = vec![CompensatedPoint::empty(); points.len()];
+            for (chunk, out) in points.chunks(MAX_BATCH).zip(results.chunks_mut(MAX_BATCH)) {
+                client.compensate_batch(kind, chunk, out)?;
+            }
+            let rows: Vec<CompensatedRow> = ids
+                .into_iter()
+                .zip(&results)
+                .map(|(id, r)| CompensatedRow {
+                    id,
+                    point: Compensated {
+                        legs: r.legs,
+                        corrections: r.corrections,
+                        status: r.status,
+                    },
+                })
+                .collect();
+            let file = hexacomp_core::formats::create_file(&output)?;
+            write_compensated(file, &rows)?;
+            let generations: std::collections::BTreeSet<u64> =
+                results.iter().map(|r| r.generation).collect();
+            eprintln!(
+                "compensated {} points → {} (model generations {generations:?})",
+                rows.len(),
+                output.display()
+            );
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,157 @@
+//! The wire contract: fixed-layout `#[repr(C)]` payloads shared by the service and every client,
+//! loaned from shared memory (no serialisation on the hot path), and the service names.
+//!
+//! Compensation: `request_response::<[PointRequest], [PointResponse]>` with a
+//! [`RequestHeader`] and a [`ResponseHeader`]. Status: `u64 → StatusReport`. Deploy:
+//! `[u8] → DeployReply` (the request is a model file's bytes).
+
+use iceoryx2::prelude::ZeroCopySend;
+
+/// Version of these layouts; part of every service name and of every request header.
+pub const PROTOCOL_VERSION: u32 = 1;
+
+/// Most points in one compensation request.
+pub const MAX_BATCH: usize = 1024;
+
+/// Largest model file the deploy endpoint accepts, bytes.
+pub const MAX_MODEL_BYTES: usize = 1 << 20;
+
+/// Clients one service instance admits.
+pub const MAX_CLIENTS: usize = 32;
+
+/// What the points of a request are.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u32)]
+pub enum RequestKind {
+    /// Poses `[x, y, z, a, b, c]`, mm and degrees (LinuxCNC's convention).
+    Poses = 0,
+    /// Nominal leg lengths `[q1..q6]`, mm.
+    Joints = 1,
+}
+
+/// Header of a compensation request.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ZeroCopySend)]
+#[repr(C)]
+pub struct RequestHeader {
+    /// [`PROTOCOL_VERSION`] of the sender.
+    pub protocol: u32,
+    /// [`RequestKind`] as `u32`.
+    pub kind: u32,
+}
+
+impl Default for RequestHeader {
+    fn default() -> Self {
+        Self {
+            protocol: PROTOCOL_VERSION,
+            kind: RequestKind::Poses as u32,
+        }
+    }
+}
+
+/// One point of a request: a pose (mm, deg) or nominal legs (mm), per the header's kind.
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
+#[repr(C)]
+pub struct PointRequest {
+    /// The six values.
+    pub values: [f64; 6],
+}
+
+/// Outcome of a whole request.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u32)]
+pub enum RequestOutcome {
+    /// Every point was computed (each still carries its own status).
+    Served = 0,
+    /// The request's protocol version is not the service's.
+    ProtocolMismatch = 1,
+    /// The request's kind is unknown.
+    UnknownKind = 2,
+}
+
+/// Header of a compensation response.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
+#[repr(C)]
+pub struct ResponseHeader {
+    /// The service's [`PROTOCOL_VERSION`].
+    pub protocol: u32,
+    /// [`RequestOutcome`] as `u32`.
+    pub outcome: u32,
+    /// Generation of the model that computed every point (0: no model).
+    pub generation: u64,
+}
+
+/// One compensated point.
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
+#[repr(C)]
+pub struct PointResponse {
+    /// Leg lengths to command, mm.
+    pub legs: [f64; 6],
+    /// Corrections applied, mm.
+    pub corrections: [f64; 6],
+    /// Generation of the model that computed the point.
+    pub generation: u64,
+    /// `hexacomp_core::compensator::PointStatus` as `u8`.
+    pub status: u8,
+    /// Padding, zero.
+    pub reserved: [u8; 7],
+}
+
+/// Bytes of text fields in the status report.
+pub const TEXT_BYTES: usize = 192;
+
+/// The service's status.
+#[derive(Debug, Clone, Copy, ZeroCopySend)]
+#[repr(C)]
+pub struct StatusReport {
+    /// The service's [`PROTOCOL_VERSION`].
+    pub protocol: u32,
+    /// Reserved, zero.
+    pub reserved: u32,
+    /// Fingerprint of the geometry served.
+    pub geometry_fingerprint: u64,
+    /// Generation of the model serving (0: none).
+    pub generation: u64,
+    /// Compensation requests answered since start.
+    pub requests: u64,
+    /// Points answered since start.
+    pub points: u64,
+    /// Requests refused (protocol mismatch, unknown kind, failed sends).
+    pub errors: u64,
+    /// Nanoseconds since the service started.
+    pub uptime_ns: u64,
+    /// Geometry name, UTF-8, zero-padded.
+    pub geometry_name: [u8; TEXT_BYTES],
+    /// Model provenance, UTF-8, zero-padded (empty without a model).
+    pub model: [u8; TEXT_BYTES],
+}
+
+/// The answer to a deploy request.
+#[derive(Debug, Clone, Copy, ZeroCopySend)]
+#[repr(C)]
+pub struct DeployReply {
+    /// 1 when accepted.
+    pub accepted: u8,
+    /// Padding, zero.
+    pub reserved: [u8; 7],
+    /// Generation the model now serves as (accepted), or the generation still serving.
+    pub generation: u64,
+    /// Why it was refused, UTF-8, zero-padded (empty when accepted).
+    pub message: [u8; TEXT_BYTES],
+}
+
+/// Copies `text` into a zero-padded fixed field, cut at a character boundary.
+pub fn text_field(text: &str) -> [u8; TEXT_BYTES] {
+    let mut field = [0u8; TEXT_BYTES];
+    let mut end = text.len().min(TEXT_BYTES);
+    while !text.is_char_boundary(end) {
+        end -= 1;
+    }
+    field[..end].copy_from_slice(&text.as_bytes()[..end]);
+    field
+}
+
+/// The text of a zero-padded field.
+pub fn field_text(field: &[u8; TEXT_BYTES]) -> String {
+    let end = field.iter().position(|b| *b == 0).unwrap_or(TEXT_BYTES);
+    String::from_utf8_lossy(&field[..end]).into_owned()
+}

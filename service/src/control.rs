@@ -1,0 +1,169 @@
+//! The control thread: status and deploy endpoints. Models are validated and persisted here, then
+//! handed to the serving thread; retired models come back here to be freed.
+
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use crossbeam_channel::{Receiver, Sender};
+use hexacomp_client::wire::{DeployReply, MAX_CLIENTS, PROTOCOL_VERSION, StatusReport, text_field};
+use hexacomp_client::{Endpoint, iceoryx_name};
+use hexacomp_core::Geometry;
+use iceoryx2::prelude::*;
+
+use crate::{Counters, Generation, state, validate};
+
+/// What the control thread needs.
+pub struct ControlSetup {
+    /// The instance name.
+    pub instance: String,
+    /// The geometry served.
+    pub geometry: Geometry,
+    /// Where accepted models persist.
+    pub state_dir: PathBuf,
+    /// Accepted models to the serving thread.
+    pub outgoing: Sender<Box<Generation>>,
+    /// Retired models from the serving thread.
+    pub retired: Receiver<Box<Generation>>,
+    /// Shared counters.
+    pub counters: Arc<Counters>,
+    /// Set to stop.
+    pub stop: Arc<AtomicBool>,
+    /// Provenance of the model serving at start.
+    pub initial_summary: String,
+}
+
+/// A one-line summary of a model for the status report.
+pub fn summarise(model: &hexacomp_core::model::Model) -> String {
+    let p = &model.provenance;
+    format!(
+        "hidden {:?}, {} legs, {} configurations, validation RMSE {:.4} mm; {}",
+        model.hidden_nodes(),
+        model.input.name(),
+        p.configurations,
+        p.validation_rmse_mm,
+        p.source
+    )
+}
+
+/// Creates the status and deploy endpoints and serves them until stopped.
+pub fn run(setup: ControlSetup, ready: Sender<Result<(), String>>) {
+    let started = (|| -> Result<_, String> {
+        let node = NodeBuilder::new()
+            .signal_handling_mode(SignalHandlingMode::Disabled)
+            .create::<ipc::Service>()
+            .map_err(|e| format!("creating the iceoryx2 node: {e}"))?;
+        let name = |endpoint| iceoryx_name(&setup.instance, endpoint).map_err(|e| e.to_string());
+        let status_service = node
+            .service_builder(&name(Endpoint::Status)?)
+            .request_response::<u64, StatusReport>()
+            .max_clients(MAX_CLIENTS)
+            .max_nodes(MAX_CLIENTS + 4)
+            .create()
+            .map_err(|e| format!("status endpoint: {e:?}"))?;
+        let deploy_service = node
+            .service_builder(&name(Endpoint::Deploy)?)
+            .request_response::<[u8], DeployReply>()
+            .max_clients(MAX_CLIENTS)
+            .max_nodes(MAX_CLIENTS + 4)
+            .create()
+            .map_err(|e| format!("deploy endpoint: {e:?}"))?;
+        let status = status_service
+            .server_builder()
+            .create()
+            .map_err(|e| format!("{e:?}"))?;
+        let deploy = deploy_service
+            .server_builder()
+            .create()
+            .map_err(|e| format!("{e:?}"))?;
+        Ok((node, status_service, deploy_service, status, deploy))
+    })();
+    let (_node, _s, _d, status, deploy) = match started {
+        Ok(parts) => {
+            let _ = ready.send(Ok(()));
+            parts
+        }
+        Err(e) => {
+            let _ = ready.send(Err(e));
+            return;
+        }
+    };
+    let start = Instant::now();
+    let mut summary = setup.initial_summary.clone();
+    while !setup.stop.load(Ordering::Relaxed) {
+        let mut busy = false;
+        while let Ok(old) = setup.retired.try_recv() {
+            drop(old);
+        }
+        if let Ok(Some(request)) = status.receive() {
+            busy = true;
+            let c = &setup.counters;
+            let report = StatusReport {
+                protocol: PROTOCOL_VERSION,
+                reserved: 0,
+                geometry_fingerprint: setup.geometry.fingerprint().0,
+                generation: c.generation.load(Ordering::Relaxed),
+                requests: c.requests.load(Ordering::Relaxed),
+                points: c.points.load(Ordering::Relaxed),
+                errors: c.errors.load(Ordering::Relaxed),
+                uptime_ns: start.elapsed().as_nanos() as u64,
+                geometry_name: text_field(&setup.geometry.name),
+                model: text_field(&summary),
+            };
+            if let Err(e) = request.send_copy(report) {
+                tracing::warn!("answering a status request failed: {e:?}");
+            }
+        }
+        if let Ok(Some(request)) = deploy.receive() {
+            busy = true;
+            let reply = handle_deploy(&setup, request.payload(), &mut summary);
+            if let Err(e) = request.send_copy(reply) {
+                tracing::warn!("answering a deploy request failed: {e:?}");
+            }
+        }
+        if !busy {
+            std::thread::sleep(Duration::from_millis(1));
+        }
+    }
+}
+
+fn handle_deploy(setup: &ControlSetup, bytes: &[u8], summary: &mut String) -> DeployReply {
+    let serving = setup.counters.generation.load(Ordering::Relaxed);
+    let refuse = |why: String| {
+        tracing::warn!("refused a deployed model: {why}");
+        DeployReply {
+            accepted: 0,
+            reserved: [0; 7],
+            generation: serving,
+            message: text_field(&why),
+        }
+    };
+    let model = match validate::validate(bytes, &setup.geometry) {
+        Ok(model) => model,
+        Err(why) => return refuse(why),
+    };
+    let number = serving + 1;
+    let mut note = String::new();
+    if let Err(e) = state::persist(&setup.state_dir, &model, number) {
+        tracing::error!("accepted generation {number} but could not persist it: {e}");
+        note = format!("accepted but not persisted: {e}");
+    }
+    let line = summarise(&model);
+    let generation = Box::new(Generation {
+        model,
+        number,
+        summary: line.clone(),
+    });
+    if setup.outgoing.send(generation).is_err() {
+        return refuse("the serving thread has stopped".into());
+    }
+    *summary = line;
+    tracing::info!("accepted a model as generation {number}");
+    DeployReply {
+        accepted: 1,
+        reserved: [0; 7],
+        generation: number,
+        message: text_field(&note),
+    }
+}

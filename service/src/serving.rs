@@ -1,0 +1,202 @@
+//! The serving path: answers compensation requests from the loaned request straight into the
+//! loaned response. Between two requests it picks up a newly accepted model from a crossbeam
+//! channel and hands the retired one back, so nothing is allocated or freed on this thread.
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use crossbeam_channel::{Receiver, Sender};
+use hexacomp_client::wire::{
+    MAX_BATCH, MAX_CLIENTS, PROTOCOL_VERSION, PointRequest, PointResponse, RequestHeader,
+    RequestKind, RequestOutcome, ResponseHeader,
+};
+use hexacomp_client::{Endpoint, iceoryx_name};
+use hexacomp_core::compensator::{compensate_legs, compensate_pose};
+use hexacomp_core::{Geometry, Pose};
+use iceoryx2::prelude::*;
+
+use crate::{Counters, Generation};
+
+/// Computes one point of a request. Allocation-free.
+#[inline]
+pub fn compute_point(
+    geometry: &Geometry,
+    model: Option<&Generation>,
+    kind: RequestKind,
+    request: &PointRequest,
+) -> PointResponse {
+    let m = model.map(|g| &g.model);
+    let point = match kind {
+        RequestKind::Poses => compensate_pose(geometry, m, &Pose::from_mm_deg(request.values)),
+        RequestKind::Joints => compensate_legs(geometry, m, &request.values),
+    };
+    PointResponse {
+        legs: point.legs,
+        corrections: point.corrections,
+        generation: model.map_or(0, |g| g.number),
+        status: point.status as u8,
+        reserved: [0; 7],
+    }
+}
+
+/// Checks a request header: the kind to compute, or why the request is refused.
+pub fn check_header(header: &RequestHeader) -> Result<RequestKind, RequestOutcome> {
+    if header.protocol != PROTOCOL_VERSION {
+        return Err(RequestOutcome::ProtocolMismatch);
+    }
+    match header.kind {
+        k if k == RequestKind::Poses as u32 => Ok(RequestKind::Poses),
+        k if k == RequestKind::Joints as u32 => Ok(RequestKind::Joints),
+        _ => Err(RequestOutcome::UnknownKind),
+    }
+}
+
+/// How the serving thread waits for requests.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum WaitMode {
+    /// Busy-poll: lowest latency, needs a core of its own.
+    Spin,
+    /// Poll, and sleep briefly when idle: frees the core at a latency cost when idle.
+    Sleep,
+}
+
+/// What the serving thread needs.
+pub struct ServingSetup {
+    /// The instance name.
+    pub instance: String,
+    /// The geometry served.
+    pub geometry: Geometry,
+    /// The model to start with, if any.
+    pub initial: Option<Box<Generation>>,
+    /// New models from the control thread.
+    pub incoming: Receiver<Box<Generation>>,
+    /// Retired models back to the control thread (freed there).
+    pub retired: Sender<Box<Generation>>,
+    /// Shared counters.
+    pub counters: Arc<Counters>,
+    /// Set to stop; also set by this thread on SIGINT/SIGTERM.
+    pub stop: Arc<AtomicBool>,
+    /// How to wait.
+    pub wait: WaitMode,
+}
+
+/// Creates the compensation endpoint (refusing when another service owns the instance) and
+/// serves until stopped. Returns when `stop` is set or a termination signal arrives.
+pub fn serve(setup: ServingSetup, ready: Sender<Result<(), String>>) {
+    let ServingSetup {
+        instance,
+        geometry,
+        initial,
+        incoming,
+        retired,
+        counters,
+        stop,
+        wait,
+    } = setup;
+    let started = (|| -> Result<_, String> {
+        let node = NodeBuilder::new()
+            .create::<ipc::Service>()
+            .map_err(|e| format!("creating the iceoryx2 node: {e}"))?;
+        let name = iceoryx_name(&instance, Endpoint::Compensate).map_err(|e| e.to_string())?;
+        let service = node
+            .service_builder(&name)
+            .request_response::<[PointRequest], [PointResponse]>()
+            .request_user_header::<RequestHeader>()
+            .response_user_header::<ResponseHeader>()
+            .max_clients(MAX_CLIENTS)
+            .max_servers(1)
+            .max_active_requests_per_client(4)
+            .max_nodes(MAX_CLIENTS + 4)
+            .create()
+            .map_err(|e| {
+                format!(
+                    "instance {instance:?} is already served by another hexacomp-service ({e:?})"
+                )
+            })?;
+        let server = service
+            .server_builder()
+            .initial_max_slice_len(MAX_BATCH)
+            .create()
+            .map_err(|e| format!("creating the server port: {e:?}"))?;
+        Ok((node, service, server))
+    })();
+    let (node, _service, server) = match started {
+        Ok(parts) => {
+            let _ = ready.send(Ok(()));
+            parts
+        }
+        Err(e) => {
+            let _ = ready.send(Err(e));
+            return;
+        }
+    };
+    let mut current = initial;
+    counters
+        .generation
+        .store(current.as_ref().map_or(0, |g| g.number), Ordering::Relaxed);
+    let mut last_check = Instant::now();
+    while !stop.load(Ordering::Relaxed) {
+        // A new model switches in between two requests; the old one goes back to be freed.
+        if let Ok(next) = incoming.try_recv() {
+            counters.generation.store(next.number, Ordering::Relaxed);
+            if let Some(old) = current.replace(next) {
+                let _ = retired.try_send(old);
+            }
+        }
+        match server.receive() {
+            Ok(Some(active)) => {
+                let header = *active.user_header();
+                let points = active.payload();
+                let count = points.len();
+                let model = current.as_deref();
+                let (outcome, kind) = match check_header(&header) {
+                    Ok(kind) => (RequestOutcome::Served, Some(kind)),
+                    Err(outcome) => (outcome, None),
+                };
+                let sent = match active.loan_slice_uninit(if kind.is_some() { count } else { 0 }) {
+                    Ok(loan) => {
+                        let mut response = loan.write_from_fn(|i| match kind {
+                            Some(kind) => compute_point(&geometry, model, kind, &points[i]),
+                            None => PointResponse::default(),
+                        });
+                        *response.user_header_mut() = ResponseHeader {
+                            protocol: PROTOCOL_VERSION,
+                            outcome: outcome as u32,
+                            generation: model.map_or(0, |g| g.number),
+                        };
+                        response.send().is_ok()
+                    }
+                    Err(_) => false,
+                };
+                if !sent || kind.is_none() {
+                    counters.errors.fetch_add(1, Ordering::Relaxed);
+                } else {
+                    counters.requests.fetch_add(1, Ordering::Relaxed);
+                    counters.points.fetch_add(count as u64, Ordering::Relaxed);
+                }
+            }
+            Ok(None) => {
+                if wait == WaitMode::Sleep {
+                    std::thread::sleep(Duration::from_micros(50));
+                } else {
+                    std::hint::spin_loop();
+                }
+                // Termination signals are checked only while idle, at most every millisecond.
+                if last_check.elapsed() > Duration::from_millis(1) {
+                    last_check = Instant::now();
+                    if node.wait(Duration::ZERO).is_err() {
+                        stop.store(true, Ordering::Relaxed);
+                    }
+                }
+            }
+            Err(e) => {
+                tracing::warn!("receiving a request failed: {e:?}");
+                counters.errors.fetch_add(1, Ordering::Relaxed);
+            }
+        }
+    }
+    if let Some(old) = current.take() {
+        let _ = retired.try_send(old);
+    }
+}

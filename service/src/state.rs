@@ -1,0 +1,60 @@
+//! The state directory: the last accepted model and its generation, written atomically so that a
+//! crash mid-write never leaves a broken file.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use hexacomp_core::Geometry;
+use hexacomp_core::model::Model;
+
+/// The accepted model's file in a state directory.
+pub fn model_path(dir: &Path) -> PathBuf {
+    dir.join("model.hxm")
+}
+
+fn generation_path(dir: &Path) -> PathBuf {
+    dir.join("generation")
+}
+
+/// Creates the state directory, readable and writable by its owner only.
+pub fn prepare(dir: &Path) -> std::io::Result<()> {
+    std::fs::create_dir_all(dir)?;
+    use std::os::unix::fs::PermissionsExt;
+    std::fs::set_permissions(dir, std::fs::Permissions::from_mode(0o700))
+}
+
+/// Persists an accepted model and its generation (each file written to a temporary, synced, and
+/// renamed into place).
+pub fn persist(dir: &Path, model: &Model, generation: u64) -> Result<(), String> {
+    model.save(&model_path(dir)).map_err(|e| e.to_string())?;
+    let temporary = dir.join(".generation.tmp");
+    let write = || -> std::io::Result<()> {
+        let mut file = std::fs::File::create(&temporary)?;
+        file.write_all(generation.to_string().as_bytes())?;
+        file.sync_all()?;
+        std::fs::rename(&temporary, generation_path(dir))
+    };
+    write().map_err(|e| format!("writing {}: {e}", generation_path(dir).display()))
+}
+
+/// The persisted model and generation, if any, for `geometry`. A file for another geometry or a
+/// damaged one is reported and ignored.
+pub fn restore(dir: &Path, geometry: &Geometry) -> Option<(Model, u64)> {
+    let path = model_path(dir);
+    if !path.exists() {
+        return None;
+    }
+    match Model::load(&path, geometry) {
+        Ok(model) => {
+            let generation = std::fs::read_to_string(generation_path(dir))
+                .ok()
+                .and_then(|t| t.trim().parse().ok())
+                .unwrap_or(1);
+            Some((model, generation))
+        }
+        Err(e) => {
+            tracing::warn!("ignoring the persisted model: {e}");
+            None
+        }
+    }
+}
