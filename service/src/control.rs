@@ -59,15 +59,17 @@ pub fn run(setup: ControlSetup, ready: Sender<Result<(), String>>) {
             .service_builder(&name(Endpoint::Status)?)
             .request_response::<u64, StatusReport>()
             .max_clients(MAX_CLIENTS)
+            .max_servers(1)
             .max_nodes(MAX_CLIENTS + 4)
-            .create()
+            .open_or_create()
             .map_err(|e| format!("status endpoint: {e:?}"))?;
         let deploy_service = node
             .service_builder(&name(Endpoint::Deploy)?)
             .request_response::<[u8], DeployReply>()
             .max_clients(MAX_CLIENTS)
+            .max_servers(1)
             .max_nodes(MAX_CLIENTS + 4)
-            .create()
+            .open_or_create()
             .map_err(|e| format!("deploy endpoint: {e:?}"))?;
         let status = status_service
             .server_builder()

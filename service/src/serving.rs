@@ -108,17 +108,20 @@ pub fn serve(setup: ServingSetup, ready: Sender<Result<(), String>>) {
             .max_servers(1)
             .max_active_requests_per_client(4)
             .max_nodes(MAX_CLIENTS + 4)
+            // Open when clients still hold the service of a killed server: its dead node is
+            // cleaned up when this node is created, which frees the one server slot.
+            .open_or_create()
+            .map_err(|e| format!("opening the compensation service: {e:?}"))?;
+        // One server per instance: a live second service cannot create its port.
+        let server = service
+            .server_builder()
+            .initial_max_slice_len(MAX_BATCH)
             .create()
             .map_err(|e| {
                 format!(
                     "instance {instance:?} is already served by another hexacomp-service ({e:?})"
                 )
             })?;
-        let server = service
-            .server_builder()
-            .initial_max_slice_len(MAX_BATCH)
-            .create()
-            .map_err(|e| format!("creating the server port: {e:?}"))?;
         Ok((node, service, server))
     })();
     let (node, _service, server) = match started {

@@ -50,3 +50,88 @@ pub fn run(name: &str, args: &[&str]) -> Output {
         .output()
         .unwrap_or_else(|e| panic!("running {name}: {e}"))
 }
+
+/// A unique instance name for one test: tests run in parallel, each with its own service.
+pub fn unique_instance(test: &str) -> String {
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    static COUNTER: AtomicUsize = AtomicUsize::new(0);
+    format!(
+        "t{}-{}-{}",
+        std::process::id(),
+        COUNTER.fetch_add(1, Ordering::Relaxed),
+        test
+    )
+}
+
+/// A running `hexacomp-service` child process, killed when dropped.
+pub struct ServiceProcess {
+    child: std::process::Child,
+    /// The instance it serves.
+    pub instance: String,
+    /// Its standard error, for failure messages.
+    log: PathBuf,
+}
+
+impl ServiceProcess {
+    /// Starts the service for `instance` with extra `args` (e.g. `--state-dir`, `--model`) and
+    /// waits until a client can connect (10 s at most).
+    pub fn start(instance: &str, args: &[&str]) -> Self {
+        let log = std::env::temp_dir().join(format!("hexacomp-{instance}.log"));
+        let child = Command::new(binary("hexacomp-service"))
+            .args(["--instance", instance])
+            .args(args)
+            .stdout(std::process::Stdio::null())
+            .stderr(std::fs::File::create(&log).expect("service log file"))
+            .spawn()
+            .expect("starting hexacomp-service");
+        let service = Self {
+            child,
+            instance: instance.to_string(),
+            log,
+        };
+        service.wait_until_serving();
+        service
+    }
+
+    fn wait_until_serving(&self) {
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(10);
+        loop {
+            if self.client().is_ok_and(|mut c| c.status().is_ok()) {
+                return;
+            }
+            assert!(
+                std::time::Instant::now() < deadline,
+                "service {} did not come up:\n{}",
+                self.instance,
+                std::fs::read_to_string(&self.log).unwrap_or_default()
+            );
+            std::thread::sleep(std::time::Duration::from_millis(20));
+        }
+    }
+
+    /// A new client of this service, 2 s deadline per call.
+    pub fn client(&self) -> Result<hexacomp_client::Client, hexacomp_client::Error> {
+        let options = hexacomp_client::ClientOptions {
+            timeout: std::time::Duration::from_secs(2),
+        };
+        hexacomp_client::Client::connect(&self.instance, &options)
+    }
+
+    /// Kills the service with SIGKILL and reaps it.
+    pub fn kill(mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+
+    /// The child's process id.
+    pub fn pid(&self) -> u32 {
+        self.child.id()
+    }
+}
+
+impl Drop for ServiceProcess {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}

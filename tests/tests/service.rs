@@ -1,0 +1,365 @@
+//! The service and its clients as separate processes: results equal `predict`, hot swap in a
+//! stream, refused deploys, SIGKILL and restart, invalid points.
+
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use hexacomp_client::wire::RequestKind;
+use hexacomp_client::{CompensatedPoint, DeployOutcome};
+use hexacomp_core::compensator::{PointStatus, compensate_legs, compensate_pose};
+use hexacomp_core::formats::CorrectionRow;
+use hexacomp_core::model::Model;
+use hexacomp_core::sampling::{SamplerOptions, WorkspaceSampler};
+use hexacomp_core::virtual_platform::{DEFAULT_MACHINE_SEED, ErrorModel, VirtualPlatform};
+use hexacomp_core::{Geometry, Pose, inverse_kinematics};
+use hexacomp_tests::{ServiceProcess, unique_instance};
+use hexacomp_trainer::acquire::measure_plan;
+use hexacomp_trainer::corrections::{Checks, SolverOptions, solve_all};
+use hexacomp_trainer::plan::{PlanOptions, numbered_rows, plan};
+use hexacomp_trainer::train::{Architecture, TrainOptions, train};
+
+/// A small decoupled model of the default virtual machine, trained with `seed`, saved in `dir`.
+fn small_model(dir: &Path, seed: u64) -> (Model, PathBuf) {
+    let g = Geometry::prototype();
+    let rows = numbered_rows(
+        &plan(
+            &g,
+            &PlanOptions {
+                count: 40,
+                seed,
+                ..Default::default()
+            },
+        )
+        .unwrap(),
+    );
+    let mut platform =
+        VirtualPlatform::new(&g, &ErrorModel::default(), DEFAULT_MACHINE_SEED, seed).unwrap();
+    let measurements = measure_plan(&mut platform, &rows).unwrap();
+    let corrections: Vec<CorrectionRow> = solve_all(
+        &g,
+        &measurements,
+        &SolverOptions::default(),
+        &Checks::default(),
+    )
+    .unwrap()
+    .iter()
+    .filter_map(|o| o.correction_row())
+    .collect();
+    let options = TrainOptions {
+        hidden_sizes: vec![1, 2, 3],
+        restarts: 1,
+        seed,
+        ..Default::default()
+    };
+    let model = train(
+        &corrections,
+        Architecture::Decoupled,
+        g.fingerprint(),
+        &options,
+        &|| {},
+    )
+    .unwrap()
+    .model;
+    let path = dir.join(format!("model-{seed}.hxm"));
+    model.save(&path).unwrap();
+    (model, path)
+}
+
+fn poses(count: usize, seed: u64) -> Vec<Pose> {
+    WorkspaceSampler::new(&Geometry::prototype(), seed, SamplerOptions::default())
+        .unwrap()
+        .samples(count)
+        .unwrap()
+}
+
+fn p(path: &Path) -> &str {
+    path.to_str().unwrap()
+}
+
+fn assert_same(got: &CompensatedPoint, expected: &hexacomp_core::compensator::Compensated) {
+    assert_eq!(got.legs, expected.legs);
+    assert_eq!(got.corrections, expected.corrections);
+    assert_eq!(got.status, expected.status);
+}
+
+#[test]
+fn client_results_equal_predict_for_10000_poses_single_and_batched() {
+    let dir = tempfile::tempdir().unwrap();
+    let (model, path) = small_model(dir.path(), 1);
+    let g = Geometry::prototype();
+    let service = ServiceProcess::start(
+        &unique_instance("equal"),
+        &[
+            "--state-dir",
+            p(&dir.path().join("state")),
+            "--model",
+            p(&path),
+        ],
+    );
+    let mut client = service.client().unwrap();
+    let poses = poses(10_000, 3);
+    for pose in &poses {
+        let got = client.compensate_pose(pose.to_mm_deg()).unwrap();
+        assert_same(
+            &got,
+            &compensate_pose(&g, Some(&model), &Pose::from_mm_deg(pose.to_mm_deg())),
+        );
+        assert_eq!(got.generation, 1);
+    }
+    let points: Vec<[f64; 6]> = poses.iter().map(|p| p.to_mm_deg()).collect();
+    let mut out = vec![CompensatedPoint::empty(); 1024];
+    for chunk in points.chunks(1024) {
+        let out = &mut out[..chunk.len()];
+        client
+            .compensate_batch(RequestKind::Poses, chunk, out)
+            .unwrap();
+        for (got, pose) in out.iter().zip(chunk) {
+            assert_same(
+                got,
+                &compensate_pose(&g, Some(&model), &Pose::from_mm_deg(*pose)),
+            );
+        }
+    }
+    // Joints: the same numbers from the nominal legs.
+    let legs: Vec<[f64; 6]> = poses
+        .iter()
+        .take(1024)
+        .map(|p| inverse_kinematics(&g, &Pose::from_mm_deg(p.to_mm_deg())).lengths)
+        .collect();
+    let out = &mut out[..legs.len()];
+    client
+        .compensate_batch(RequestKind::Joints, &legs, out)
+        .unwrap();
+    for (got, q) in out.iter().zip(&legs) {
+        assert_same(got, &compensate_legs(&g, Some(&model), q));
+    }
+    let status = client.status().unwrap();
+    assert_eq!(status.requests, 10_000 + 10 + 1);
+    assert_eq!(status.errors, 0);
+}
+
+#[test]
+fn hot_swap_in_a_stream_of_100000_requests_loses_nothing_and_never_mixes_a_batch() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_, first) = small_model(dir.path(), 1);
+    let (_, second) = small_model(dir.path(), 2);
+    let service = ServiceProcess::start(
+        &unique_instance("swap"),
+        &[
+            "--state-dir",
+            p(&dir.path().join("state")),
+            "--model",
+            p(&first),
+        ],
+    );
+    let instance = service.instance.clone();
+    let deployer = std::thread::spawn(move || {
+        std::thread::sleep(Duration::from_millis(300));
+        let output = hexacomp_tests::run(
+            "hexacomp-trainer",
+            &["deploy", "--instance", &instance, "--model", p(&second)],
+        );
+        String::from_utf8_lossy(&output.stdout).into_owned()
+            + &String::from_utf8_lossy(&output.stderr)
+    });
+    let mut client = service.client().unwrap();
+    let points: Vec<[f64; 6]> = poses(8, 5).iter().map(|p| p.to_mm_deg()).collect();
+    let mut out = [CompensatedPoint::empty(); 8];
+    let mut generations = Vec::with_capacity(100_000);
+    let start = Instant::now();
+    for _ in 0..100_000 {
+        client
+            .compensate_batch(RequestKind::Poses, &points, &mut out)
+            .unwrap();
+        let g = out[0].generation;
+        assert!(
+            out.iter().all(|p| p.generation == g),
+            "a batch mixed generations"
+        );
+        assert!(out.iter().all(|p| p.status == PointStatus::Ok));
+        generations.push(g);
+    }
+    let elapsed = start.elapsed();
+    let said = deployer.join().unwrap();
+    assert!(said.contains("accepted as generation 2"), "{said}");
+    // Generation 1 then generation 2, switched once, never back.
+    let switch = generations
+        .iter()
+        .position(|g| *g == 2)
+        .expect("the new model must have served");
+    assert!(switch > 0, "the swap must happen mid-stream");
+    assert!(generations[..switch].iter().all(|g| *g == 1));
+    assert!(generations[switch..].iter().all(|g| *g == 2));
+    eprintln!("100000 requests of 8 points in {elapsed:?}, switched at request {switch}");
+}
+
+#[test]
+fn refused_deploys_leave_the_old_model_serving_and_say_why() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_, first) = small_model(dir.path(), 1);
+    let service = ServiceProcess::start(
+        &unique_instance("refuse"),
+        &[
+            "--state-dir",
+            p(&dir.path().join("state")),
+            "--model",
+            p(&first),
+        ],
+    );
+    let mut client = service.client().unwrap();
+    let bytes = std::fs::read(&first).unwrap();
+    let mut corrupt = bytes.clone();
+    corrupt[40] ^= 0xff;
+    let mut other_geometry = Model::from_bytes(&bytes).unwrap();
+    other_geometry.geometry = hexacomp_core::Fingerprint(42);
+    for (file, reason) in [
+        (corrupt, "checksum mismatch"),
+        (
+            other_geometry.to_bytes(),
+            "trained for geometry 000000000000002a",
+        ),
+        (b"not a model".to_vec(), "not a hexacomp model file"),
+    ] {
+        match client.deploy(&file).unwrap() {
+            DeployOutcome::Refused {
+                reason: said,
+                generation,
+            } => {
+                assert!(said.contains(reason), "{said}");
+                assert_eq!(generation, 1);
+            }
+            other => panic!("expected a refusal, got {other:?}"),
+        }
+        let point = client
+            .compensate_pose([0.0, 0.0, 280.0, 0.0, 0.0, 0.0])
+            .unwrap();
+        assert_eq!((point.generation, point.status), (1, PointStatus::Ok));
+    }
+    assert_eq!(client.status().unwrap().generation, 1);
+}
+
+#[test]
+fn after_sigkill_a_restarted_service_serves_the_last_accepted_model() {
+    let dir = tempfile::tempdir().unwrap();
+    let state = dir.path().join("state");
+    let (_, first) = small_model(dir.path(), 1);
+    let (second_model, second) = small_model(dir.path(), 2);
+    let instance = unique_instance("kill");
+    let service =
+        ServiceProcess::start(&instance, &["--state-dir", p(&state), "--model", p(&first)]);
+    let mut client = service.client().unwrap();
+    let bytes = std::fs::read(&second).unwrap();
+    assert_eq!(
+        client.deploy(&bytes).unwrap(),
+        DeployOutcome::Accepted { generation: 2 }
+    );
+    service.kill();
+    // The connected client gets a clear error, not a hang.
+    let error = client
+        .compensate_pose([0.0, 0.0, 280.0, 0.0, 0.0, 0.0])
+        .unwrap_err();
+    assert!(
+        matches!(error, hexacomp_client::Error::Timeout { .. }),
+        "{error:?}"
+    );
+    // Restart without --model and without any cleanup: the persisted generation 2 serves.
+    let service = ServiceProcess::start(&instance, &["--state-dir", p(&state)]);
+    assert_eq!(service.client().unwrap().status().unwrap().generation, 2);
+    // The old client works again once the service is back (a retry within its deadline).
+    let g = Geometry::prototype();
+    let pose = [5.0, -3.0, 290.0, 1.0, 2.0, -3.0];
+    let deadline = Instant::now() + Duration::from_secs(10);
+    let point = loop {
+        match client.compensate_pose(pose) {
+            Ok(point) => break point,
+            Err(e) => assert!(Instant::now() < deadline, "the client did not recover: {e}"),
+        }
+    };
+    assert_eq!(point.generation, 2);
+    assert_same(
+        &point,
+        &compensate_pose(&g, Some(&second_model), &Pose::from_mm_deg(pose)),
+    );
+}
+
+#[test]
+fn invalid_points_get_their_status_and_the_service_keeps_serving() {
+    let dir = tempfile::tempdir().unwrap();
+    let (model, path) = small_model(dir.path(), 1);
+    let service = ServiceProcess::start(
+        &unique_instance("invalid"),
+        &[
+            "--state-dir",
+            p(&dir.path().join("state")),
+            "--model",
+            p(&path),
+        ],
+    );
+    let mut client = service.client().unwrap();
+    let nan = client
+        .compensate_pose([f64::NAN, 0.0, 280.0, 0.0, 0.0, 0.0])
+        .unwrap();
+    assert_eq!(nan.status, PointStatus::InvalidInput);
+    let inf = client
+        .compensate_joints([f64::INFINITY, 350.0, 350.0, 350.0, 350.0, 350.0])
+        .unwrap();
+    assert_eq!(inf.status, PointStatus::InvalidInput);
+    let low = client
+        .compensate_pose([0.0, 0.0, 100.0, 0.0, 0.0, 0.0])
+        .unwrap();
+    assert_eq!(low.status, PointStatus::OutOfStroke);
+    let below_trained = model.training_range[0][0] - 1.0;
+    let untrained = client
+        .compensate_joints([below_trained.max(281.0), 350.0, 350.0, 350.0, 350.0, 350.0])
+        .unwrap();
+    assert_eq!(untrained.status, PointStatus::OutsideTrainedRange);
+    let fine = client
+        .compensate_pose([0.0, 0.0, 280.0, 0.0, 0.0, 0.0])
+        .unwrap();
+    assert_eq!(fine.status, PointStatus::Ok);
+    assert!(fine.corrections.iter().any(|c| *c != 0.0));
+}
+
+#[test]
+fn without_a_model_the_service_answers_nominal_inverse_kinematics() {
+    let dir = tempfile::tempdir().unwrap();
+    let service = ServiceProcess::start(
+        &unique_instance("nomodel"),
+        &["--state-dir", p(&dir.path().join("state"))],
+    );
+    let mut client = service.client().unwrap();
+    let pose = [10.0, 20.0, 300.0, 3.0, -2.0, 5.0];
+    let point = client.compensate_pose(pose).unwrap();
+    assert_eq!((point.status, point.generation), (PointStatus::NoModel, 0));
+    assert_eq!(
+        point.legs,
+        inverse_kinematics(&Geometry::prototype(), &Pose::from_mm_deg(pose)).lengths
+    );
+}
+
+#[test]
+fn a_second_service_for_the_same_instance_is_refused_and_the_absent_one_is_reported() {
+    let dir = tempfile::tempdir().unwrap();
+    let instance = unique_instance("twice");
+    let absent = hexacomp_client::Client::connect(&instance, &Default::default()).unwrap_err();
+    assert!(
+        matches!(absent, hexacomp_client::Error::ServiceAbsent { .. }),
+        "{absent:?}"
+    );
+    let _service = ServiceProcess::start(&instance, &["--state-dir", p(&dir.path().join("a"))]);
+    let output = std::process::Command::new(hexacomp_tests::binary("hexacomp-service"))
+        .args([
+            "--instance",
+            &instance,
+            "--state-dir",
+            p(&dir.path().join("b")),
+        ])
+        .output()
+        .unwrap();
+    assert_eq!(output.status.code(), Some(1));
+    let message = String::from_utf8_lossy(&output.stderr);
+    assert!(
+        message.contains("is already served by another hexacomp-service"),
+        "{message}"
+    );
+}
