@@ -122,11 +122,6 @@ impl ServiceProcess {
         let _ = self.child.kill();
         let _ = self.child.wait();
     }
-
-    /// The child's process id.
-    pub fn pid(&self) -> u32 {
-        self.child.id()
-    }
 }
 
 impl Drop for ServiceProcess {
