@@ -8,6 +8,7 @@
 #![warn(missing_docs)]
 
 pub mod control;
+pub mod realtime;
 pub mod serving;
 pub mod state;
 pub mod validate;

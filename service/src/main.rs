@@ -42,6 +42,13 @@ struct Args {
     /// when idle (frees the core, adds latency to the first request after a pause).
     #[arg(long, value_enum, default_value_t = WaitArg::Spin)]
     wait: WaitArg,
+    /// Pin the serving thread to this CPU (with --wait spin, give it a core no one else uses).
+    #[arg(long, value_name = "N")]
+    cpu: Option<usize>,
+    /// Run the serving thread with SCHED_FIFO at this priority (1–99). For real hardware; on
+    /// virtual machines it tends to make wake-ups slower. Needs CAP_SYS_NICE or an rtprio limit.
+    #[arg(long, value_name = "PRIORITY", value_parser = clap::value_parser!(i32).range(1..=99))]
+    realtime: Option<i32>,
 }
 
 #[derive(Debug, Clone, Copy, clap::ValueEnum)]
@@ -136,9 +143,26 @@ fn run(args: Args) -> anyhow::Result<()> {
             },
         };
         let ready = ready_tx.clone();
+        let (cpu, realtime) = (args.cpu, args.realtime);
         std::thread::Builder::new()
             .name("serving".into())
-            .spawn(move || serving::serve(setup, ready))?
+            .spawn(move || {
+                if let Some(cpu) = cpu {
+                    match hexacomp_service::realtime::pin_to_cpu(cpu) {
+                        Ok(()) => tracing::info!("serving thread pinned to CPU {cpu}"),
+                        Err(e) => tracing::warn!("not pinned, serving anyway: {e}"),
+                    }
+                }
+                if let Some(priority) = realtime {
+                    match hexacomp_service::realtime::set_realtime(priority) {
+                        Ok(()) => {
+                            tracing::info!("serving thread at SCHED_FIFO priority {priority}")
+                        }
+                        Err(e) => tracing::warn!("no real-time priority, serving anyway: {e}"),
+                    }
+                }
+                serving::serve(setup, ready)
+            })?
     };
     ready_rx
         .recv()
