@@ -100,6 +100,8 @@ pub enum Endpoint {
     Status,
     /// Model deployment (hot swap).
     Deploy,
+    /// Wake-up events for a service waiting in a WaitSet (`--wait event`).
+    Wake,
 }
 
 impl Endpoint {
@@ -108,6 +110,7 @@ impl Endpoint {
             Endpoint::Compensate => "compensate",
             Endpoint::Status => "status",
             Endpoint::Deploy => "deploy",
+            Endpoint::Wake => "wake",
         }
     }
 }
@@ -185,6 +188,8 @@ pub struct Status {
     pub errors: u64,
     /// Time since the service started.
     pub uptime: Duration,
+    /// How the serving thread waits: `spin`, `sleep` or `event`.
+    pub wait_mode: &'static str,
 }
 
 /// What the service said to a deployed model.
@@ -217,6 +222,9 @@ pub struct Client {
     status: Port<ipc::Service, u64, (), StatusReport, ()>,
     deploy: Port<ipc::Service, [u8], (), DeployReply, ()>,
     _factories: (CompensateFactory, StatusFactory, DeployFactory),
+    /// Set when the service waits on events: notified after every compensation request.
+    wake: Option<iceoryx2::port::notifier::Notifier<ipc::Service>>,
+    _wake_factory: Option<iceoryx2::service::port_factory::event::PortFactory<ipc::Service>>,
     _node: Node<ipc::Service>,
     timeout: Duration,
 }
@@ -273,14 +281,30 @@ impl Client {
             .initial_max_slice_len(MAX_MODEL_BYTES)
             .create()
             .map_err(transport)?;
-        Ok(Self {
+        let mut client = Self {
             compensate,
             status,
             deploy,
             _factories: (compensate_factory, status_factory, deploy_factory),
+            wake: None,
+            _wake_factory: None,
             _node: node,
             timeout: options.timeout,
-        })
+        };
+        // A service that sleeps in a WaitSet needs a notification after each request.
+        if client.status_report()?.wait_mode == wire::WAIT_EVENT {
+            let factory = client
+                ._node
+                .service_builder(&iceoryx_name(instance, Endpoint::Wake)?)
+                .event()
+                .open()
+                .map_err(|_| Error::ServiceAbsent {
+                    instance: instance.to_string(),
+                })?;
+            client.wake = Some(factory.notifier_builder().create().map_err(transport)?);
+            client._wake_factory = Some(factory);
+        }
+        Ok(client)
     }
 
     /// Compensates one pose `[x, y, z, a, b, c]` (mm, degrees).
@@ -322,6 +346,9 @@ impl Client {
         };
         let request = request.write_from_fn(|i| PointRequest { values: points[i] });
         let pending = request.send().map_err(transport)?;
+        if let Some(wake) = &self.wake {
+            wake.notify().map_err(transport)?;
+        }
         let deadline = Instant::now() + self.timeout;
         let mut spins = 0u32;
         loop {
@@ -361,8 +388,8 @@ impl Client {
         }
     }
 
-    /// The service's status.
-    pub fn status(&mut self) -> Result<Status, Error> {
+    /// The service's raw status report.
+    fn status_report(&mut self) -> Result<StatusReport, Error> {
         let pending = self.status.send_copy(0).map_err(transport)?;
         let report = self.wait(|| pending.receive().map(|r| r.map(|r| *r.payload())))?;
         if report.protocol != PROTOCOL_VERSION {
@@ -370,7 +397,18 @@ impl Client {
                 service: report.protocol,
             });
         }
+        Ok(report)
+    }
+
+    /// The service's status.
+    pub fn status(&mut self) -> Result<Status, Error> {
+        let report = self.status_report()?;
         Ok(Status {
+            wait_mode: match report.wait_mode {
+                wire::WAIT_SPIN => "spin",
+                wire::WAIT_SLEEP => "sleep",
+                _ => "event",
+            },
             geometry_fingerprint: format!("{:016x}", report.geometry_fingerprint),
             geometry_name: wire::field_text(&report.geometry_name),
             generation: report.generation,

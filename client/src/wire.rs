@@ -96,6 +96,13 @@ pub struct PointResponse {
     pub reserved: [u8; 7],
 }
 
+/// The serving thread busy-polls.
+pub const WAIT_SPIN: u32 = 0;
+/// The serving thread polls and sleeps briefly when idle.
+pub const WAIT_SLEEP: u32 = 1;
+/// The serving thread sleeps in an iceoryx2 WaitSet until a client notifies `wake`.
+pub const WAIT_EVENT: u32 = 2;
+
 /// Bytes of text fields in the status report.
 pub const TEXT_BYTES: usize = 192;
 
@@ -105,8 +112,9 @@ pub const TEXT_BYTES: usize = 192;
 pub struct StatusReport {
     /// The service's [`PROTOCOL_VERSION`].
     pub protocol: u32,
-    /// Reserved, zero.
-    pub reserved: u32,
+    /// How the serving thread waits: [`WAIT_SPIN`], [`WAIT_SLEEP`] or [`WAIT_EVENT`]. With
+    /// [`WAIT_EVENT`] clients notify the `wake` endpoint after sending a request.
+    pub wait_mode: u32,
     /// Fingerprint of the geometry served.
     pub geometry_fingerprint: u64,
     /// Generation of the model serving (0: none).

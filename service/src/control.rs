@@ -32,6 +32,8 @@ pub struct ControlSetup {
     pub stop: Arc<AtomicBool>,
     /// Provenance of the model serving at start.
     pub initial_summary: String,
+    /// How the serving thread waits (status report value).
+    pub wait_mode: u32,
 }
 
 /// A one-line summary of a model for the status report.
@@ -103,7 +105,7 @@ pub fn run(setup: ControlSetup, ready: Sender<Result<(), String>>) {
             let c = &setup.counters;
             let report = StatusReport {
                 protocol: PROTOCOL_VERSION,
-                reserved: 0,
+                wait_mode: setup.wait_mode,
                 geometry_fingerprint: setup.geometry.fingerprint().0,
                 generation: c.generation.load(Ordering::Relaxed),
                 requests: c.requests.load(Ordering::Relaxed),

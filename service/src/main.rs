@@ -38,8 +38,9 @@ struct Args {
     /// ~/.local/state/hexacomp/<instance>.
     #[arg(long, value_name = "DIR")]
     state_dir: Option<PathBuf>,
-    /// spin: busy-poll (lowest latency, give it a core of its own); sleep: poll and sleep 50 µs
-    /// when idle (frees the core, adds latency to the first request after a pause).
+    /// spin: busy-poll (lowest latency, give it a core of its own); event: sleep in an iceoryx2
+    /// WaitSet until a client's notification (frees the core; each request pays a wake-up);
+    /// sleep: poll and sleep 50 µs when idle.
     #[arg(long, value_enum, default_value_t = WaitArg::Spin)]
     wait: WaitArg,
     /// Pin the serving thread to this CPU (with --wait spin, give it a core no one else uses).
@@ -54,6 +55,7 @@ struct Args {
 #[derive(Debug, Clone, Copy, clap::ValueEnum)]
 enum WaitArg {
     Spin,
+    Event,
     Sleep,
 }
 
@@ -123,6 +125,11 @@ fn run(args: Args) -> anyhow::Result<()> {
         state_dir.display()
     );
 
+    let wait_mode = match args.wait {
+        WaitArg::Spin => WaitMode::Spin,
+        WaitArg::Event => WaitMode::Event,
+        WaitArg::Sleep => WaitMode::Sleep,
+    };
     let counters = Arc::new(Counters::default());
     let stop = Arc::new(AtomicBool::new(false));
     let (to_serving, incoming) = crossbeam_channel::bounded(1);
@@ -137,10 +144,7 @@ fn run(args: Args) -> anyhow::Result<()> {
             retired: retired_tx,
             counters: counters.clone(),
             stop: stop.clone(),
-            wait: match args.wait {
-                WaitArg::Spin => WaitMode::Spin,
-                WaitArg::Sleep => WaitMode::Sleep,
-            },
+            wait: wait_mode,
         };
         let ready = ready_tx.clone();
         let (cpu, realtime) = (args.cpu, args.realtime);
@@ -178,6 +182,7 @@ fn run(args: Args) -> anyhow::Result<()> {
             counters,
             stop: stop.clone(),
             initial_summary,
+            wait_mode: wait_mode.wire_value(),
         };
         std::thread::Builder::new()
             .name("control".into())

@@ -15,6 +15,7 @@ use hexacomp_client::{Endpoint, iceoryx_name};
 use hexacomp_core::compensator::{compensate_legs, compensate_pose};
 use hexacomp_core::{Geometry, Pose};
 use iceoryx2::prelude::*;
+use iceoryx2::waitset::WaitSetRunResult;
 
 use crate::{Counters, Generation};
 
@@ -57,8 +58,21 @@ pub fn check_header(header: &RequestHeader) -> Result<RequestKind, RequestOutcom
 pub enum WaitMode {
     /// Busy-poll: lowest latency, needs a core of its own.
     Spin,
-    /// Poll, and sleep briefly when idle: frees the core at a latency cost when idle.
+    /// Poll, and sleep 50 µs when idle: frees the core at a latency cost when idle.
     Sleep,
+    /// Sleep in an iceoryx2 WaitSet until a client notifies the wake endpoint.
+    Event,
+}
+
+impl WaitMode {
+    /// The mode's value in the status report.
+    pub fn wire_value(self) -> u32 {
+        match self {
+            WaitMode::Spin => hexacomp_client::wire::WAIT_SPIN,
+            WaitMode::Sleep => hexacomp_client::wire::WAIT_SLEEP,
+            WaitMode::Event => hexacomp_client::wire::WAIT_EVENT,
+        }
+    }
 }
 
 /// What the serving thread needs.
@@ -138,6 +152,28 @@ pub fn serve(setup: ServingSetup, ready: Sender<Result<(), String>>) {
     counters
         .generation
         .store(current.as_ref().map_or(0, |g| g.number), Ordering::Relaxed);
+    // Event mode: a listener on the wake endpoint, attached to a WaitSet together with a 10 ms
+    // tick that keeps stop requests and model switches prompt while no request comes.
+    let wake = match wait {
+        WaitMode::Event => match wake_listener(&node, &instance) {
+            Ok(parts) => Some(parts),
+            Err(e) => {
+                tracing::error!("{e}; serving with --wait sleep instead");
+                None
+            }
+        },
+        _ => None,
+    };
+    let waitset = wake
+        .as_ref()
+        .and_then(|_| WaitSetBuilder::new().create::<ipc::Service>().ok());
+    let guards = match (&wake, &waitset) {
+        (Some((_, listener)), Some(waitset)) => waitset
+            .attach_notification(listener)
+            .ok()
+            .zip(waitset.attach_interval(Duration::from_millis(10)).ok()),
+        _ => None,
+    };
     let mut last_check = Instant::now();
     while !stop.load(Ordering::Relaxed) {
         // A new model switches in between two requests; the old one goes back to be freed.
@@ -148,51 +184,36 @@ pub fn serve(setup: ServingSetup, ready: Sender<Result<(), String>>) {
             }
         }
         match server.receive() {
-            Ok(Some(active)) => {
-                let header = *active.user_header();
-                let points = active.payload();
-                let count = points.len();
-                let model = current.as_deref();
-                let (outcome, kind) = match check_header(&header) {
-                    Ok(kind) => (RequestOutcome::Served, Some(kind)),
-                    Err(outcome) => (outcome, None),
-                };
-                let sent = match active.loan_slice_uninit(if kind.is_some() { count } else { 0 }) {
-                    Ok(loan) => {
-                        let mut response = loan.write_from_fn(|i| match kind {
-                            Some(kind) => compute_point(&geometry, model, kind, &points[i]),
-                            None => PointResponse::default(),
-                        });
-                        *response.user_header_mut() = ResponseHeader {
-                            protocol: PROTOCOL_VERSION,
-                            outcome: outcome as u32,
-                            generation: model.map_or(0, |g| g.number),
-                        };
-                        response.send().is_ok()
-                    }
-                    Err(_) => false,
-                };
-                if !sent || kind.is_none() {
-                    counters.errors.fetch_add(1, Ordering::Relaxed);
-                } else {
-                    counters.requests.fetch_add(1, Ordering::Relaxed);
-                    counters.points.fetch_add(count as u64, Ordering::Relaxed);
-                }
-            }
-            Ok(None) => {
-                if wait == WaitMode::Sleep {
-                    std::thread::sleep(Duration::from_micros(50));
-                } else {
-                    std::hint::spin_loop();
-                }
-                // Termination signals are checked only while idle, at most every millisecond.
-                if last_check.elapsed() > Duration::from_millis(1) {
-                    last_check = Instant::now();
-                    if node.wait(Duration::ZERO).is_err() {
+            Ok(Some(active)) => answer(&active, &geometry, current.as_deref(), &counters),
+            Ok(None) => match (&waitset, &wake, &guards) {
+                (Some(waitset), Some((_, listener)), Some(_)) => {
+                    let result = waitset.wait_and_process_once_with_timeout(
+                        |_| CallbackProgression::Continue,
+                        Duration::from_millis(100),
+                    );
+                    if matches!(
+                        result,
+                        Ok(WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt)
+                    ) {
                         stop.store(true, Ordering::Relaxed);
                     }
+                    let _ = listener.try_wait(|_| {});
                 }
-            }
+                _ => {
+                    if wait == WaitMode::Spin {
+                        std::hint::spin_loop();
+                    } else {
+                        std::thread::sleep(Duration::from_micros(50));
+                    }
+                    // Termination signals are checked only while idle, at most every millisecond.
+                    if last_check.elapsed() > Duration::from_millis(1) {
+                        last_check = Instant::now();
+                        if node.wait(Duration::ZERO).is_err() {
+                            stop.store(true, Ordering::Relaxed);
+                        }
+                    }
+                }
+            },
             Err(e) => {
                 tracing::warn!("receiving a request failed: {e:?}");
                 counters.errors.fetch_add(1, Ordering::Relaxed);
@@ -202,4 +223,72 @@ pub fn serve(setup: ServingSetup, ready: Sender<Result<(), String>>) {
     if let Some(old) = current.take() {
         let _ = retired.try_send(old);
     }
+}
+
+type ActiveRequest = iceoryx2::active_request::ActiveRequest<
+    ipc::Service,
+    [PointRequest],
+    RequestHeader,
+    [PointResponse],
+    ResponseHeader,
+>;
+
+/// Answers one request from its loaned payload straight into a loaned response.
+fn answer(
+    active: &ActiveRequest,
+    geometry: &Geometry,
+    model: Option<&Generation>,
+    counters: &Counters,
+) {
+    let header = *active.user_header();
+    let points = active.payload();
+    let count = points.len();
+    let (outcome, kind) = match check_header(&header) {
+        Ok(kind) => (RequestOutcome::Served, Some(kind)),
+        Err(outcome) => (outcome, None),
+    };
+    let sent = match active.loan_slice_uninit(if kind.is_some() { count } else { 0 }) {
+        Ok(loan) => {
+            let mut response = loan.write_from_fn(|i| match kind {
+                Some(kind) => compute_point(geometry, model, kind, &points[i]),
+                None => PointResponse::default(),
+            });
+            *response.user_header_mut() = ResponseHeader {
+                protocol: PROTOCOL_VERSION,
+                outcome: outcome as u32,
+                generation: model.map_or(0, |g| g.number),
+            };
+            response.send().is_ok()
+        }
+        Err(_) => false,
+    };
+    if !sent || kind.is_none() {
+        counters.errors.fetch_add(1, Ordering::Relaxed);
+    } else {
+        counters.requests.fetch_add(1, Ordering::Relaxed);
+        counters.points.fetch_add(count as u64, Ordering::Relaxed);
+    }
+}
+
+type WakeParts = (
+    iceoryx2::service::port_factory::event::PortFactory<ipc::Service>,
+    iceoryx2::port::listener::Listener<ipc::Service>,
+);
+
+/// The wake endpoint's service and this thread's listener on it.
+fn wake_listener(node: &Node<ipc::Service>, instance: &str) -> Result<WakeParts, String> {
+    let name = iceoryx_name(instance, Endpoint::Wake).map_err(|e| e.to_string())?;
+    let service = node
+        .service_builder(&name)
+        .event()
+        .max_notifiers(MAX_CLIENTS)
+        .max_listeners(1)
+        .max_nodes(MAX_CLIENTS + 4)
+        .open_or_create()
+        .map_err(|e| format!("wake endpoint: {e:?}"))?;
+    let listener = service
+        .listener_builder()
+        .create()
+        .map_err(|e| format!("wake listener: {e:?}"))?;
+    Ok((service, listener))
 }

@@ -117,6 +117,11 @@ impl ServiceProcess {
         hexacomp_client::Client::connect(&self.instance, &options)
     }
 
+    /// The child's process id.
+    pub fn pid(&self) -> u32 {
+        self.child.id()
+    }
+
     /// Kills the service with SIGKILL and reaps it.
     pub fn kill(mut self) {
         let _ = self.child.kill();

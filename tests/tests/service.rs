@@ -363,3 +363,63 @@ fn a_second_service_for_the_same_instance_is_refused_and_the_absent_one_is_repor
         "{message}"
     );
 }
+
+/// CPU time (user + system) a process has used, from /proc, in seconds.
+fn cpu_seconds(pid: u32) -> f64 {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).unwrap();
+    let fields: Vec<&str> = stat
+        .rsplit(')')
+        .next()
+        .unwrap()
+        .split_whitespace()
+        .collect();
+    let ticks: f64 = fields[11].parse::<f64>().unwrap() + fields[12].parse::<f64>().unwrap();
+    // SAFETY: sysconf has no preconditions.
+    ticks / unsafe { libc::sysconf(libc::_SC_CLK_TCK) } as f64
+}
+
+#[test]
+fn event_mode_serves_the_same_numbers_swaps_and_leaves_the_core_free_when_idle() {
+    let dir = tempfile::tempdir().unwrap();
+    let (first_model, first) = small_model(dir.path(), 1);
+    let (_, second) = small_model(dir.path(), 2);
+    let service = ServiceProcess::start(
+        &unique_instance("event"),
+        &[
+            "--state-dir",
+            p(&dir.path().join("state")),
+            "--model",
+            p(&first),
+            "--wait",
+            "event",
+        ],
+    );
+    let mut client = service.client().unwrap();
+    assert_eq!(client.status().unwrap().wait_mode, "event");
+    let g = Geometry::prototype();
+    for pose in poses(2000, 9) {
+        let values = pose.to_mm_deg();
+        let got = client.compensate_pose(values).unwrap();
+        assert_same(
+            &got,
+            &compensate_pose(&g, Some(&first_model), &Pose::from_mm_deg(values)),
+        );
+    }
+    let bytes = std::fs::read(&second).unwrap();
+    assert_eq!(
+        client.deploy(&bytes).unwrap(),
+        DeployOutcome::Accepted { generation: 2 }
+    );
+    let point = client
+        .compensate_pose([0.0, 0.0, 280.0, 0.0, 0.0, 0.0])
+        .unwrap();
+    assert_eq!(point.generation, 2);
+    // Idle for a second: a spinning thread would use a whole core; the WaitSet sleeps.
+    let before = cpu_seconds(service.pid());
+    std::thread::sleep(Duration::from_secs(1));
+    let used = cpu_seconds(service.pid()) - before;
+    assert!(
+        used < 0.2,
+        "an idle event-mode service used {used:.2} s of CPU in 1 s"
+    );
+}

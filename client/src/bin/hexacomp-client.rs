@@ -80,6 +80,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 "requests      {} ({} points), {} errors",
                 s.requests, s.points, s.errors
             );
+            println!("waiting       {}", s.wait_mode);
             println!("uptime        {:.1} s", s.uptime.as_secs_f64());
         }
         Command::Compensate {
