@@ -9,7 +9,6 @@ use anyhow::Context;
 use clap::Parser;
 use hexacomp_client::DEFAULT_INSTANCE;
 use hexacomp_core::Geometry;
-use hexacomp_core::model::Model;
 use hexacomp_service::control::{self, ControlSetup, summarise};
 use hexacomp_service::serving::{self, ServingSetup, WaitMode};
 use hexacomp_service::{Counters, Generation, state};
@@ -95,8 +94,8 @@ fn run(args: Args) -> anyhow::Result<()> {
         .with_context(|| format!("state directory {}", state_dir.display()))?;
     let initial = match &args.model {
         Some(path) => {
-            let model = Model::load(path, &geometry)?;
-            let bytes = model.to_bytes();
+            let bytes =
+                std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
             let model = hexacomp_service::validate::validate(&bytes, &geometry)
                 .map_err(|why| anyhow::anyhow!("{}: refused: {why}", path.display()))?;
             state::persist(&state_dir, &model, 1).map_err(anyhow::Error::msg)?;
