@@ -19,6 +19,7 @@ use hexacomp_client::{Client, ClientOptions, CompensatedPoint};
 use hexacomp_core::Geometry;
 use hexacomp_core::model::{Model, NetworkInput, Networks, Provenance};
 use hexacomp_core::network::{Network, Normalisation};
+use hexacomp_service::control::{ControlSetup, run as run_control};
 use hexacomp_service::serving::{ServingSetup, WaitMode, serve};
 use hexacomp_service::{Counters, Generation};
 
@@ -111,27 +112,24 @@ fn serving_thread_allocates_only_iceoryx2s_two_objects_per_request_and_nothing_o
         serve(setup, ready_tx);
     });
     ready_rx.recv().unwrap().unwrap();
-    // `Client::connect` opens the status and deploy endpoints too; without the control thread
-    // this test creates them (unserved) so that the client can connect.
-    let node = iceoryx2::prelude::NodeBuilder::new()
-        .create::<iceoryx2::prelude::ipc::Service>()
-        .unwrap();
-    let endpoints = [
-        hexacomp_client::Endpoint::Status,
-        hexacomp_client::Endpoint::Deploy,
-    ];
-    let status = node
-        .service_builder(&hexacomp_client::iceoryx_name(&instance, endpoints[0]).unwrap())
-        .request_response::<u64, hexacomp_client::wire::StatusReport>()
-        .max_servers(1)
-        .open_or_create()
-        .unwrap();
-    let deploy = node
-        .service_builder(&hexacomp_client::iceoryx_name(&instance, endpoints[1]).unwrap())
-        .request_response::<[u8], hexacomp_client::wire::DeployReply>()
-        .max_servers(1)
-        .open_or_create()
-        .unwrap();
+    // The real control thread serves status and deploy (`Client::connect` asks the status for
+    // the wait mode); it only reads the counters here.
+    let (unused_tx, unused_rx) = crossbeam_channel::bounded(1);
+    let (control_ready_tx, control_ready_rx) = crossbeam_channel::bounded(1);
+    let state = tempfile::tempdir().unwrap();
+    let control_setup = ControlSetup {
+        instance: instance.clone(),
+        geometry: geometry.clone(),
+        state_dir: state.path().to_path_buf(),
+        outgoing: unused_tx,
+        retired: unused_rx,
+        counters: Arc::new(Counters::default()),
+        stop: stop.clone(),
+        initial_summary: String::new(),
+        wait_mode: WaitMode::Sleep.wire_value(),
+    };
+    let control = std::thread::spawn(move || run_control(control_setup, control_ready_tx));
+    control_ready_rx.recv().unwrap().unwrap();
     let mut client = Client::connect(
         &instance,
         &ClientOptions {
@@ -180,5 +178,5 @@ fn serving_thread_allocates_only_iceoryx2s_two_objects_per_request_and_nothing_o
     assert_eq!(retired_rx.try_recv().unwrap().number, 1);
     stop.store(true, Ordering::SeqCst);
     serving.join().unwrap();
-    drop((status, deploy));
+    control.join().unwrap();
 }
