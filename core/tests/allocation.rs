@@ -2,7 +2,7 @@
 //! compensation.
 
 use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicUsize, Ordering};
+use std::cell::Cell;
 
 use hexacomp_core::Geometry;
 use hexacomp_core::compensator::compensate_pose;
@@ -12,11 +12,18 @@ use hexacomp_core::sampling::{SamplerOptions, WorkspaceSampler};
 
 struct Counting;
 
-static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
+thread_local! {
+    /// Allocations made by the current thread (tests run in parallel threads).
+    static ALLOCATIONS: Cell<usize> = const { Cell::new(0) };
+}
+
+fn allocations() -> usize {
+    ALLOCATIONS.with(Cell::get)
+}
 
 unsafe impl GlobalAlloc for Counting {
     unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        ALLOCATIONS.with(|c| c.set(c.get() + 1));
         unsafe { System.alloc(layout) }
     }
     unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
@@ -29,9 +36,9 @@ static GLOBAL: Counting = Counting;
 
 #[test]
 fn the_counter_sees_allocations() {
-    let before = ALLOCATIONS.load(Ordering::Relaxed);
+    let before = allocations();
     let v = std::hint::black_box(vec![1u8; 10]);
-    assert!(ALLOCATIONS.load(Ordering::Relaxed) > before);
+    assert!(allocations() > before);
     drop(v);
 }
 
@@ -68,12 +75,12 @@ fn inference_and_compensation_allocate_nothing() {
         .samples(1000)
         .unwrap();
     for m in &models {
-        let before = ALLOCATIONS.load(Ordering::Relaxed);
+        let before = allocations();
         let mut checksum = 0.0;
         for pose in &poses {
             checksum += compensate_pose(&g, Some(m), pose).legs[0];
         }
-        let after = ALLOCATIONS.load(Ordering::Relaxed);
+        let after = allocations();
         assert!(checksum.is_finite());
         assert_eq!(
             after - before,
