@@ -19,6 +19,10 @@ pub const MAX_MODEL_BYTES: usize = 1 << 20;
 /// Clients one service instance admits.
 pub const MAX_CLIENTS: usize = 32;
 
+/// Nodes that may use one endpoint: every client, plus the service's own threads and a margin
+/// for tools (status, deploy) connecting at the same time.
+pub const MAX_NODES: usize = MAX_CLIENTS + 4;
+
 /// What the points of a request are.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[repr(u32)]

@@ -7,7 +7,9 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use crossbeam_channel::{Receiver, Sender};
-use hexacomp_client::wire::{DeployReply, MAX_CLIENTS, PROTOCOL_VERSION, StatusReport, text_field};
+use hexacomp_client::wire::{
+    DeployReply, MAX_CLIENTS, MAX_NODES, PROTOCOL_VERSION, StatusReport, text_field,
+};
 use hexacomp_client::{Endpoint, iceoryx_name};
 use hexacomp_core::Geometry;
 use iceoryx2::prelude::*;
@@ -62,7 +64,7 @@ pub fn run(setup: ControlSetup, ready: Sender<Result<(), String>>) {
             .request_response::<u64, StatusReport>()
             .max_clients(MAX_CLIENTS)
             .max_servers(1)
-            .max_nodes(MAX_CLIENTS + 4)
+            .max_nodes(MAX_NODES)
             .open_or_create()
             .map_err(|e| format!("status endpoint: {e:?}"))?;
         let deploy_service = node
@@ -70,17 +72,17 @@ pub fn run(setup: ControlSetup, ready: Sender<Result<(), String>>) {
             .request_response::<[u8], DeployReply>()
             .max_clients(MAX_CLIENTS)
             .max_servers(1)
-            .max_nodes(MAX_CLIENTS + 4)
+            .max_nodes(MAX_NODES)
             .open_or_create()
             .map_err(|e| format!("deploy endpoint: {e:?}"))?;
         let status = status_service
             .server_builder()
             .create()
-            .map_err(|e| format!("{e:?}"))?;
+            .map_err(|e| format!("status server: {e:?}"))?;
         let deploy = deploy_service
             .server_builder()
             .create()
-            .map_err(|e| format!("{e:?}"))?;
+            .map_err(|e| format!("deploy server: {e:?}"))?;
         Ok((node, status_service, deploy_service, status, deploy))
     })();
     let (_node, _s, _d, status, deploy) = match started {

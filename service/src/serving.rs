@@ -8,8 +8,8 @@ use std::time::{Duration, Instant};
 
 use crossbeam_channel::{Receiver, Sender};
 use hexacomp_client::wire::{
-    MAX_BATCH, MAX_CLIENTS, PROTOCOL_VERSION, PointRequest, PointResponse, RequestHeader,
-    RequestKind, RequestOutcome, ResponseHeader,
+    MAX_BATCH, MAX_CLIENTS, MAX_NODES, PROTOCOL_VERSION, PointRequest, PointResponse,
+    RequestHeader, RequestKind, RequestOutcome, ResponseHeader,
 };
 use hexacomp_client::{Endpoint, iceoryx_name};
 use hexacomp_core::compensator::{compensate_legs, compensate_pose};
@@ -121,7 +121,7 @@ pub fn serve(setup: ServingSetup, ready: Sender<Result<(), String>>) {
             .max_clients(MAX_CLIENTS)
             .max_servers(1)
             .max_active_requests_per_client(4)
-            .max_nodes(MAX_CLIENTS + 4)
+            .max_nodes(MAX_NODES)
             // Open when clients still hold the service of a killed server: its dead node is
             // cleaned up when this node is created, which frees the one server slot.
             .open_or_create()
@@ -283,7 +283,7 @@ fn wake_listener(node: &Node<ipc::Service>, instance: &str) -> Result<WakeParts,
         .event()
         .max_notifiers(MAX_CLIENTS)
         .max_listeners(1)
-        .max_nodes(MAX_CLIENTS + 4)
+        .max_nodes(MAX_NODES)
         .open_or_create()
         .map_err(|e| format!("wake endpoint: {e:?}"))?;
     let listener = service
