@@ -8,7 +8,7 @@
 
 use hexacomp_core::compensator::compensate_pose;
 use hexacomp_core::formats::CorrectionRow;
-use hexacomp_core::model::{Model, NetworkInput};
+use hexacomp_core::model::NetworkInput;
 use hexacomp_core::sampling::{SamplerOptions, WorkspaceSampler};
 use hexacomp_core::stats::{PoseErrorNorm, PoseErrorStats};
 use hexacomp_core::virtual_platform::{ErrorModel, VirtualPlatform};
@@ -231,12 +231,9 @@ pub fn evaluate(
                     .expect("decoupled")
                     .1,
             );
-            let alt = PoseErrorStats::of(&drive_model(
-                &mut machine.clone(),
-                geometry,
-                &alternative.model,
-                &validation,
-            )?);
+            let alt = PoseErrorStats::of(&drive(&mut machine.clone(), &validation, |pose| {
+                compensate_pose(geometry, Some(&alternative.model), pose).legs
+            })?);
             inputs = vec![(input, own), (other, alt)];
         }
         platform = machine;
@@ -255,7 +252,7 @@ pub fn evaluate(
 }
 
 /// Drives the machine to every pose with the legs `command` gives; the errors reached.
-fn drive(
+pub fn drive(
     platform: &mut VirtualPlatform,
     poses: &[Pose],
     command: impl Fn(&Pose) -> [f64; 6],
@@ -267,16 +264,4 @@ fn drive(
             Ok(PoseErrorNorm::between(pose, &reached))
         })
         .collect()
-}
-
-/// Drives the machine with a model's compensation.
-pub fn drive_model(
-    platform: &mut VirtualPlatform,
-    geometry: &Geometry,
-    model: &Model,
-    poses: &[Pose],
-) -> Result<Vec<PoseErrorNorm>> {
-    drive(platform, poses, |pose| {
-        compensate_pose(geometry, Some(model), pose).legs
-    })
 }

@@ -6,11 +6,12 @@ mod common;
 use hexacomp_core::compensator::compensate_pose;
 use hexacomp_core::formats::CorrectionRow;
 use hexacomp_core::sampling::{SamplerOptions, WorkspaceSampler};
-use hexacomp_core::stats::{PoseErrorNorm, PoseErrorStats};
+use hexacomp_core::stats::PoseErrorStats;
 use hexacomp_core::virtual_platform::{DEFAULT_MACHINE_SEED, ErrorModel};
 use hexacomp_core::{Geometry, Pose, inverse_kinematics};
 use hexacomp_trainer::Error;
 use hexacomp_trainer::corrections::{Checks, SolverOptions, solve_all};
+use hexacomp_trainer::evaluate;
 use hexacomp_trainer::identify::{IdentifyOptions, identify};
 use hexacomp_trainer::train::{Architecture, TrainOptions, train};
 
@@ -35,12 +36,7 @@ fn robust_networks_beat_the_papers_figures_and_the_model_based_baseline() {
         .samples(100)
         .unwrap();
     let drive = |command: &dyn Fn(&Pose) -> [f64; 6]| {
-        let mut machine = platform.clone();
-        let errors: Vec<_> = fresh
-            .iter()
-            .map(|p| PoseErrorNorm::between(p, &machine.move_legs(&command(p), p).unwrap()))
-            .collect();
-        PoseErrorStats::of(&errors)
+        PoseErrorStats::of(&evaluate::drive(&mut platform.clone(), &fresh, command).unwrap())
     };
     let options = TrainOptions::default();
     let decoupled = train(

@@ -4,6 +4,7 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::Context;
+use hexacomp_core::compensator::compensate_pose;
 use hexacomp_core::formats::{read_measurements, write_measurements, write_poses};
 use hexacomp_core::sampling::{SamplerOptions, WorkspaceSampler};
 use hexacomp_core::stats::PoseErrorStats;
@@ -13,7 +14,7 @@ use hexacomp_core::virtual_platform::{
 use hexacomp_core::{Geometry, inverse_kinematics};
 use hexacomp_trainer::acquire::measure_plan;
 use hexacomp_trainer::corrections::{Checks, Outcome, SolverOptions, solve_all};
-use hexacomp_trainer::evaluate::drive_model;
+use hexacomp_trainer::evaluate::drive;
 use hexacomp_trainer::identify::{IdentifyOptions, identify};
 use hexacomp_trainer::plan::{PlanOptions, numbered_rows, plan};
 use hexacomp_trainer::train::{Architecture, TrainOptions};
@@ -167,35 +168,23 @@ pub fn run(geometry: &Geometry, args: &CalibrateArgs) -> anyhow::Result<()> {
         )?
         .samples(args.validation.max(1))?;
         let identified = identify(geometry, &measurements, &IdentifyOptions::default())?.geometry;
-        let drive =
-            |command: &dyn Fn(&hexacomp_core::Pose) -> [f64; 6]| -> anyhow::Result<PoseErrorStats> {
-                let mut machine = platform.clone();
-                let errors: Vec<_> = poses
-                    .iter()
-                    .map(|p| {
-                        Ok(hexacomp_core::stats::PoseErrorNorm::between(
-                            p,
-                            &machine.move_legs(&command(p), p)?,
-                        ))
-                    })
-                    .collect::<anyhow::Result<_>>()?;
-                Ok(PoseErrorStats::of(&errors))
-            };
+        let stats = |command: &dyn Fn(&hexacomp_core::Pose) -> [f64; 6]| {
+            drive(&mut platform.clone(), &poses, command).map(|e| PoseErrorStats::of(&e))
+        };
         let mut rows = vec![
             (
                 "uncompensated".to_string(),
-                drive(&|p| inverse_kinematics(geometry, p).lengths)?,
+                stats(&|p| inverse_kinematics(geometry, p).lengths)?,
             ),
             (
                 "model-based (identified geometry)".to_string(),
-                drive(&|p| inverse_kinematics(&identified, p).lengths)?,
+                stats(&|p| inverse_kinematics(&identified, p).lengths)?,
             ),
         ];
         for (architecture, t) in &trained {
-            let errors = drive_model(&mut platform.clone(), geometry, &t.model, &poses)?;
             rows.push((
                 format!("robust {}", arch_name(*architecture)),
-                PoseErrorStats::of(&errors),
+                stats(&|p| compensate_pose(geometry, Some(&t.model), p).legs)?,
             ));
         }
         for (name, s) in rows {
