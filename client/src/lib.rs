@@ -349,49 +349,40 @@ impl Client {
         if let Some(wake) = &self.wake {
             wake.notify().map_err(transport)?;
         }
-        let deadline = Instant::now() + self.timeout;
-        let mut spins = 0u32;
-        loop {
-            if let Some(response) = pending.receive().map_err(transport)? {
-                let header = *response.user_header();
-                if header.protocol != PROTOCOL_VERSION
-                    || header.outcome == RequestOutcome::ProtocolMismatch as u32
-                {
-                    return Err(Error::ProtocolMismatch {
-                        service: header.protocol,
-                    });
-                }
-                let payload = response.payload();
-                if payload.len() != out.len() {
-                    return Err(Error::Transport(format!(
-                        "the service answered {} points for {}",
-                        payload.len(),
-                        out.len()
-                    )));
-                }
-                for (slot, p) in out.iter_mut().zip(payload) {
-                    *slot = CompensatedPoint {
-                        legs: p.legs,
-                        corrections: p.corrections,
-                        status: PointStatus::from_u8(p.status).unwrap_or(PointStatus::InvalidInput),
-                        generation: p.generation,
-                    };
-                }
-                return Ok(());
-            }
-            if Instant::now() > deadline {
-                return Err(Error::Timeout {
-                    timeout: self.timeout,
-                });
-            }
-            wait_a_little(&mut spins);
+        let response = wait_for(self.timeout, || pending.receive())?;
+        let header = *response.user_header();
+        if header.protocol != PROTOCOL_VERSION
+            || header.outcome == RequestOutcome::ProtocolMismatch as u32
+        {
+            return Err(Error::ProtocolMismatch {
+                service: header.protocol,
+            });
         }
+        let payload = response.payload();
+        if payload.len() != out.len() {
+            return Err(Error::Transport(format!(
+                "the service answered {} points for {}",
+                payload.len(),
+                out.len()
+            )));
+        }
+        for (slot, p) in out.iter_mut().zip(payload) {
+            *slot = CompensatedPoint {
+                legs: p.legs,
+                corrections: p.corrections,
+                status: PointStatus::from_u8(p.status).unwrap_or(PointStatus::InvalidInput),
+                generation: p.generation,
+            };
+        }
+        Ok(())
     }
 
     /// The service's raw status report.
     fn status_report(&mut self) -> Result<StatusReport, Error> {
         let pending = self.status.send_copy(0).map_err(transport)?;
-        let report = self.wait(|| pending.receive().map(|r| r.map(|r| *r.payload())))?;
+        let report = wait_for(self.timeout, || {
+            pending.receive().map(|r| r.map(|r| *r.payload()))
+        })?;
         if report.protocol != PROTOCOL_VERSION {
             return Err(Error::ProtocolMismatch {
                 service: report.protocol,
@@ -434,11 +425,9 @@ impl Client {
             .map_err(transport)?
             .write_from_fn(|i| model_file[i]);
         let pending = request.send().map_err(transport)?;
-        let timeout = self.timeout;
-        self.timeout = timeout * 10;
-        let reply = self.wait(|| pending.receive().map(|r| r.map(|r| *r.payload())));
-        self.timeout = timeout;
-        let reply = reply?;
+        let reply = wait_for(self.timeout * 10, || {
+            pending.receive().map(|r| r.map(|r| *r.payload()))
+        })?;
         Ok(if reply.accepted == 1 {
             DeployOutcome::Accepted {
                 generation: reply.generation,
@@ -449,26 +438,6 @@ impl Client {
                 generation: reply.generation,
             }
         })
-    }
-
-    /// Polls `receive` until it yields or the deadline passes.
-    fn wait<T, E: std::fmt::Display>(
-        &self,
-        mut receive: impl FnMut() -> Result<Option<T>, E>,
-    ) -> Result<T, Error> {
-        let deadline = Instant::now() + self.timeout;
-        let mut spins = 0u32;
-        loop {
-            if let Some(value) = receive().map_err(transport)? {
-                return Ok(value);
-            }
-            if Instant::now() > deadline {
-                return Err(Error::Timeout {
-                    timeout: self.timeout,
-                });
-            }
-            wait_a_little(&mut spins);
-        }
     }
 }
 
@@ -481,6 +450,24 @@ impl CompensatedPoint {
             status: PointStatus::NoModel,
             generation: 0,
         }
+    }
+}
+
+/// Polls `receive` until it yields or `timeout` has passed.
+fn wait_for<T, E: std::fmt::Display>(
+    timeout: Duration,
+    mut receive: impl FnMut() -> Result<Option<T>, E>,
+) -> Result<T, Error> {
+    let deadline = Instant::now() + timeout;
+    let mut spins = 0u32;
+    loop {
+        if let Some(value) = receive().map_err(transport)? {
+            return Ok(value);
+        }
+        if Instant::now() > deadline {
+            return Err(Error::Timeout { timeout });
+        }
+        wait_a_little(&mut spins);
     }
 }
 
