@@ -156,11 +156,7 @@ fn handle_deploy(setup: &ControlSetup, bytes: &[u8], summary: &mut String) -> De
         note = format!("accepted but not persisted: {e}");
     }
     let line = summarise(&model);
-    let generation = Box::new(Generation {
-        model,
-        number,
-        summary: line.clone(),
-    });
+    let generation = Box::new(Generation { model, number });
     if setup.outgoing.send(generation).is_err() {
         return refuse("the serving thread has stopped".into());
     }

@@ -35,6 +35,4 @@ pub struct Generation {
     pub model: hexacomp_core::model::Model,
     /// Its generation number (1, 2, …).
     pub number: u64,
-    /// One line of provenance for the status report.
-    pub summary: String,
 }

@@ -103,18 +103,11 @@ fn run(args: Args) -> anyhow::Result<()> {
         }
         None => state::restore(&state_dir, &geometry),
     };
-    let initial = initial.map(|(model, number)| {
-        let summary = summarise(&model);
-        Box::new(Generation {
-            model,
-            number,
-            summary,
-        })
-    });
     let initial_summary = initial
         .as_ref()
-        .map(|g| g.summary.clone())
+        .map(|(model, _)| summarise(model))
         .unwrap_or_default();
+    let initial = initial.map(|(model, number)| Box::new(Generation { model, number }));
     tracing::info!(
         "instance {} geometry {} ({}), model generation {}, state {}",
         args.instance,

@@ -82,11 +82,7 @@ fn generation(geometry: &Geometry, number: u64) -> Box<Generation> {
         geometry: geometry.fingerprint(),
         provenance: Provenance::default(),
     };
-    Box::new(Generation {
-        model,
-        number,
-        summary: String::new(),
-    })
+    Box::new(Generation { model, number })
 }
 
 #[test]
