@@ -80,22 +80,24 @@ impl Network {
     }
 
     /// Evaluates the network at normalised input `x`, writing `outputs` values to `out` (Eq. 10).
-    /// Allocation-free.
+    /// Allocation-free; each hidden activation is consumed as it is computed, so no buffer of
+    /// activations is set up per call.
     #[inline]
     pub fn evaluate(&self, x: &[f64; LEGS], out: &mut [f64]) {
-        let mut hidden = [0.0; MAX_HIDDEN];
-        self.hidden_layer(x, &mut hidden);
         let (h, o) = (self.hidden, self.outputs);
-        let w2 = &self.weights[h * LEGS + h..];
-        let b2 = &w2[o * h..];
+        let (w1, rest) = self.weights.split_at(h * LEGS);
+        let (b1, rest) = rest.split_at(h);
+        let (w2, b2) = rest.split_at(o * h);
+        let mut sums = [0.0; LEGS];
+        for (j, row) in w1.chunks_exact(LEGS).enumerate() {
+            let z = b1[j] + row.iter().zip(x).map(|(w, x)| w * x).sum::<f64>();
+            let a = z.tanh();
+            for (k, sum) in sums.iter_mut().enumerate().take(o) {
+                *sum += w2[k * h + j] * a;
+            }
+        }
         for (k, value) in out.iter_mut().enumerate().take(o) {
-            let row = &w2[k * h..(k + 1) * h];
-            *value = b2[k]
-                + row
-                    .iter()
-                    .zip(&hidden[..h])
-                    .map(|(w, a)| w * a)
-                    .sum::<f64>();
+            *value = b2[k] + sums[k];
         }
     }
 
