@@ -1,0 +1,196 @@
+//! The daemon's command line: its arguments and the function that runs it until stopped. The
+//! `hexacomp-service` binary is a thin wrapper; `hexacomp-bench` starts the same code as a child
+//! process so that one `cargo run` is enough for the demo.
+
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use crate::control::{self, ControlSetup, summarise};
+use crate::serving::{self, ServingSetup, WaitMode};
+use crate::{Counters, Generation, state};
+use anyhow::Context;
+use clap::Parser;
+use hexacomp_client::DEFAULT_INSTANCE;
+use hexacomp_core::Geometry;
+
+/// Serve joint compensation for one hexapod over iceoryx2 shared memory.
+///
+/// Clients (`hexacomp-client`, the C library, the LinuxCNC component) send poses (mm, degrees) or
+/// nominal leg lengths (mm), singly or in batches of up to 1024, and get the legs to command with
+/// a status per point and the generation of the model that computed it. Without a model the
+/// service answers nominal inverse kinematics with the status `no_model`. Models are hot-swapped
+/// with `hexacomp-trainer deploy`; the last accepted one persists in the state directory and is
+/// served again after a restart. Stops cleanly on SIGINT/SIGTERM.
+#[derive(Debug, Clone, Parser)]
+#[command(name = "hexacomp-service", version)]
+pub struct Args {
+    /// Instance name: one service per machine tool.
+    #[arg(long, default_value = DEFAULT_INSTANCE)]
+    instance: String,
+    /// Geometry TOML (DESIGN.md layout). Default: the built-in `prototype`.
+    #[arg(long, value_name = "FILE")]
+    geometry: Option<PathBuf>,
+    /// Model file to serve at start (else the persisted one, else none).
+    #[arg(long, value_name = "FILE")]
+    model: Option<PathBuf>,
+    /// Where the accepted model persists. Default: $XDG_STATE_HOME/hexacomp/<instance>, or
+    /// ~/.local/state/hexacomp/<instance>.
+    #[arg(long, value_name = "DIR")]
+    state_dir: Option<PathBuf>,
+    /// spin: busy-poll (lowest latency, give it a core of its own); event: sleep in an iceoryx2
+    /// WaitSet until a client's notification (frees the core; each request pays a wake-up);
+    /// sleep: poll and sleep 50 µs when idle.
+    #[arg(long, value_enum, default_value_t = WaitArg::Spin)]
+    wait: WaitArg,
+    /// Pin the serving thread to this CPU (with --wait spin, give it a core no one else uses).
+    #[arg(long, value_name = "N")]
+    cpu: Option<usize>,
+    /// Run the serving thread with SCHED_FIFO at this priority (1–99). For real hardware; on
+    /// virtual machines it tends to make wake-ups slower. Needs CAP_SYS_NICE or an rtprio limit.
+    #[arg(long, value_name = "PRIORITY", value_parser = clap::value_parser!(i32).range(1..=99))]
+    realtime: Option<i32>,
+}
+
+#[derive(Debug, Clone, Copy, clap::ValueEnum)]
+enum WaitArg {
+    Spin,
+    Event,
+    Sleep,
+}
+
+/// Logs to standard error (level from `RUST_LOG`, default info), iceoryx2's own log at errors
+/// only unless its level is set in the environment.
+pub fn init_logging() {
+    tracing_subscriber::fmt()
+        .with_writer(std::io::stderr)
+        .init();
+    iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
+}
+
+fn default_state_dir(instance: &str) -> PathBuf {
+    let base = std::env::var_os("XDG_STATE_HOME")
+        .map(PathBuf::from)
+        .or_else(|| std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".local/state")))
+        .unwrap_or_else(|| PathBuf::from("."));
+    base.join("hexacomp").join(instance)
+}
+
+/// Serves until SIGINT/SIGTERM; an error when the service cannot start (bad geometry or model,
+/// state directory, instance already served).
+pub fn run(args: Args) -> anyhow::Result<()> {
+    hexacomp_client::service_name(&args.instance, hexacomp_client::Endpoint::Compensate)?;
+    let geometry = match &args.geometry {
+        Some(path) => Geometry::load(path)?,
+        None => Geometry::prototype(),
+    };
+    let state_dir = args
+        .state_dir
+        .clone()
+        .unwrap_or_else(|| default_state_dir(&args.instance));
+    state::prepare(&state_dir)
+        .with_context(|| format!("state directory {}", state_dir.display()))?;
+    let initial = match &args.model {
+        Some(path) => {
+            let bytes =
+                std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+            let model = crate::validate::validate(&bytes, &geometry)
+                .map_err(|why| anyhow::anyhow!("{}: refused: {why}", path.display()))?;
+            state::persist(&state_dir, &model, 1).map_err(anyhow::Error::msg)?;
+            Some((model, 1))
+        }
+        None => state::restore(&state_dir, &geometry),
+    };
+    let initial_summary = initial
+        .as_ref()
+        .map(|(model, _)| summarise(model))
+        .unwrap_or_default();
+    let initial = initial.map(|(model, number)| Box::new(Generation { model, number }));
+    tracing::info!(
+        "instance {} geometry {} ({}), model generation {}, state {}",
+        args.instance,
+        geometry.name,
+        geometry.fingerprint(),
+        initial.as_ref().map_or(0, |g| g.number),
+        state_dir.display()
+    );
+
+    let wait_mode = match args.wait {
+        WaitArg::Spin => WaitMode::Spin,
+        WaitArg::Event => WaitMode::Event,
+        WaitArg::Sleep => WaitMode::Sleep,
+    };
+    let counters = Arc::new(Counters::default());
+    let stop = Arc::new(AtomicBool::new(false));
+    let (to_serving, incoming) = crossbeam_channel::bounded(1);
+    let (retired_tx, retired_rx) = crossbeam_channel::bounded(4);
+    let (ready_tx, ready_rx) = crossbeam_channel::bounded(2);
+    let serving = {
+        let setup = ServingSetup {
+            instance: args.instance.clone(),
+            geometry: geometry.clone(),
+            initial,
+            incoming,
+            retired: retired_tx,
+            counters: counters.clone(),
+            stop: stop.clone(),
+            wait: wait_mode,
+        };
+        let ready = ready_tx.clone();
+        let (cpu, realtime) = (args.cpu, args.realtime);
+        std::thread::Builder::new()
+            .name("serving".into())
+            .spawn(move || {
+                if let Some(cpu) = cpu {
+                    match crate::realtime::pin_to_cpu(cpu) {
+                        Ok(()) => tracing::info!("serving thread pinned to CPU {cpu}"),
+                        Err(e) => tracing::warn!("not pinned, serving anyway: {e}"),
+                    }
+                }
+                if let Some(priority) = realtime {
+                    match crate::realtime::set_realtime(priority) {
+                        Ok(()) => {
+                            tracing::info!("serving thread at SCHED_FIFO priority {priority}")
+                        }
+                        Err(e) => tracing::warn!("no real-time priority, serving anyway: {e}"),
+                    }
+                }
+                serving::serve(setup, ready)
+            })?
+    };
+    ready_rx
+        .recv()
+        .context("serving thread")?
+        .map_err(anyhow::Error::msg)?;
+    let control = {
+        let setup = ControlSetup {
+            instance: args.instance.clone(),
+            geometry,
+            state_dir,
+            outgoing: to_serving,
+            retired: retired_rx,
+            counters,
+            stop: stop.clone(),
+            initial_summary,
+            wait_mode: wait_mode.wire_value(),
+        };
+        std::thread::Builder::new()
+            .name("control".into())
+            .spawn(move || control::run(setup, ready_tx))?
+    };
+    if let Err(e) = ready_rx
+        .recv()
+        .context("control thread")?
+        .map_err(anyhow::Error::msg)
+    {
+        stop.store(true, Ordering::Relaxed);
+        let _ = serving.join();
+        return Err(e);
+    }
+    tracing::info!("serving instance {}", args.instance);
+    let _ = serving.join();
+    stop.store(true, Ordering::Relaxed);
+    let _ = control.join();
+    tracing::info!("stopped; iceoryx2 resources released");
+    Ok(())
+}
