@@ -5,6 +5,8 @@
 //! - [`plan`]: measuring configurations spread over the task workspace (the paper's Fig. 8);
 //! - [`acquire`]: measuring a plan on the virtual platform;
 //! - [`corrections`]: the robust Levenberg–Marquardt joint-correction solver (Fig. 2, Eq. 5–9);
+//! - [`train`], [`evaluate`]: the networks and their check on the virtual platform;
+//! - [`svg`], [`table`]: plots and terminal tables for reports;
 //! - [`identify`]: the model-based baseline — identification of the geometric parameters by
 //!   iterative least squares, compensation by the identified inverse kinematics.
 //!
@@ -19,6 +21,7 @@ pub mod evaluate;
 pub mod identify;
 pub mod plan;
 pub mod svg;
+pub mod table;
 pub mod train;
 
 pub use error::{Error, Result};

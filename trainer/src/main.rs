@@ -2,7 +2,6 @@
 //! joint corrections, network training and evaluation.
 
 mod commands;
-mod table;
 
 use std::path::PathBuf;
 use std::process::ExitCode;

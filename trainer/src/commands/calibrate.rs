@@ -24,7 +24,7 @@ use super::train::{
     InputArg, arch_name, print_selection, train_with_progress, write_selection_plot,
 };
 use super::write_file;
-use crate::table::Table;
+use hexacomp_trainer::table::Table;
 
 /// Calibrate in one command: plan → measure (the virtual platform, or --measurements from a real
 /// device) → solve the robust joint corrections → train coupled and decoupled networks with

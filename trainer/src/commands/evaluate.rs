@@ -11,7 +11,7 @@ use hexacomp_trainer::svg::{Chart, Series};
 use hexacomp_trainer::train::TrainOptions;
 
 use super::train::InputArg;
-use crate::table::Table;
+use hexacomp_trainer::table::Table;
 
 /// Compare the compensation methods on the virtual platform, on fresh validation poses that no
 /// training used: uncompensated, the model-based baseline (identified geometry), the ordinary

@@ -10,7 +10,7 @@ use hexacomp_trainer::svg::{Chart, Series};
 use hexacomp_trainer::train::{Architecture, Selection, TrainOptions, Trained, train};
 use indicatif::{ProgressBar, ProgressStyle};
 
-use crate::table::Table;
+use hexacomp_trainer::table::Table;
 
 /// Fit the joint-correction function Δq = N(q) with three-layer networks (tanh hidden layer,
 /// linear output, inputs normalised by Eq. 13) and write a model file.
