@@ -1,56 +1,110 @@
-//! `hexacomp-bench`: per-point latency along interpolated paths and the one-command demo. This
-//! first version measures the compute floor only: nominal inverse kinematics along random
-//! workspace poses, in process.
+//! `hexacomp-bench`: per-point latency along interpolated paths, side by side with the baselines
+//! a user would otherwise pick, hot swaps under load, accuracy along the path, and the
+//! one-command demo.
 
-use std::hint::black_box;
-use std::time::Instant;
+mod accuracy;
+mod calibration;
+mod children;
+mod commands;
+mod echo;
+mod path;
+mod report;
+mod session;
+mod stream;
+mod uds;
+mod variant;
 
-use clap::Parser;
-use hexacomp_core::sampling::{SamplerOptions, WorkspaceSampler};
-use hexacomp_core::{Geometry, inverse_kinematics};
+use std::path::PathBuf;
+use std::process::ExitCode;
 
-/// Measure the in-process cost of nominal inverse kinematics (pose → six leg lengths), the floor
-/// under every compensation request.
+use clap::{Parser, Subcommand};
+use hexacomp_core::Geometry;
+use hexacomp_core::model::Model;
+
+/// Measure hexacomp where an NC interpolator uses it: along interpolated tool paths, one point
+/// per interpolation period, next to the baselines (`echo`: the iceoryx2 transport alone; `uds`:
+/// the same compensation over a Unix domain socket; `inprocess`: the computation called
+/// directly).
+///
+/// Every command starts the servers it needs as child processes of this executable and
+/// calibrates the virtual platform for a model unless --model is given. Reports (tables on
+/// standard output; `.hgrm` histograms, SVG plots and server logs) go to --out-dir. On a
+/// 2-core machine a spinning server takes one core and the streaming client the other: keep
+/// other load away while measuring.
 #[derive(Debug, Parser)]
 #[command(name = "hexacomp-bench", version)]
-struct Args {
-    /// Number of poses per round.
-    #[arg(long, default_value_t = 100_000)]
-    points: usize,
-    /// Rounds; the median round is reported.
-    #[arg(long, default_value_t = 7)]
-    rounds: usize,
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
 }
 
-fn main() -> anyhow::Result<()> {
-    let args = Args::parse();
-    anyhow::ensure!(
-        args.points > 0 && args.rounds > 0,
-        "--points and --rounds must be ≥ 1"
-    );
-    let geometry = Geometry::prototype();
-    let poses = WorkspaceSampler::new(&geometry, 1, SamplerOptions::default())?
-        .samples(args.points.min(10_000))?;
-    let mut per_point_ns: Vec<f64> = (0..args.rounds)
-        .map(|_| {
-            let start = Instant::now();
-            for i in 0..args.points {
-                black_box(inverse_kinematics(
-                    &geometry,
-                    black_box(&poses[i % poses.len()]),
-                ));
-            }
-            start.elapsed().as_nanos() as f64 / args.points as f64
-        })
-        .collect();
-    per_point_ns.sort_by(f64::total_cmp);
-    let median = per_point_ns[per_point_ns.len() / 2];
-    println!(
-        "inverse kinematics, in process: median {median:.1} ns per point over {} rounds of {} \
-         points ({:.2} M points/s)",
-        args.rounds,
-        args.points,
-        1e3 / median
-    );
-    Ok(())
+#[derive(Debug, Subcommand)]
+enum Command {
+    Demo(commands::demo::DemoCommand),
+    Path(commands::path::PathCommand),
+    Compare(commands::compare::CompareCommand),
+    Batches(commands::batches::BatchesCommand),
+    Swap(commands::swap::SwapCommand),
+    /// The hexacomp service (as `hexacomp-service`), started by the other commands.
+    #[command(hide = true)]
+    Service(hexacomp_service::cli::Args),
+    /// The echo server, started by the other commands.
+    #[command(hide = true)]
+    ServeEcho {
+        #[arg(long)]
+        instance: String,
+    },
+    /// The Unix-domain-socket server, started by the other commands.
+    #[command(hide = true)]
+    ServeUds {
+        #[arg(long)]
+        socket: PathBuf,
+        #[arg(long)]
+        geometry: Option<PathBuf>,
+        #[arg(long)]
+        model: Option<PathBuf>,
+    },
+}
+
+fn main() -> ExitCode {
+    let result = match Cli::parse().command {
+        Command::Demo(c) => commands::demo::run(&c),
+        Command::Path(c) => commands::path::run(&c),
+        Command::Compare(c) => commands::compare::run(&c),
+        Command::Batches(c) => commands::batches::run(&c),
+        Command::Swap(c) => commands::swap::run(&c),
+        Command::Service(args) => {
+            hexacomp_service::cli::init_logging();
+            hexacomp_service::cli::run(args)
+        }
+        Command::ServeEcho { instance } => echo::serve(&instance),
+        Command::ServeUds {
+            socket,
+            geometry,
+            model,
+        } => serve_uds(&socket, geometry.as_deref(), model.as_deref()),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn serve_uds(
+    socket: &std::path::Path,
+    geometry: Option<&std::path::Path>,
+    model: Option<&std::path::Path>,
+) -> anyhow::Result<()> {
+    let geometry = match geometry {
+        Some(path) => Geometry::load(path)?,
+        None => Geometry::prototype(),
+    };
+    let model = model
+        .map(|path| Model::load(path, &geometry))
+        .transpose()?
+        .map(|model| hexacomp_service::Generation { model, number: 1 });
+    uds::serve(socket, geometry, model)
 }

@@ -1,0 +1,86 @@
+//! Accuracy along the path: the virtual machine driven with the uncompensated (nominal inverse
+//! kinematics) and the compensated legs at every point of the same path — what the machine
+//! would actually trace.
+
+use hexacomp_client::CompensatedPoint;
+use hexacomp_core::stats::{PoseErrorNorm, PoseErrorStats};
+use hexacomp_core::virtual_platform::VirtualPlatform;
+use hexacomp_core::{Pose, inverse_kinematics};
+use hexacomp_trainer::svg::{Chart, Series};
+
+/// The path errors before and after compensation.
+#[derive(Debug, Clone)]
+pub struct PathAccuracy {
+    /// Error at every point with the nominal legs.
+    pub before: Vec<PoseErrorNorm>,
+    /// Error at every point with the compensated legs.
+    pub after: Vec<PoseErrorNorm>,
+}
+
+impl PathAccuracy {
+    /// Statistics before and after.
+    pub fn stats(&self) -> (PoseErrorStats, PoseErrorStats) {
+        (
+            PoseErrorStats::of(&self.before),
+            PoseErrorStats::of(&self.after),
+        )
+    }
+}
+
+/// Drives `platform` along `poses` (mm, degrees) twice, with the nominal legs and with the
+/// `compensated` legs (one per pose, from the service). Every `stride`-th point is driven.
+pub fn along_path(
+    platform: &VirtualPlatform,
+    poses: &[[f64; 6]],
+    compensated: &[CompensatedPoint],
+    stride: usize,
+) -> anyhow::Result<PathAccuracy> {
+    anyhow::ensure!(
+        poses.len() == compensated.len(),
+        "{} poses but {} compensated points",
+        poses.len(),
+        compensated.len()
+    );
+    let geometry = platform.nominal().clone();
+    // The same noise sequence for both runs (common random numbers): the difference is the
+    // compensation alone.
+    let (mut nominal_run, mut compensated_run) = (platform.clone(), platform.clone());
+    let mut accuracy = PathAccuracy {
+        before: Vec::new(),
+        after: Vec::new(),
+    };
+    for (values, point) in poses.iter().zip(compensated).step_by(stride.max(1)) {
+        let pose = Pose::from_mm_deg(*values);
+        let nominal = inverse_kinematics(&geometry, &pose).lengths;
+        let reached = nominal_run.move_legs(&nominal, &pose)?;
+        accuracy
+            .before
+            .push(PoseErrorNorm::between(&pose, &reached));
+        let reached = compensated_run.move_legs(&point.legs, &pose)?;
+        accuracy.after.push(PoseErrorNorm::between(&pose, &reached));
+    }
+    Ok(accuracy)
+}
+
+/// Position error along the path before and after (mm), against time along the path (s).
+pub fn chart(accuracy: &PathAccuracy, seconds_per_point: f64, title: &str) -> Chart {
+    let series = |name: &str, errors: &[PoseErrorNorm]| {
+        Series::line(
+            name,
+            errors
+                .iter()
+                .enumerate()
+                .map(|(i, e)| (i as f64 * seconds_per_point, e.position_mm))
+                .collect(),
+        )
+    };
+    Chart {
+        title: title.to_string(),
+        x_label: "time along the path (s)".into(),
+        y_label: "position error ‖δ_A‖ (mm)".into(),
+        series: vec![
+            series("uncompensated", &accuracy.before),
+            series("compensated", &accuracy.after),
+        ],
+    }
+}

@@ -1,0 +1,97 @@
+//! Calibrating the virtual platform for the benchmarks that need a model: the trainer's pipeline
+//! (plan, simulated measurement, robust joint corrections, decoupled networks with hidden-node
+//! selection) on its defaults.
+
+use anyhow::Context;
+use hexacomp_core::Geometry;
+use hexacomp_core::model::Model;
+use hexacomp_core::virtual_platform::{ErrorModel, ErrorVariant, VirtualPlatform};
+use hexacomp_trainer::acquire::measure_plan;
+use hexacomp_trainer::corrections::{Checks, SolverOptions, solve_all};
+use hexacomp_trainer::plan::{PlanOptions, numbered_rows, plan};
+use hexacomp_trainer::train::{Architecture, TrainOptions, train};
+use indicatif::{ProgressBar, ProgressStyle};
+
+/// The virtual machine a benchmark drives: drawn from `machine_seed` with the paper's error
+/// variant, noise from `seed`.
+pub fn virtual_platform(
+    geometry: &Geometry,
+    machine_seed: u64,
+    seed: u64,
+) -> anyhow::Result<VirtualPlatform> {
+    Ok(VirtualPlatform::new(
+        geometry,
+        &ErrorModel::variant(ErrorVariant::Paper),
+        machine_seed,
+        seed,
+    )?)
+}
+
+/// What a calibration produced.
+#[derive(Debug)]
+pub struct Calibration {
+    /// The decoupled model.
+    pub model: Model,
+    /// Configurations measured.
+    pub configurations: usize,
+    /// Holdout validation RMSE of the corrections, mm.
+    pub validation_rmse_mm: f64,
+    /// Seconds the whole calibration took.
+    pub seconds: f64,
+}
+
+/// Calibrates `platform` on `configurations` planned poses and trains the decoupled model, with
+/// a progress bar on standard error.
+pub fn calibrate(
+    platform: &mut VirtualPlatform,
+    configurations: usize,
+    seed: u64,
+) -> anyhow::Result<Calibration> {
+    let start = std::time::Instant::now();
+    let geometry = platform.nominal().clone();
+    let poses = plan(
+        &geometry,
+        &PlanOptions {
+            count: configurations,
+            seed,
+            ..Default::default()
+        },
+    )?;
+    let measurements = measure_plan(platform, &numbered_rows(&poses))?;
+    let outcomes = solve_all(
+        &geometry,
+        &measurements,
+        &SolverOptions::default(),
+        &Checks::default(),
+    )?;
+    let corrections: Vec<_> = outcomes.iter().filter_map(|o| o.correction_row()).collect();
+    let options = TrainOptions {
+        seed,
+        ..Default::default()
+    };
+    let bar = ProgressBar::new((6 * options.hidden_sizes.len()) as u64);
+    bar.set_style(
+        ProgressStyle::with_template("training decoupled networks [{bar:30}] {pos}/{len} fits")
+            .expect("valid template")
+            .progress_chars("=> "),
+    );
+    let mut trained = train(
+        &corrections,
+        Architecture::Decoupled,
+        geometry.fingerprint(),
+        &options,
+        &|| bar.inc(1),
+    )
+    .context("training the decoupled networks")?;
+    bar.finish_and_clear();
+    trained.model.provenance.source = format!(
+        "hexacomp-bench {} virtual calibration ({configurations} configurations)",
+        env!("CARGO_PKG_VERSION")
+    );
+    Ok(Calibration {
+        model: trained.model,
+        configurations,
+        validation_rmse_mm: trained.validation_rmse_mm,
+        seconds: start.elapsed().as_secs_f64(),
+    })
+}

@@ -1,0 +1,117 @@
+//! `hexacomp-bench batches`: throughput against batch size.
+
+use std::path::PathBuf;
+
+use hexacomp_client::wire::MAX_BATCH;
+use hexacomp_trainer::svg::{Chart, Series};
+
+use crate::path::interpolate;
+use crate::report::write_into;
+use crate::session::{PathArgs, Session, SetupArgs, VariantKind};
+use crate::stream::{Pacing, StreamOptions, stream};
+
+/// Stream the path free running in batches of 1, 2, 4, … 1024 points per request through each
+/// variant and report points per second against batch size (table, SVG, optional JSON).
+#[derive(Debug, clap::Args)]
+pub struct BatchesCommand {
+    #[command(flatten)]
+    setup: SetupArgs,
+    #[command(flatten)]
+    path: PathArgs,
+    /// Points per variant and batch size.
+    #[arg(long, default_value_t = 200_000)]
+    points: usize,
+    /// Write `{"batch_sizes": [...], "points_per_second": {VARIANT: [...]}}` here.
+    #[arg(long, value_name = "FILE")]
+    json: Option<PathBuf>,
+}
+
+pub fn run(command: &BatchesCommand) -> anyhow::Result<()> {
+    anyhow::ensure!(command.points > 0, "--points must be ≥ 1");
+    let session = Session::prepare(&command.setup)?;
+    let duration = command.points as f64 / command.path.rate;
+    let path = interpolate(&session.geometry, &command.path.spec(duration))?;
+    let sizes: Vec<usize> = (0..)
+        .map(|k| 1usize << k)
+        .take_while(|b| *b <= MAX_BATCH)
+        .collect();
+    let mut curves: Vec<(VariantKind, Vec<f64>)> = Vec::new();
+    for kind in VariantKind::ALL {
+        let (mut variant, _child) = session.variant(kind)?;
+        let mut rates = Vec::new();
+        for &batch in &sizes {
+            let options = StreamOptions {
+                pacing: Pacing::FreeRunning,
+                batch,
+                keep_points: false,
+                swapping: None,
+                deadline_s: path.period_s * batch as f64,
+            };
+            let warm = (batch * 20).min(path.poses.len());
+            stream(variant.as_mut(), &path.poses[..warm], &options)?;
+            let run = stream(variant.as_mut(), &path.poses, &options)?;
+            anyhow::ensure!(
+                run.failures == 0,
+                "{} with batches of {batch}: {}",
+                kind.name(),
+                run.first_failure.as_deref().unwrap_or("?")
+            );
+            eprintln!(
+                "{:<9} batch {batch:>4}: {:>12.0} points/s",
+                kind.name(),
+                run.points_per_second()
+            );
+            rates.push(run.points_per_second());
+        }
+        curves.push((kind, rates));
+    }
+
+    let mut table = hexacomp_trainer::table::Table::new([
+        "batch",
+        "hexacomp pts/s",
+        "echo pts/s",
+        "uds pts/s",
+        "inprocess pts/s",
+    ]);
+    for (i, batch) in sizes.iter().enumerate() {
+        table.row([
+            batch.to_string(),
+            format!("{:.0}", curves[0].1[i]),
+            format!("{:.0}", curves[1].1[i]),
+            format!("{:.0}", curves[2].1[i]),
+            format!("{:.0}", curves[3].1[i]),
+        ]);
+    }
+    println!(
+        "\n{} points per variant and batch size, free running:\n{table}",
+        path.poses.len()
+    );
+    let chart = Chart {
+        title: "Throughput against batch size".into(),
+        x_label: "log₂ of the batch size (0 = 1 point, 10 = 1024 points per request)".into(),
+        y_label: "million points per second".into(),
+        series: curves
+            .iter()
+            .map(|(kind, rates)| {
+                Series::line(
+                    kind.name(),
+                    rates
+                        .iter()
+                        .enumerate()
+                        .map(|(k, r)| (k as f64, r / 1e6))
+                        .collect(),
+                )
+            })
+            .collect(),
+    };
+    let svg = write_into(session.out_dir(), "batches.svg", &chart.to_svg())?;
+    println!("wrote {}", svg.display());
+    if let Some(file) = &command.json {
+        let rates: std::collections::BTreeMap<&str, &Vec<f64>> =
+            curves.iter().map(|(k, r)| (k.name(), r)).collect();
+        let json = serde_json::json!({ "batch_sizes": sizes, "points_per_second": rates });
+        std::fs::write(file, serde_json::to_string_pretty(&json)? + "\n")?;
+        println!("wrote {}", file.display());
+    }
+    Ok(())
+}

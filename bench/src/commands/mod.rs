@@ -1,0 +1,7 @@
+//! The subcommands of `hexacomp-bench`.
+
+pub mod batches;
+pub mod compare;
+pub mod demo;
+pub mod path;
+pub mod swap;

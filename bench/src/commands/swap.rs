@@ -1,0 +1,191 @@
+//! `hexacomp-bench swap`: hot swaps under load.
+
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use hexacomp_client::{Client, ClientOptions, DeployOutcome};
+
+use crate::path::interpolate;
+use crate::report::{self, JsonSummary, Summary, write_into};
+use crate::session::{PathArgs, Session, SetupArgs};
+use crate::stream::{Pacing, StreamOptions, stream};
+use crate::variant::OverIceoryx;
+
+/// Stream a path through the service while another client deploys a model every --interval
+/// seconds, and compare the round trips of requests sent during a swap (from the deploy request
+/// until 2 ms after its answer) with those of the steady state. Every request must be answered,
+/// and the generations must advance once per deploy.
+#[derive(Debug, clap::Args)]
+pub struct SwapCommand {
+    #[command(flatten)]
+    setup: SetupArgs,
+    #[command(flatten)]
+    path: PathArgs,
+    /// How long to stream, s.
+    #[arg(long, default_value_t = 20.0)]
+    duration: f64,
+    /// Seconds between deploys.
+    #[arg(long, default_value_t = 1.0)]
+    interval: f64,
+    /// Pace the requests at the interpolation rate instead of free running (fewer samples per
+    /// swap).
+    #[arg(long)]
+    paced: bool,
+    /// Write the JSON summary (variants `steady` and `during_swaps`) here.
+    #[arg(long, value_name = "FILE")]
+    json: Option<PathBuf>,
+}
+
+/// What the deploying thread saw.
+#[derive(Debug, Default)]
+struct Deploys {
+    accepted: usize,
+    refused: Vec<String>,
+    slowest: Duration,
+}
+
+pub fn run(command: &SwapCommand) -> anyhow::Result<()> {
+    anyhow::ensure!(
+        command.interval > 0.0 && command.duration > command.interval,
+        "--duration must exceed --interval (> 0)"
+    );
+    let session = Session::prepare(&command.setup)?;
+    let period = 1.0 / command.path.rate;
+    // One lap of the path, streamed over and over until the duration has passed.
+    let path = interpolate(
+        &session.geometry,
+        &command.path.spec(command.duration.min(60.0)),
+    )?;
+    let (instance, _service) = session.hexacomp_service(true)?;
+    let model_bytes = std::fs::read(&session.model_path)?;
+    let swapping = Arc::new(AtomicBool::new(false));
+    let done = Arc::new(AtomicBool::new(false));
+    let deployer = {
+        let (swapping, done, instance) = (swapping.clone(), done.clone(), instance.clone());
+        let interval = Duration::from_secs_f64(command.interval);
+        std::thread::spawn(move || -> anyhow::Result<Deploys> {
+            let mut client = Client::connect(&instance, &ClientOptions::default())?;
+            let mut deploys = Deploys::default();
+            let mut next = Instant::now() + interval;
+            while !done.load(Ordering::Relaxed) {
+                if Instant::now() < next {
+                    std::thread::sleep(Duration::from_millis(5));
+                    continue;
+                }
+                next += interval;
+                swapping.store(true, Ordering::Relaxed);
+                let start = Instant::now();
+                let outcome = client.deploy(&model_bytes);
+                deploys.slowest = deploys.slowest.max(start.elapsed());
+                // The serving thread switches at its next request: keep the window open a little.
+                std::thread::sleep(Duration::from_millis(2));
+                swapping.store(false, Ordering::Relaxed);
+                match outcome? {
+                    DeployOutcome::Accepted { .. } => deploys.accepted += 1,
+                    DeployOutcome::Refused { reason, .. } => deploys.refused.push(reason),
+                }
+            }
+            Ok(deploys)
+        })
+    };
+    let mut variant = OverIceoryx::connect(&instance)?;
+    session.pin_client()?;
+    let options = StreamOptions {
+        pacing: if command.paced {
+            Pacing::Period(period)
+        } else {
+            Pacing::FreeRunning
+        },
+        batch: 1,
+        keep_points: false,
+        swapping: Some(swapping),
+        deadline_s: period,
+    };
+    // Stream in slices until the duration has passed, so that free running stops on time.
+    let start = Instant::now();
+    let mut runs = Vec::new();
+    for slice in path.poses.chunks(10_000).cycle() {
+        runs.push(stream(&mut variant, slice, &options)?);
+        if start.elapsed().as_secs_f64() >= command.duration {
+            break;
+        }
+    }
+    done.store(true, Ordering::Relaxed);
+    let deploys = deployer
+        .join()
+        .map_err(|_| anyhow::anyhow!("the deploying thread panicked"))??;
+
+    let mut steady = crate::stream::new_histogram();
+    let mut during = crate::stream::new_histogram();
+    let (mut points, mut failures, mut misses, mut generations) = (0, 0, 0, Vec::new());
+    let mut not_ok = 0;
+    for run in &runs {
+        steady.add(&run.histogram)?;
+        during.add(&run.during_swaps)?;
+        points += run.points;
+        failures += run.failures;
+        misses += run.deadline_misses;
+        not_ok += run.not_ok.iter().map(|(_, n)| n).sum::<usize>();
+        for g in &run.generations {
+            if !generations.contains(g) {
+                generations.push(*g);
+            }
+        }
+    }
+    let steady_summary = Summary::of(&steady, points - during.len() as usize, misses);
+    let during_summary = Summary::of(&during, during.len() as usize, 0);
+    println!(
+        "\n{:.1} s, {} requests, {} deploys accepted, {} refused, slowest deploy {:.1} ms; \
+         generations served {}..={}; {failures} failed requests, {not_ok} points not ok\n{}",
+        start.elapsed().as_secs_f64(),
+        points,
+        deploys.accepted,
+        deploys.refused.len(),
+        deploys.slowest.as_secs_f64() * 1e3,
+        generations.first().copied().unwrap_or(0),
+        generations.last().copied().unwrap_or(0),
+        report::latency_table(&[
+            ("steady", steady_summary, 0.0),
+            ("during swaps", during_summary, 0.0),
+        ])
+    );
+    println!(
+        "p99.9 during swaps ÷ steady: {:.2}; p50: {:.2}",
+        during_summary.p999_ns as f64 / steady_summary.p999_ns as f64,
+        during_summary.p50_ns as f64 / steady_summary.p50_ns as f64
+    );
+    for reason in &deploys.refused {
+        println!("refused: {reason}");
+    }
+    let svg = write_into(
+        session.out_dir(),
+        "swap-percentiles.svg",
+        &report::percentile_chart(
+            "Round trip during hot swaps and in steady state",
+            &[("steady", &steady), ("during swaps", &during)],
+        )
+        .to_svg(),
+    )?;
+    println!("wrote {}", svg.display());
+    if let Some(file) = &command.json {
+        let mut json = JsonSummary::default();
+        json.variants.insert("steady".into(), steady_summary);
+        json.variants.insert("during_swaps".into(), during_summary);
+        json.write(file)?;
+    }
+    anyhow::ensure!(
+        failures == 0 && deploys.refused.is_empty(),
+        "{failures} requests failed, {} deploys refused",
+        deploys.refused.len()
+    );
+    // The last deploy may land after the last request.
+    anyhow::ensure!(
+        (deploys.accepted..=deploys.accepted + 1).contains(&generations.len()),
+        "{} deploys accepted but {} generations served",
+        deploys.accepted,
+        generations.len()
+    );
+    Ok(())
+}

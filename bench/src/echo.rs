@@ -1,0 +1,132 @@
+//! The `echo` baseline: an iceoryx2 server with the service's endpoints, payload types and
+//! busy-polling loop that answers every compensation request without computing anything (the
+//! legs it returns are the request's values). What it costs is the transport floor under
+//! hexacomp's round trip.
+
+use anyhow::Context;
+use hexacomp_client::wire::{
+    DeployReply, MAX_BATCH, MAX_CLIENTS, MAX_NODES, PROTOCOL_VERSION, PointRequest, PointResponse,
+    RequestHeader, RequestOutcome, ResponseHeader, StatusReport, WAIT_SPIN, text_field,
+};
+use hexacomp_client::{Endpoint, iceoryx_name};
+use iceoryx2::prelude::*;
+use iceoryx2_bb_posix::signal::SignalHandler;
+
+/// Serves `instance` until SIGINT/SIGTERM, answering compensation requests with their own
+/// values, status queries with a report naming the echo server, and deploys with a refusal.
+pub fn serve(instance: &str) -> anyhow::Result<()> {
+    set_log_level_from_env_or(LogLevel::Error);
+    let node = NodeBuilder::new()
+        .create::<ipc::Service>()
+        .context("creating the iceoryx2 node")?;
+    let name = |endpoint| iceoryx_name(instance, endpoint);
+    let compensate_service = node
+        .service_builder(&name(Endpoint::Compensate)?)
+        .request_response::<[PointRequest], [PointResponse]>()
+        .request_user_header::<RequestHeader>()
+        .response_user_header::<ResponseHeader>()
+        .max_clients(MAX_CLIENTS)
+        .max_servers(1)
+        .max_active_requests_per_client(4)
+        .max_nodes(MAX_NODES)
+        .create()
+        .map_err(|e| anyhow::anyhow!("creating the echo compensation endpoint: {e:?}"))?;
+    let compensate = compensate_service
+        .server_builder()
+        .initial_max_slice_len(MAX_BATCH)
+        .create()
+        .map_err(|e| anyhow::anyhow!("echo server port: {e:?}"))?;
+    let status_service = node
+        .service_builder(&name(Endpoint::Status)?)
+        .request_response::<u64, StatusReport>()
+        .max_clients(MAX_CLIENTS)
+        .max_nodes(MAX_NODES)
+        .create()
+        .map_err(|e| anyhow::anyhow!("echo status endpoint: {e:?}"))?;
+    let status = status_service
+        .server_builder()
+        .create()
+        .map_err(|e| anyhow::anyhow!("echo status port: {e:?}"))?;
+    let deploy_service = node
+        .service_builder(&name(Endpoint::Deploy)?)
+        .request_response::<[u8], DeployReply>()
+        .max_clients(MAX_CLIENTS)
+        .max_nodes(MAX_NODES)
+        .create()
+        .map_err(|e| anyhow::anyhow!("echo deploy endpoint: {e:?}"))?;
+    let deploy = deploy_service
+        .server_builder()
+        .create()
+        .map_err(|e| anyhow::anyhow!("echo deploy port: {e:?}"))?;
+
+    let mut idle_polls = 0u32;
+    loop {
+        match compensate.receive() {
+            Ok(Some(active)) => {
+                let count = active.payload().len();
+                let loan = active
+                    .loan_slice_uninit(count)
+                    .map_err(|e| anyhow::anyhow!("loaning a response: {e:?}"))?;
+                let mut response = loan.write_from_fn(|i| PointResponse {
+                    legs: active.payload()[i].values,
+                    ..PointResponse::default()
+                });
+                *response.user_header_mut() = ResponseHeader {
+                    protocol: PROTOCOL_VERSION,
+                    outcome: RequestOutcome::Served as u32,
+                    generation: 0,
+                };
+                response
+                    .send()
+                    .map_err(|e| anyhow::anyhow!("sending a response: {e:?}"))?;
+            }
+            Ok(None) => {
+                std::hint::spin_loop();
+                idle_polls += 1;
+                // Termination signals (as the service checks them), and the other endpoints
+                // every few thousand idle polls.
+                if SignalHandler::termination_requested() {
+                    return Ok(());
+                }
+                if idle_polls >= 4096 {
+                    idle_polls = 0;
+                    answer_control(&status, &deploy)?;
+                }
+            }
+            Err(e) => anyhow::bail!("receiving a request: {e:?}"),
+        }
+    }
+}
+
+type StatusServer = iceoryx2::port::server::Server<ipc::Service, u64, (), StatusReport, ()>;
+type DeployServer = iceoryx2::port::server::Server<ipc::Service, [u8], (), DeployReply, ()>;
+
+fn answer_control(status: &StatusServer, deploy: &DeployServer) -> anyhow::Result<()> {
+    if let Ok(Some(request)) = status.receive() {
+        request
+            .send_copy(StatusReport {
+                protocol: PROTOCOL_VERSION,
+                wait_mode: WAIT_SPIN,
+                geometry_fingerprint: 0,
+                generation: 0,
+                requests: 0,
+                points: 0,
+                errors: 0,
+                uptime_ns: 0,
+                geometry_name: text_field("echo (hexacomp-bench transport floor)"),
+                model: text_field(""),
+            })
+            .map_err(|e| anyhow::anyhow!("answering status: {e:?}"))?;
+    }
+    if let Ok(Some(request)) = deploy.receive() {
+        request
+            .send_copy(DeployReply {
+                accepted: 0,
+                reserved: [0; 7],
+                generation: 0,
+                message: text_field("the echo server takes no models"),
+            })
+            .map_err(|e| anyhow::anyhow!("answering deploy: {e:?}"))?;
+    }
+    Ok(())
+}

@@ -1,0 +1,260 @@
+//! `hexacomp-bench` as a user runs it: the demo end to end, the four-variant comparison, the
+//! batch sweep and hot swaps under load — each with the real service, echo and socket servers
+//! as child processes. Latency figures are not asserted here (benchmarks check those); what is
+//! asserted is that every report is produced, complete and consistent.
+
+use std::path::{Path, PathBuf};
+use std::sync::{Mutex, MutexGuard, OnceLock};
+
+use hexacomp_tests::run;
+
+/// One benchmark at a time: each starts a busy-polling server, and the machine has two cores.
+fn exclusive() -> MutexGuard<'static, ()> {
+    static LOCK: Mutex<()> = Mutex::new(());
+    LOCK.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
+}
+
+fn text(bytes: &[u8]) -> String {
+    String::from_utf8_lossy(bytes).into_owned()
+}
+
+fn bench(args: &[&str]) -> String {
+    let output = run("hexacomp-bench", args);
+    assert!(
+        output.status.success(),
+        "hexacomp-bench {args:?} failed:\n{}\n{}",
+        text(&output.stdout),
+        text(&output.stderr)
+    );
+    text(&output.stdout)
+}
+
+fn p(path: &Path) -> &str {
+    path.to_str().unwrap()
+}
+
+/// The demo, run once on short settings: its output folder (with the calibrated model) and
+/// what it printed.
+fn demo() -> &'static (tempfile::TempDir, String) {
+    static DEMO: OnceLock<(tempfile::TempDir, String)> = OnceLock::new();
+    DEMO.get_or_init(|| {
+        let dir = tempfile::tempdir().unwrap();
+        let stdout = bench(&[
+            "demo",
+            "--duration",
+            "2",
+            "--compare-points",
+            "3000",
+            "--out-dir",
+            p(dir.path()),
+        ]);
+        (dir, stdout)
+    })
+}
+
+fn model() -> PathBuf {
+    demo().0.path().join("model.hxm")
+}
+
+fn json(path: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+/// Parses the first number after `label` in `text`.
+fn number_after(text: &str, label: &str) -> f64 {
+    let rest = &text[text
+        .find(label)
+        .unwrap_or_else(|| panic!("no {label:?} in\n{text}"))
+        + label.len()..];
+    rest.split_whitespace()
+        .next()
+        .and_then(|t| {
+            t.trim_end_matches(|c: char| !c.is_ascii_digit())
+                .parse()
+                .ok()
+        })
+        .unwrap_or_else(|| panic!("no number after {label:?} in\n{text}"))
+}
+
+#[test]
+fn demo_calibrates_hot_swaps_streams_and_compensates_the_path() {
+    let _one = exclusive();
+    let (dir, stdout) = demo();
+    assert!(stdout.contains("generation 0"), "{stdout}");
+    assert!(stdout.contains("accepted as generation 1"), "{stdout}");
+    // The virtual machine's path error: compensation must shrink it by an order of magnitude.
+    let before = number_after(stdout, "nominal (uncompensated)");
+    let after = number_after(stdout, "\ncompensated");
+    assert!(
+        before > 0.3 && after < before / 10.0,
+        "{before} → {after}\n{stdout}"
+    );
+    for variant in ["hexacomp", "echo", "uds", "inprocess"] {
+        assert!(
+            stdout.contains(&format!("\n{variant} ")),
+            "{variant}\n{stdout}"
+        );
+    }
+    assert!(!stdout.contains("requests failed"), "{stdout}");
+    assert!(
+        !stdout.contains("points answered"),
+        "every point ok\n{stdout}"
+    );
+    for file in [
+        "demo-latency.hgrm",
+        "demo-percentiles.svg",
+        "demo-latency-along-path.svg",
+        "demo-accuracy.svg",
+        "model.hxm",
+    ] {
+        assert!(dir.path().join(file).exists(), "{file}");
+    }
+    // 2 s at 1 kHz: 2001 round trips in the histogram.
+    let hgrm = std::fs::read_to_string(dir.path().join("demo-latency.hgrm")).unwrap();
+    assert!(hgrm.contains("Total count    =         2001"), "{hgrm}");
+}
+
+#[test]
+fn compare_reports_all_four_variants_in_the_json_summary() {
+    let _one = exclusive();
+    let dir = tempfile::tempdir().unwrap();
+    let summary = dir.path().join("compare.json");
+    let stdout = bench(&[
+        "compare",
+        "--model",
+        p(&model()),
+        "--points",
+        "4000",
+        "--rounds",
+        "2",
+        "--shape",
+        "figure-eight",
+        "--json",
+        p(&summary),
+        "--out-dir",
+        p(dir.path()),
+    ]);
+    let json = json(&summary);
+    let variants = json["variants"].as_object().unwrap();
+    assert_eq!(variants.len(), 4, "{json}");
+    for name in ["hexacomp", "echo", "uds", "inprocess"] {
+        let v = &variants[name];
+        assert_eq!(v["points"], 8000, "{name}: {v}");
+        let keys = [
+            "p50_ns", "p90_ns", "p99_ns", "p999_ns", "p9999_ns", "max_ns",
+        ];
+        let values: Vec<u64> = keys.iter().map(|k| v[k].as_u64().unwrap()).collect();
+        assert!(values[0] > 0, "{name}: {v}");
+        assert!(
+            values.windows(2).all(|w| w[0] <= w[1]),
+            "{name}: percentiles ordered: {v}"
+        );
+        assert!(v["deadline_misses"].is_u64());
+        assert!(dir.path().join(format!("compare-{name}.hgrm")).exists());
+    }
+    assert!(stdout.contains("p50 hexacomp / echo"), "{stdout}");
+    assert!(dir.path().join("compare-percentiles.svg").exists());
+}
+
+#[test]
+fn batches_report_throughput_for_every_size_and_variant() {
+    let _one = exclusive();
+    let dir = tempfile::tempdir().unwrap();
+    let summary = dir.path().join("batches.json");
+    bench(&[
+        "batches",
+        "--model",
+        p(&model()),
+        "--points",
+        "3000",
+        "--shape",
+        "line",
+        "--json",
+        p(&summary),
+        "--out-dir",
+        p(dir.path()),
+    ]);
+    let json = json(&summary);
+    let sizes: Vec<u64> = json["batch_sizes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_u64().unwrap())
+        .collect();
+    assert_eq!(sizes, (0..=10).map(|k| 1u64 << k).collect::<Vec<_>>());
+    for name in ["hexacomp", "echo", "uds", "inprocess"] {
+        let rates = json["points_per_second"][name].as_array().unwrap();
+        assert_eq!(rates.len(), 11, "{name}");
+        assert!(
+            rates.iter().all(|r| r.as_f64().unwrap() > 0.0),
+            "{name}: {rates:?}"
+        );
+    }
+    assert!(dir.path().join("batches.svg").exists());
+}
+
+#[test]
+fn hot_swaps_under_load_lose_nothing() {
+    let _one = exclusive();
+    let dir = tempfile::tempdir().unwrap();
+    let summary = dir.path().join("swap.json");
+    // The command itself fails when a request fails, a deploy is refused or the generations do
+    // not advance once per deploy.
+    let stdout = bench(&[
+        "swap",
+        "--model",
+        p(&model()),
+        "--duration",
+        "3",
+        "--interval",
+        "0.5",
+        "--json",
+        p(&summary),
+        "--out-dir",
+        p(dir.path()),
+    ]);
+    assert!(
+        stdout.contains("0 failed requests, 0 points not ok"),
+        "{stdout}"
+    );
+    let accepted = number_after(&stdout, "requests, ");
+    assert!(accepted >= 4.0, "{stdout}");
+    let json = json(&summary);
+    assert!(
+        json["variants"]["during_swaps"]["points"].as_u64().unwrap() > 0,
+        "{json}"
+    );
+    assert!(
+        json["variants"]["steady"]["points"].as_u64().unwrap() > 0,
+        "{json}"
+    );
+}
+
+#[test]
+fn paths_that_leave_the_workspace_are_refused_before_anything_starts() {
+    let _one = exclusive();
+    let dir = tempfile::tempdir().unwrap();
+    let output = run(
+        "hexacomp-bench",
+        &[
+            "path",
+            "--model",
+            p(&model()),
+            "--shape",
+            "circle",
+            "--size",
+            "200",
+            "--duration",
+            "1",
+            "--out-dir",
+            p(dir.path()),
+        ],
+    );
+    assert!(!output.status.success());
+    let stderr = text(&output.stderr);
+    assert!(stderr.contains("does not fit the workspace"), "{stderr}");
+    assert!(
+        !dir.path().join("service.log").exists(),
+        "no service was started"
+    );
+}
