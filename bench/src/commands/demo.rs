@@ -82,7 +82,14 @@ pub fn run(command: &DemoCommand) -> anyhow::Result<()> {
         "\n4. latency next to the baselines ({} points each, free running)",
         command.compare_points
     );
-    let poses = &path.poses[..command.compare_points.min(path.poses.len())];
+    // The same path, lap after lap, for as many points as asked.
+    let poses: Vec<[f64; 6]> = path
+        .poses
+        .iter()
+        .cycle()
+        .take(command.compare_points.max(1))
+        .copied()
+        .collect();
     let options = StreamOptions {
         pacing: Pacing::FreeRunning,
         batch: 1,
@@ -94,7 +101,7 @@ pub fn run(command: &DemoCommand) -> anyhow::Result<()> {
     for kind in VariantKind::ALL {
         let (mut variant, child) = session.variant(kind)?;
         stream(variant.as_mut(), &poses[..poses.len().min(2000)], &options)?;
-        let run = stream(variant.as_mut(), poses, &options)?;
+        let run = stream(variant.as_mut(), &poses, &options)?;
         drop(variant);
         drop(child);
         rows.push((kind.name(), Summary::of_run(&run), run.points_per_second()));
