@@ -111,7 +111,7 @@ pub fn run(command: &DemoCommand) -> anyhow::Result<()> {
     let (uncompensated, compensated) = report.accuracy;
     println!(
         "\nSummary: path error {:.4} → {:.4} mm mean, {:.4} → {:.4} mm max ({:.1}× better); \
-         round trip p50 {:.2} µs, p99.9 {:.2} µs, {} deadline misses at {} Hz; {:.1} s in all.",
+         round trip p50 {:.2} µs, p99.9 {:.2} µs, deadline misses at {} Hz: {}; {:.1} s in all.",
         uncompensated.position_mm.mean,
         compensated.position_mm.mean,
         uncompensated.position_mm.max,
@@ -119,8 +119,8 @@ pub fn run(command: &DemoCommand) -> anyhow::Result<()> {
         uncompensated.position_mm.mean / compensated.position_mm.mean,
         report.summary.p50_ns as f64 / 1e3,
         report.summary.p999_ns as f64 / 1e3,
-        report.summary.deadline_misses,
         spec.rate_hz,
+        report.summary.deadline_misses,
         total.elapsed().as_secs_f64()
     );
     anyhow::ensure!(
