@@ -34,8 +34,8 @@ pub struct Args {
     /// Model file to serve at start (else the persisted one, else none).
     #[arg(long, value_name = "FILE")]
     model: Option<PathBuf>,
-    /// Where the accepted model persists. Default: $XDG_STATE_HOME/hexacomp/<instance>, or
-    /// ~/.local/state/hexacomp/<instance>.
+    /// Where the accepted model persists. Default: $XDG_STATE_HOME/hexacomp/INSTANCE, or
+    /// ~/.local/state/hexacomp/INSTANCE.
     #[arg(long, value_name = "DIR")]
     state_dir: Option<PathBuf>,
     /// spin: busy-poll (lowest latency, give it a core of its own); event: sleep in an iceoryx2
