@@ -5,10 +5,11 @@
 
 use anyhow::Context;
 use hexacomp_client::wire::{
-    DeployReply, MAX_BATCH, MAX_CLIENTS, MAX_NODES, PROTOCOL_VERSION, PointRequest, PointResponse,
-    RequestHeader, RequestOutcome, ResponseHeader, StatusReport, WAIT_SPIN, text_field,
+    DeployReply, MAX_CLIENTS, MAX_NODES, PROTOCOL_VERSION, PointResponse, RequestOutcome,
+    ResponseHeader, StatusReport, WAIT_SPIN, text_field,
 };
 use hexacomp_client::{Endpoint, iceoryx_name};
+use hexacomp_service::serving::compensation_endpoint;
 use iceoryx2::prelude::*;
 use iceoryx2_bb_posix::signal::SignalHandler;
 
@@ -20,22 +21,9 @@ pub fn serve(instance: &str) -> anyhow::Result<()> {
         .create::<ipc::Service>()
         .context("creating the iceoryx2 node")?;
     let name = |endpoint| iceoryx_name(instance, endpoint);
-    let compensate_service = node
-        .service_builder(&name(Endpoint::Compensate)?)
-        .request_response::<[PointRequest], [PointResponse]>()
-        .request_user_header::<RequestHeader>()
-        .response_user_header::<ResponseHeader>()
-        .max_clients(MAX_CLIENTS)
-        .max_servers(1)
-        .max_active_requests_per_client(4)
-        .max_nodes(MAX_NODES)
-        .create()
-        .map_err(|e| anyhow::anyhow!("creating the echo compensation endpoint: {e:?}"))?;
-    let compensate = compensate_service
-        .server_builder()
-        .initial_max_slice_len(MAX_BATCH)
-        .create()
-        .map_err(|e| anyhow::anyhow!("echo server port: {e:?}"))?;
+    // The service's own endpoint: same sizes, same server settings.
+    let (_compensate_service, compensate) =
+        compensation_endpoint(&node, instance).map_err(anyhow::Error::msg)?;
     let status_service = node
         .service_builder(&name(Endpoint::Status)?)
         .request_response::<u64, StatusReport>()

@@ -96,6 +96,55 @@ pub struct ServingSetup {
     pub wait: WaitMode,
 }
 
+/// The compensation endpoint's service and its one server port.
+pub type CompensationEndpoint = (
+    iceoryx2::service::port_factory::request_response::PortFactory<
+        ipc::Service,
+        [PointRequest],
+        RequestHeader,
+        [PointResponse],
+        ResponseHeader,
+    >,
+    iceoryx2::port::server::Server<
+        ipc::Service,
+        [PointRequest],
+        RequestHeader,
+        [PointResponse],
+        ResponseHeader,
+    >,
+);
+
+/// Opens (or creates) the compensation endpoint of `instance` with the sizes every client
+/// expects and creates its one server port; refused when another server owns the instance.
+pub fn compensation_endpoint(
+    node: &Node<ipc::Service>,
+    instance: &str,
+) -> Result<CompensationEndpoint, String> {
+    let name = iceoryx_name(instance, Endpoint::Compensate).map_err(|e| e.to_string())?;
+    let service = node
+        .service_builder(&name)
+        .request_response::<[PointRequest], [PointResponse]>()
+        .request_user_header::<RequestHeader>()
+        .response_user_header::<ResponseHeader>()
+        .max_clients(MAX_CLIENTS)
+        .max_servers(1)
+        .max_active_requests_per_client(4)
+        .max_nodes(MAX_NODES)
+        // Open when clients still hold the service of a killed server: its dead node is
+        // cleaned up when this node is created, which frees the one server slot.
+        .open_or_create()
+        .map_err(|e| format!("opening the compensation service: {e:?}"))?;
+    // One server per instance: a live second server cannot create its port.
+    let server = service
+        .server_builder()
+        .initial_max_slice_len(MAX_BATCH)
+        .create()
+        .map_err(|e| {
+            format!("instance {instance:?} is already served by another hexacomp-service ({e:?})")
+        })?;
+    Ok((service, server))
+}
+
 /// Creates the compensation endpoint (refusing when another service owns the instance) and
 /// serves until stopped. Returns when `stop` is set or a termination signal arrives.
 pub fn serve(setup: ServingSetup, ready: Sender<Result<(), String>>) {
@@ -113,30 +162,7 @@ pub fn serve(setup: ServingSetup, ready: Sender<Result<(), String>>) {
         let node = NodeBuilder::new()
             .create::<ipc::Service>()
             .map_err(|e| format!("creating the iceoryx2 node: {e}"))?;
-        let name = iceoryx_name(&instance, Endpoint::Compensate).map_err(|e| e.to_string())?;
-        let service = node
-            .service_builder(&name)
-            .request_response::<[PointRequest], [PointResponse]>()
-            .request_user_header::<RequestHeader>()
-            .response_user_header::<ResponseHeader>()
-            .max_clients(MAX_CLIENTS)
-            .max_servers(1)
-            .max_active_requests_per_client(4)
-            .max_nodes(MAX_NODES)
-            // Open when clients still hold the service of a killed server: its dead node is
-            // cleaned up when this node is created, which frees the one server slot.
-            .open_or_create()
-            .map_err(|e| format!("opening the compensation service: {e:?}"))?;
-        // One server per instance: a live second service cannot create its port.
-        let server = service
-            .server_builder()
-            .initial_max_slice_len(MAX_BATCH)
-            .create()
-            .map_err(|e| {
-                format!(
-                    "instance {instance:?} is already served by another hexacomp-service ({e:?})"
-                )
-            })?;
+        let (service, server) = compensation_endpoint(&node, &instance)?;
         Ok((node, service, server))
     })();
     let (node, _service, server) = match started {
