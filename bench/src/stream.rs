@@ -68,6 +68,17 @@ pub struct StreamRun {
 }
 
 impl StreamRun {
+    /// An error naming `what` when any request failed.
+    pub fn ensure_no_failures(&self, what: &str) -> anyhow::Result<()> {
+        anyhow::ensure!(
+            self.failures == 0,
+            "{what}: {} requests failed; the first: {}",
+            self.failures,
+            self.first_failure.as_deref().unwrap_or("?")
+        );
+        Ok(())
+    }
+
     /// Points per second over the whole stream.
     pub fn points_per_second(&self) -> f64 {
         self.points as f64 / self.elapsed.as_secs_f64()

@@ -50,12 +50,7 @@ pub fn run(command: &BatchesCommand) -> anyhow::Result<()> {
             let warm = (batch * 20).min(path.poses.len());
             stream(variant.as_mut(), &path.poses[..warm], &options)?;
             let run = stream(variant.as_mut(), &path.poses, &options)?;
-            anyhow::ensure!(
-                run.failures == 0,
-                "{} with batches of {batch}: {}",
-                kind.name(),
-                run.first_failure.as_deref().unwrap_or("?")
-            );
+            run.ensure_no_failures(&format!("{} with batches of {batch}", kind.name()))?;
             eprintln!(
                 "{:<9} batch {batch:>4}: {:>12.0} points/s",
                 kind.name(),

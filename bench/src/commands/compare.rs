@@ -79,13 +79,7 @@ pub fn run(command: &CompareCommand) -> anyhow::Result<()> {
             let run = stream(variant.as_mut(), poses, &options)?;
             drop(variant);
             drop(child);
-            anyhow::ensure!(
-                run.failures == 0,
-                "{}: {} requests failed; the first: {}",
-                kind.name(),
-                run.failures,
-                run.first_failure.as_deref().unwrap_or("?")
-            );
+            run.ensure_no_failures(kind.name())?;
             let s = Summary::of_run(&run);
             eprintln!(
                 "round {round}/{}: {:<9} p50 {:>8.2} µs  p99.9 {:>8.2} µs",

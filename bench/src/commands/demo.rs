@@ -123,11 +123,5 @@ pub fn run(command: &DemoCommand) -> anyhow::Result<()> {
         report.summary.deadline_misses,
         total.elapsed().as_secs_f64()
     );
-    anyhow::ensure!(
-        run.failures == 0,
-        "{} requests failed; the first: {}",
-        run.failures,
-        run.first_failure.as_deref().unwrap_or("?")
-    );
-    Ok(())
+    run.ensure_no_failures("the path")
 }

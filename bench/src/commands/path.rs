@@ -89,13 +89,7 @@ pub fn run(command: &PathCommand) -> anyhow::Result<()> {
             .insert(VariantKind::Hexacomp.name().into(), report.summary);
         json.write(file)?;
     }
-    anyhow::ensure!(
-        run.failures == 0,
-        "{} requests failed; the first: {}",
-        run.failures,
-        run.first_failure.as_deref().unwrap_or("?")
-    );
-    Ok(())
+    run.ensure_no_failures("the path")
 }
 
 /// Prints and writes the reports of a path streamed through hexacomp: latency table, `.hgrm`,
