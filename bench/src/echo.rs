@@ -100,6 +100,8 @@ fn answer_control(status: &StatusServer, deploy: &DeployServer) -> anyhow::Resul
                 requests: 0,
                 points: 0,
                 errors: 0,
+                overloaded: 0,
+                persist_failures: 0,
                 uptime_ns: 0,
                 geometry_name: text_field("echo (hexacomp-bench transport floor)"),
                 model: text_field(""),

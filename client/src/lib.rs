@@ -76,6 +76,16 @@ pub enum Error {
         /// Points requested.
         points: usize,
     },
+    /// This client asked for more points per second than the service grants one client: nothing
+    /// was computed for the request. Send fewer or smaller requests.
+    #[error("overloaded: this client exceeded its points-per-second budget at the service")]
+    Overloaded,
+    /// The service refused the request for a reason this client does not know (a newer service).
+    #[error("the service refused the request (outcome {outcome})")]
+    Refused {
+        /// The outcome's wire value.
+        outcome: u32,
+    },
     /// A model file larger than the deploy endpoint accepts.
     #[error("a model of {bytes} bytes exceeds the {MAX_MODEL_BYTES}-byte deploy limit")]
     ModelTooLarge {
@@ -186,6 +196,10 @@ pub struct Status {
     pub points: u64,
     /// Requests refused.
     pub errors: u64,
+    /// Requests answered [`Error::Overloaded`] (a client over its budget).
+    pub overloaded: u64,
+    /// Accepted models the service could not persist (they serve until the next restart).
+    pub persist_failures: u64,
     /// Time since the service started.
     pub uptime: Duration,
     /// How the serving thread waits: `spin`, `sleep` or `event`.
@@ -358,6 +372,16 @@ impl Client {
                 service: header.protocol,
             });
         }
+        match header.outcome {
+            o if o == RequestOutcome::Served as u32 => {}
+            o if o == RequestOutcome::Overloaded as u32 => return Err(Error::Overloaded),
+            o if o == RequestOutcome::BatchTooLarge as u32 => {
+                return Err(Error::BatchTooLarge {
+                    points: points.len(),
+                });
+            }
+            outcome => return Err(Error::Refused { outcome }),
+        }
         let payload = response.payload();
         if payload.len() != out.len() {
             return Err(Error::Transport(format!(
@@ -407,6 +431,8 @@ impl Client {
             requests: report.requests,
             points: report.points,
             errors: report.errors,
+            overloaded: report.overloaded,
+            persist_failures: report.persist_failures,
             uptime: Duration::from_nanos(report.uptime_ns),
         })
     }

@@ -70,6 +70,11 @@ pub enum RequestOutcome {
     ProtocolMismatch = 1,
     /// The request's kind is unknown.
     UnknownKind = 2,
+    /// The client asked for more points per second than its budget (`--client-budget` of the
+    /// service): nothing computed, the response has no points. Retry later or send less.
+    Overloaded = 3,
+    /// More than [`MAX_BATCH`] points in one request: nothing computed, no points.
+    BatchTooLarge = 4,
 }
 
 /// Header of a compensation response.
@@ -127,8 +132,13 @@ pub struct StatusReport {
     pub requests: u64,
     /// Points answered since start.
     pub points: u64,
-    /// Requests refused (protocol mismatch, unknown kind, failed sends).
+    /// Requests refused (protocol mismatch, unknown kind, batch too large, failed sends).
     pub errors: u64,
+    /// Requests answered `Overloaded` (a client over its budget).
+    pub overloaded: u64,
+    /// Accepted models that could not be written to the state directory (they serve, but a
+    /// restart would not bring them back).
+    pub persist_failures: u64,
     /// Nanoseconds since the service started.
     pub uptime_ns: u64,
     /// Geometry name, UTF-8, zero-padded.

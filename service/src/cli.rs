@@ -50,6 +50,11 @@ pub struct Args {
     /// virtual machines it tends to make wake-ups slower. Needs CAP_SYS_NICE or an rtprio limit.
     #[arg(long, value_name = "PRIORITY", value_parser = clap::value_parser!(i32).range(1..=99))]
     realtime: Option<i32>,
+    /// Points per second one client may ask for, sustained (bursts of 4096 above it are
+    /// allowed). Requests beyond it are answered `overloaded` at once, without computing, so that
+    /// one flooding client cannot hold the serving thread from the others. 0: unlimited.
+    #[arg(long, value_name = "POINTS_PER_S", default_value_t = crate::admission::DEFAULT_POINTS_PER_SECOND)]
+    client_budget: f64,
 }
 
 #[derive(Debug, Clone, Copy, clap::ValueEnum)]
@@ -135,6 +140,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             counters: counters.clone(),
             stop: stop.clone(),
             wait: wait_mode,
+            client_budget: Some(args.client_budget),
         };
         let ready = ready_tx.clone();
         let (cpu, realtime) = (args.cpu, args.realtime);

@@ -118,6 +118,8 @@ pub fn run(setup: ControlSetup, ready: Sender<Result<(), String>>) {
                 requests: c.requests.load(Ordering::Relaxed),
                 points: c.points.load(Ordering::Relaxed),
                 errors: c.errors.load(Ordering::Relaxed),
+                overloaded: c.overloaded.load(Ordering::Relaxed),
+                persist_failures: c.persist_failures.load(Ordering::Relaxed),
                 uptime_ns: start.elapsed().as_nanos() as u64,
                 geometry_name: text_field(&setup.geometry.name),
                 model: text_field(&summary),
@@ -158,6 +160,10 @@ fn handle_deploy(setup: &ControlSetup, bytes: &[u8], summary: &mut String) -> De
     let mut note = String::new();
     if let Err(e) = state::persist(&setup.state_dir, &model, number) {
         tracing::error!("accepted generation {number} but could not persist it: {e}");
+        setup
+            .counters
+            .persist_failures
+            .fetch_add(1, Ordering::Relaxed);
         note = format!("accepted but not persisted: {e}");
     }
     let line = summarise(&model);

@@ -7,6 +7,7 @@
 
 #![warn(missing_docs)]
 
+pub mod admission;
 pub mod cli;
 pub mod control;
 pub mod realtime;
@@ -25,6 +26,10 @@ pub struct Counters {
     pub points: AtomicU64,
     /// Requests refused or failed.
     pub errors: AtomicU64,
+    /// Requests answered `Overloaded`.
+    pub overloaded: AtomicU64,
+    /// Accepted models that could not be persisted.
+    pub persist_failures: AtomicU64,
     /// Generation of the model serving (0: none).
     pub generation: AtomicU64,
 }

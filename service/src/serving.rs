@@ -18,6 +18,7 @@ use iceoryx2::prelude::*;
 use iceoryx2::waitset::WaitSetRunResult;
 use iceoryx2_bb_posix::signal::SignalHandler;
 
+use crate::admission::Admission;
 use crate::{Counters, Generation};
 
 /// Computes one point of a request. Allocation-free.
@@ -94,7 +95,18 @@ pub struct ServingSetup {
     pub stop: Arc<AtomicBool>,
     /// How to wait.
     pub wait: WaitMode,
+    /// Points per second each client may ask for (`None`: unlimited); see [`crate::admission`].
+    pub client_budget: Option<f64>,
 }
+
+/// The compensation endpoint's server port.
+pub type CompensationServer = iceoryx2::port::server::Server<
+    ipc::Service,
+    [PointRequest],
+    RequestHeader,
+    [PointResponse],
+    ResponseHeader,
+>;
 
 /// The compensation endpoint's service and its one server port.
 pub type CompensationEndpoint = (
@@ -105,13 +117,7 @@ pub type CompensationEndpoint = (
         [PointResponse],
         ResponseHeader,
     >,
-    iceoryx2::port::server::Server<
-        ipc::Service,
-        [PointRequest],
-        RequestHeader,
-        [PointResponse],
-        ResponseHeader,
-    >,
+    CompensationServer,
 );
 
 /// Opens (or creates) the compensation endpoint of `instance` with the sizes every client
@@ -157,7 +163,9 @@ pub fn serve(setup: ServingSetup, ready: Sender<Result<(), String>>) {
         counters,
         stop,
         wait,
+        client_budget,
     } = setup;
+    let mut admission = Admission::new(client_budget);
     let started = (|| -> Result<_, String> {
         let node = NodeBuilder::new()
             .create::<ipc::Service>()
@@ -210,7 +218,14 @@ pub fn serve(setup: ServingSetup, ready: Sender<Result<(), String>>) {
             }
         }
         match server.receive() {
-            Ok(Some(active)) => answer(&active, &geometry, current.as_deref(), &counters),
+            Ok(Some(active)) => answer(
+                &active,
+                &server,
+                &geometry,
+                current.as_deref(),
+                &mut admission,
+                &counters,
+            ),
             Ok(None) => match (&waitset, &wake, &guards) {
                 (Some(waitset), Some((_, listener)), Some(_)) => {
                     let result = waitset.wait_and_process_once_with_timeout(
@@ -258,17 +273,45 @@ type ActiveRequest = iceoryx2::active_request::ActiveRequest<
     ResponseHeader,
 >;
 
+/// What to do with a request: compute its points, or answer at once with an outcome and none.
+fn triage(
+    header: &RequestHeader,
+    count: usize,
+    client: u128,
+    admission: &mut Admission,
+    others_waiting: impl FnOnce() -> bool,
+) -> Result<RequestKind, RequestOutcome> {
+    let kind = check_header(header)?;
+    if count > MAX_BATCH {
+        return Err(RequestOutcome::BatchTooLarge);
+    }
+    if !admission.admit(client, count, std::time::Instant::now(), others_waiting) {
+        return Err(RequestOutcome::Overloaded);
+    }
+    Ok(kind)
+}
+
 /// Answers one request from its loaned payload straight into a loaned response.
 fn answer(
     active: &ActiveRequest,
+    server: &CompensationServer,
     geometry: &Geometry,
     model: Option<&Generation>,
+    admission: &mut Admission,
     counters: &Counters,
 ) {
     let header = *active.user_header();
     let points = active.payload();
     let count = points.len();
-    let (outcome, kind) = match check_header(&header) {
+    let others_waiting = || server.has_requests().unwrap_or(false);
+    let triaged = triage(
+        &header,
+        count,
+        active.origin().value(),
+        admission,
+        others_waiting,
+    );
+    let (outcome, kind) = match triaged {
         Ok(kind) => (RequestOutcome::Served, Some(kind)),
         Err(outcome) => (outcome, None),
     };
@@ -287,12 +330,15 @@ fn answer(
         }
         Err(_) => false,
     };
-    if !sent || kind.is_none() {
-        counters.errors.fetch_add(1, Ordering::Relaxed);
-    } else {
-        counters.requests.fetch_add(1, Ordering::Relaxed);
-        counters.points.fetch_add(count as u64, Ordering::Relaxed);
-    }
+    let counter = match (sent, outcome) {
+        (true, RequestOutcome::Served) => {
+            counters.points.fetch_add(count as u64, Ordering::Relaxed);
+            &counters.requests
+        }
+        (true, RequestOutcome::Overloaded) => &counters.overloaded,
+        _ => &counters.errors,
+    };
+    counter.fetch_add(1, Ordering::Relaxed);
 }
 
 type WakeParts = (

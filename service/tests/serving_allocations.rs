@@ -102,6 +102,7 @@ fn serving_thread_allocates_only_iceoryx2s_two_objects_per_request_and_nothing_o
         counters: Arc::new(Counters::default()),
         stop: stop.clone(),
         wait: WaitMode::Sleep,
+        client_budget: Some(hexacomp_service::admission::DEFAULT_POINTS_PER_SECOND),
     };
     let serving = std::thread::spawn(move || {
         ON_SERVING_THREAD.with(|f| f.set(true));

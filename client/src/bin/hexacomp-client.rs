@@ -77,9 +77,15 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 println!("model         generation {}: {}", s.generation, s.model);
             }
             println!(
-                "requests      {} ({} points), {} errors",
-                s.requests, s.points, s.errors
+                "requests      {} ({} points), {} errors, {} overloaded",
+                s.requests, s.points, s.errors, s.overloaded
             );
+            if s.persist_failures > 0 {
+                println!(
+                    "persistence   {} accepted models NOT persisted (state directory not writable?): a restart would serve an older model",
+                    s.persist_failures
+                );
+            }
             println!("waiting       {}", s.wait_mode);
             println!("uptime        {:.1} s", s.uptime.as_secs_f64());
         }
