@@ -213,6 +213,9 @@ pub enum DeployOutcome {
     Accepted {
         /// The new generation.
         generation: u64,
+        /// What went wrong beside, empty when nothing did (e.g. the model serves but could not
+        /// be persisted: a restart would serve the previous one).
+        warning: String,
     },
     /// Refused; the old model keeps serving.
     Refused {
@@ -457,6 +460,7 @@ impl Client {
         Ok(if reply.accepted == 1 {
             DeployOutcome::Accepted {
                 generation: reply.generation,
+                warning: wire::field_text(&reply.message),
             }
         } else {
             DeployOutcome::Refused {

@@ -102,6 +102,17 @@ impl Model {
         out
     }
 
+    /// An upper bound, valid for every input, on how fast any raw correction changes with the
+    /// legs (mm per mm of leg travel, Euclidean norm): corrections at legs `d` mm apart differ
+    /// by at most `max_slope() · d` mm. See [`Network::max_slope`].
+    pub fn max_slope(&self) -> f64 {
+        let span = &self.normalisation.span;
+        match &self.networks {
+            Networks::Coupled(n) => n.max_slope(span),
+            Networks::Decoupled(nets) => nets.iter().map(|n| n.max_slope(span)).fold(0.0, f64::max),
+        }
+    }
+
     /// Hidden nodes of each network.
     pub fn hidden_nodes(&self) -> Vec<usize> {
         match &self.networks {

@@ -101,6 +101,30 @@ impl Network {
         }
     }
 
+    /// An upper bound, valid for every input, on how fast any output changes with the legs:
+    /// `max_k Σ_j |w2_kj| · ‖w1_j ⊘ span‖` (mm of output per mm of leg travel, Euclidean norm of
+    /// the leg change), from `|tanh'| ≤ 1`. `span` is the input normalisation's (mm).
+    pub fn max_slope(&self, span: &[f64; LEGS]) -> f64 {
+        let (h, o) = (self.hidden, self.outputs);
+        let (w1, rest) = self.weights.split_at(h * LEGS);
+        let w2 = &rest[h..h + o * h];
+        let gains: [f64; MAX_HIDDEN] = std::array::from_fn(|j| {
+            if j < h {
+                let row = &w1[j * LEGS..(j + 1) * LEGS];
+                row.iter()
+                    .zip(span)
+                    .map(|(w, s)| (w / s).powi(2))
+                    .sum::<f64>()
+                    .sqrt()
+            } else {
+                0.0
+            }
+        });
+        (0..o)
+            .map(|k| (0..h).map(|j| w2[k * h + j].abs() * gains[j]).sum::<f64>())
+            .fold(0.0, f64::max)
+    }
+
     /// The hidden activations `tanh(w1·x + b1)` (Eq. 10–11) into `hidden[..self.hidden()]`.
     #[inline]
     pub fn hidden_layer(&self, x: &[f64; LEGS], hidden: &mut [f64; MAX_HIDDEN]) {

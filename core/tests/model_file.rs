@@ -123,3 +123,46 @@ fn non_finite_weights_and_inconsistent_shapes_are_refused() {
     m.networks = Networks::Decoupled(vec![]);
     assert!(m.validate().is_err());
 }
+
+#[test]
+fn max_slope_bounds_every_finite_difference_and_is_exact_for_one_node_at_its_centre() {
+    let g = Geometry::prototype();
+    let m = model(&g);
+    let bound = m.max_slope();
+    let mut seen: f64 = 0.0;
+    let h = 1e-3;
+    for i in 0..2000 {
+        let t = i as f64;
+        let q: [f64; 6] = std::array::from_fn(|k| 355.0 + 70.0 * (t * 0.731 + k as f64).sin());
+        let u: [f64; 6] = std::array::from_fn(|k| (t * 1.37 + 2.0 * k as f64).cos());
+        let norm = u.iter().map(|x| x * x).sum::<f64>().sqrt();
+        let q2: [f64; 6] = std::array::from_fn(|k| q[k] + h * u[k] / norm);
+        let (a, b) = (m.raw_corrections(&q), m.raw_corrections(&q2));
+        for k in 0..6 {
+            seen = seen.max((a[k] - b[k]).abs() / h);
+        }
+    }
+    assert!(
+        seen > 0.0 && seen <= bound * (1.0 + 1e-9),
+        "seen {seen} bound {bound}"
+    );
+
+    // One hidden node, input 0.5 on leg 1 only, output weight 2: at the normalisation's
+    // mean tanh' = 1, so the slope there is exactly 2 · 0.5 / span.
+    let w = vec![0.5, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 2.0, 0.1];
+    let single = Model {
+        networks: Networks::Decoupled(
+            (0..6)
+                .map(|_| Network::from_weights(1, 1, w.clone()).unwrap())
+                .collect(),
+        ),
+        ..model(&g)
+    };
+    let expected = 2.0 * 0.5 / 140.0;
+    assert!((single.max_slope() - expected).abs() < 1e-15);
+    let centre = [355.0; 6];
+    let mut step = centre;
+    step[0] += 1e-4;
+    let fd = (single.raw_corrections(&step)[0] - single.raw_corrections(&centre)[0]) / 1e-4;
+    assert!((fd - expected).abs() < 1e-9 * expected.max(1.0), "fd {fd}");
+}

@@ -90,7 +90,7 @@ pub fn run(setup: ControlSetup, ready: Sender<Result<(), String>>) {
             .map_err(|e| format!("deploy server: {e:?}"))?;
         Ok((node, status_service, deploy_service, status, deploy))
     })();
-    let (_node, _s, _d, status, deploy) = match started {
+    let (node, _s, _d, status, deploy) = match started {
         Ok(parts) => {
             let _ = ready.send(Ok(()));
             parts
@@ -130,7 +130,13 @@ pub fn run(setup: ControlSetup, ready: Sender<Result<(), String>>) {
         }
         if let Ok(Some(request)) = deploy.receive() {
             busy = true;
-            let reply = handle_deploy(&setup, request.payload(), &mut summary);
+            // A deployer killed before the answer leaves the old model serving: its dead node is
+            // cleaned up, which disconnects its request, and the validated model is dropped.
+            let deployer_alive = || {
+                node.try_cleanup_dead_nodes();
+                request.is_connected()
+            };
+            let reply = handle_deploy(&setup, request.payload(), deployer_alive, &mut summary);
             if let Err(e) = request.send_copy(reply) {
                 tracing::warn!("answering a deploy request failed: {e:?}");
             }
@@ -141,7 +147,14 @@ pub fn run(setup: ControlSetup, ready: Sender<Result<(), String>>) {
     }
 }
 
-fn handle_deploy(setup: &ControlSetup, bytes: &[u8], summary: &mut String) -> DeployReply {
+/// Validates, persists and hands over a deployed model, unless it is refused or its deployer is
+/// gone by the time it is validated (`deployer_alive`, asked once, just before committing).
+fn handle_deploy(
+    setup: &ControlSetup,
+    bytes: &[u8],
+    deployer_alive: impl FnOnce() -> bool,
+    summary: &mut String,
+) -> DeployReply {
     let serving = setup.counters.generation.load(Ordering::Relaxed);
     let refuse = |why: String| {
         tracing::warn!("refused a deployed model: {why}");
@@ -156,6 +169,9 @@ fn handle_deploy(setup: &ControlSetup, bytes: &[u8], summary: &mut String) -> De
         Ok(model) => model,
         Err(why) => return refuse(why),
     };
+    if !deployer_alive() {
+        return refuse("the deployer disconnected before the model was committed".into());
+    }
     let number = serving + 1;
     let mut note = String::new();
     if let Err(e) = state::persist(&setup.state_dir, &model, number) {

@@ -1,6 +1,6 @@
 //! Validation of a deployed model, off the serving thread: format, checksum, geometry
-//! fingerprint, finite weights (the model file reader), then the model's outputs over its
-//! training range.
+//! fingerprint, finite weights (the model file reader), no jumps between neighbouring points
+//! (a bound valid everywhere), then the model's outputs over its training range.
 
 use hexacomp_core::model::Model;
 use hexacomp_core::{Geometry, LEGS};
@@ -14,6 +14,12 @@ const SAMPLES_PER_SLICE: usize = 64;
 /// Largest fraction of box samples whose raw correction may exceed the bounds (corners of the
 /// six-dimensional box are configurations the platform never reaches; the clamp covers them).
 const OUT_OF_BOUNDS_FRACTION: f64 = 0.05;
+/// Neighbouring points: leg vectors this far apart (Euclidean), mm. At a 1 kHz servo period, a
+/// leg moving 100 mm/s travels this far between two commands.
+pub const NEIGHBOUR_MM: f64 = 0.1;
+/// Largest change of any correction between neighbouring points, mm. The models trained here
+/// stay below a fifth of it (`max_slope` 0.026–0.092 mm/mm, i.e. 0.003–0.009 mm per 0.1 mm).
+pub const MAX_JUMP_MM: f64 = 0.05;
 
 /// Decodes and checks a model file's bytes for `geometry`; the error says why it is refused.
 ///
@@ -28,6 +34,13 @@ pub fn validate(bytes: &[u8], geometry: &Geometry) -> Result<Model, String> {
             model.geometry,
             geometry.fingerprint(),
             geometry.name
+        ));
+    }
+    let jump = model.max_slope() * NEIGHBOUR_MM;
+    if jump.is_nan() || jump > MAX_JUMP_MM {
+        return Err(format!(
+            "corrections may jump by up to {jump:.3} mm between legs {NEIGHBOUR_MM} mm apart \
+             (at most {MAX_JUMP_MM} mm allowed)"
         ));
     }
     let mut rng = ChaCha8Rng::seed_from_u64(0x6865_7861);
@@ -58,4 +71,65 @@ pub fn validate(bytes: &[u8], geometry: &Geometry) -> Result<Model, String> {
         ));
     }
     Ok(model)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use hexacomp_core::model::{NetworkInput, Networks, Provenance};
+    use hexacomp_core::network::{Network, Normalisation};
+
+    /// A decoupled model whose six networks have one hidden node with weights `w`.
+    fn one_node_model(geometry: &Geometry, w: [f64; 9]) -> Model {
+        Model {
+            networks: Networks::Decoupled(
+                (0..LEGS)
+                    .map(|_| Network::from_weights(1, 1, w.to_vec()).unwrap())
+                    .collect(),
+            ),
+            input: NetworkInput::Equivalent,
+            normalisation: Normalisation {
+                mean: [355.0; LEGS],
+                span: [140.0; LEGS],
+            },
+            training_range: [[290.0, 420.0]; LEGS],
+            correction_bounds: [[-1.0, 1.0]; LEGS],
+            geometry: geometry.fingerprint(),
+            provenance: Provenance::default(),
+        }
+    }
+
+    #[test]
+    fn a_smooth_model_is_accepted() {
+        let g = Geometry::prototype();
+        let model = one_node_model(&g, [1.0, 0.5, 0.0, 0.0, 0.0, 0.0, 0.0, 0.3, 0.0]);
+        assert!(validate(&model.to_bytes(), &g).is_ok());
+    }
+
+    #[test]
+    fn a_step_inside_the_range_is_refused_even_where_no_sample_lands() {
+        let g = Geometry::prototype();
+        // tanh(5000 · x) steps by 0.6 mm within ±0.03 mm of leg 1's mid-range, and stays
+        // inside the correction bounds everywhere: only the jump bound can see it.
+        let model = one_node_model(&g, [5000.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.3, 0.0]);
+        let why = validate(&model.to_bytes(), &g).unwrap_err();
+        assert!(why.contains("jump"), "{why}");
+    }
+
+    #[test]
+    fn a_model_whose_output_overflows_is_refused() {
+        let g = Geometry::prototype();
+        // Finite weights, flat (no slope), but b2 + w2 · tanh(10) overflows to infinity.
+        let model = one_node_model(&g, [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 10.0, f64::MAX, f64::MAX]);
+        let why = validate(&model.to_bytes(), &g).unwrap_err();
+        assert!(why.contains("non-finite"), "{why}");
+    }
+
+    #[test]
+    fn a_model_beyond_its_own_bounds_over_its_range_is_refused() {
+        let g = Geometry::prototype();
+        let model = one_node_model(&g, [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 2.0]);
+        let why = validate(&model.to_bytes(), &g).unwrap_err();
+        assert!(why.contains("exceed"), "{why}");
+    }
 }

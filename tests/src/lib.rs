@@ -63,6 +63,85 @@ pub fn unique_instance(test: &str) -> String {
     )
 }
 
+/// A smooth decoupled model for the prototype geometry (three hidden nodes per leg, weights
+/// from `seed`, corrections within ±0.5 mm), made without training: quick, and the same for
+/// the same seed.
+pub fn smooth_model(seed: u64) -> hexacomp_core::model::Model {
+    use hexacomp_core::model::{Model, NetworkInput, Networks, Provenance};
+    use hexacomp_core::network::{Network, Normalisation};
+    let network = |leg: usize| {
+        let count = Network::weight_count(3, 1);
+        let weights = (0..count)
+            .map(|i| ((i + 7 * leg) as f64 * 0.37 + seed as f64).sin() * 0.1)
+            .collect();
+        Network::from_weights(3, 1, weights).expect("a valid network")
+    };
+    Model {
+        networks: Networks::Decoupled((0..6).map(network).collect()),
+        input: NetworkInput::Commanded,
+        normalisation: Normalisation {
+            mean: [355.0; 6],
+            span: [140.0; 6],
+        },
+        training_range: [[285.0, 425.0]; 6],
+        correction_bounds: [[-0.5, 0.5]; 6],
+        geometry: hexacomp_core::Geometry::prototype().fingerprint(),
+        provenance: Provenance {
+            source: format!("hexacomp-tests smooth_model({seed})"),
+            ..Provenance::default()
+        },
+    }
+}
+
+/// Saves [`smooth_model`]`(seed)` in `dir` and returns the model and its path.
+pub fn save_smooth_model(
+    dir: &std::path::Path,
+    seed: u64,
+) -> (hexacomp_core::model::Model, PathBuf) {
+    let model = smooth_model(seed);
+    let path = dir.join(format!("smooth-{seed}.hxm"));
+    model.save(&path).expect("saving a model");
+    (model, path)
+}
+
+/// Starts `hexacomp-test-client --instance <instance> <args>` with its JSON report piped.
+pub fn spawn_test_client(instance: &str, args: &[&str]) -> std::process::Child {
+    Command::new(binary("hexacomp-test-client"))
+        .args(["--instance", instance])
+        .args(args)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("starting hexacomp-test-client")
+}
+
+/// Waits for a test client and parses its JSON report; panics with its stderr on failure.
+pub fn test_client_report(child: std::process::Child) -> serde_json::Value {
+    let output = child.wait_with_output().expect("waiting for a test client");
+    assert!(
+        output.status.success(),
+        "test client failed ({}): {}",
+        output.status,
+        String::from_utf8_lossy(&output.stderr)
+    );
+    serde_json::from_slice(&output.stdout).unwrap_or_else(|e| {
+        panic!(
+            "test client report {:?}: {e}",
+            String::from_utf8_lossy(&output.stdout)
+        )
+    })
+}
+
+/// Resident memory of process `pid`, KiB (`VmRSS` of `/proc/<pid>/status`).
+pub fn rss_kib(pid: u32) -> u64 {
+    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).expect("process status");
+    status
+        .lines()
+        .find_map(|l| l.strip_prefix("VmRSS:"))
+        .and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok())
+        .expect("VmRSS in /proc/<pid>/status")
+}
+
 /// A running `hexacomp-service` child process, killed when dropped.
 pub struct ServiceProcess {
     child: std::process::Child,

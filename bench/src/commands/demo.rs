@@ -42,7 +42,7 @@ pub fn run(command: &DemoCommand) -> anyhow::Result<()> {
         before.geometry_name, before.geometry_fingerprint, before.generation
     );
     match client.deploy(&std::fs::read(&session.model_path)?)? {
-        DeployOutcome::Accepted { generation } => {
+        DeployOutcome::Accepted { generation, .. } => {
             println!(
                 "   deployed {}: accepted as generation {generation}",
                 session.model_path.display()

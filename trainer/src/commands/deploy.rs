@@ -30,8 +30,14 @@ pub fn run(args: &DeployArgs) -> anyhow::Result<()> {
         },
     )?;
     match client.deploy(&bytes)? {
-        DeployOutcome::Accepted { generation } => {
+        DeployOutcome::Accepted {
+            generation,
+            warning,
+        } => {
             println!("accepted as generation {generation}");
+            if !warning.is_empty() {
+                eprintln!("warning: {warning}");
+            }
             Ok(())
         }
         DeployOutcome::Refused { reason, generation } => {

@@ -1,0 +1,264 @@
+//! Faults, with real processes: the service SIGKILLed mid-stream and restarted, again and again,
+//! without any cleanup by hand; clients SIGKILLed mid-request; a deployer SIGKILLed mid-deploy;
+//! a state directory that cannot be written.
+
+use std::collections::HashSet;
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+use hexacomp_client::DeployOutcome;
+use hexacomp_core::Geometry;
+use hexacomp_core::compensator::compensate_pose;
+use hexacomp_core::pose::Pose;
+use hexacomp_tests::{
+    ServiceProcess, save_smooth_model, spawn_test_client, test_client_report, unique_instance,
+};
+use iceoryx2::node::NodeView;
+use iceoryx2::prelude::*;
+
+fn p(path: &Path) -> &str {
+    path.to_str().unwrap()
+}
+
+/// iceoryx2 nodes (alive or dead, not yet cleaned up) created by any of `pids`.
+fn nodes_of(pids: &HashSet<i32>) -> usize {
+    let mut count = 0;
+    Node::<ipc::Service>::list(Config::global_config(), |state| {
+        let id = match &state {
+            NodeState::Alive(view) => Some(*view.id()),
+            NodeState::Dead(view) => Some(*view.id()),
+            NodeState::Inaccessible(id) | NodeState::Undefined(id) => Some(*id),
+        };
+        if let Some(pid) = id.and_then(|id| id.pid::<ipc::Service>().ok())
+            && pids.contains(&pid.value())
+        {
+            count += 1;
+        }
+        CallbackProgression::Continue
+    })
+    .unwrap();
+    count
+}
+
+/// Polls `condition` for up to `within`.
+fn eventually(within: Duration, mut condition: impl FnMut() -> bool) -> bool {
+    let deadline = Instant::now() + within;
+    while Instant::now() < deadline {
+        if condition() {
+            return true;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    condition()
+}
+
+const KILLS: usize = 5;
+
+#[test]
+fn the_service_sigkilled_mid_stream_five_times_restarts_without_cleanup_and_clients_recover() {
+    let dir = tempfile::tempdir().unwrap();
+    let state = dir.path().join("state");
+    let (model, path) = save_smooth_model(dir.path(), 1);
+    let instance = unique_instance("killloop");
+    let mut service =
+        ServiceProcess::start(&instance, &["--state-dir", p(&state), "--model", p(&path)]);
+    // Three NC-like clients stream through every kill (1 kHz, 200 ms deadline).
+    let streams: Vec<_> = (0..3)
+        .map(|_| {
+            spawn_test_client(
+                &instance,
+                &[
+                    "stream",
+                    "--seconds",
+                    "12",
+                    "--period-us",
+                    "1000",
+                    "--timeout-ms",
+                    "200",
+                ],
+            )
+        })
+        .collect();
+    let mut killed = HashSet::new();
+    for _ in 0..KILLS {
+        let mut status = service.client().unwrap();
+        let before = status.status().unwrap().requests;
+        assert!(
+            eventually(Duration::from_secs(5), || status
+                .status()
+                .is_ok_and(|s| s.requests >= before + 100)),
+            "the streaming clients did not reach the service"
+        );
+        killed.insert(service.pid() as i32);
+        service.kill();
+        // Restart at once: no --model (the persisted one serves), no cleanup by hand.
+        service = ServiceProcess::start(&instance, &["--state-dir", p(&state)]);
+    }
+    let mut status = service.client().unwrap();
+    assert_eq!(status.status().unwrap().generation, 1);
+    let before = status.status().unwrap().requests;
+    assert!(
+        eventually(Duration::from_secs(5), || status
+            .status()
+            .is_ok_and(|s| s.requests >= before + 300)),
+        "the clients did not all come back after the last restart"
+    );
+    for stream in streams {
+        let report = test_client_report(stream);
+        // While the service was down, requests timed out; nothing else went wrong.
+        assert_eq!(report["other_errors"], 0, "{report}");
+        assert_eq!(report["bad_points"], 0, "{report}");
+        assert!(report["timeouts"].as_u64().unwrap() >= 1, "{report}");
+    }
+    // Every killed service's iceoryx2 nodes were reclaimed by the processes that came after.
+    assert_eq!(
+        nodes_of(&killed),
+        0,
+        "stale nodes of killed services remain"
+    );
+    // And the last service computes what the persisted model computes.
+    let pose = [4.0, -6.0, 285.0, 1.0, -2.0, 3.0];
+    let point = status.compensate_pose(pose).unwrap();
+    let expected = compensate_pose(
+        &Geometry::prototype(),
+        Some(&model),
+        &Pose::from_mm_deg(pose),
+    );
+    assert_eq!(point.legs, expected.legs);
+}
+
+#[test]
+fn clients_sigkilled_mid_request_do_not_disturb_the_others_and_their_slots_are_reclaimed() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_, path) = save_smooth_model(dir.path(), 2);
+    let instance = unique_instance("killclients");
+    let service = ServiceProcess::start(
+        &instance,
+        &["--state-dir", p(&dir.path().join("s")), "--model", p(&path)],
+    );
+    let survivors: Vec<_> = (0..2)
+        .map(|_| {
+            spawn_test_client(
+                &instance,
+                &["stream", "--seconds", "6", "--period-us", "200"],
+            )
+        })
+        .collect();
+    // More victims than the service admits clients at once (32): only works if the slots of
+    // killed clients are reclaimed.
+    let mut victims = Vec::new();
+    for round in 0..6 {
+        let batch: Vec<_> = (0..8)
+            .map(|i| {
+                let batch = if (round + i) % 2 == 0 { "1" } else { "1024" };
+                spawn_test_client(&instance, &["stream", "--seconds", "30", "--batch", batch])
+            })
+            .collect();
+        std::thread::sleep(Duration::from_millis(300));
+        for mut victim in batch {
+            victim.kill().unwrap();
+            victim.wait().unwrap();
+            victims.push(victim.id() as i32);
+        }
+    }
+    for survivor in survivors {
+        let report = test_client_report(survivor);
+        assert_eq!(report["timeouts"], 0, "{report}");
+        assert_eq!(report["other_errors"], 0, "{report}");
+        assert_eq!(report["overloaded"], 0, "{report}");
+        assert!(report["requests"].as_u64().unwrap() > 1000, "{report}");
+    }
+    // A new client still connects and is served after 48 killed ones.
+    let mut client = service.client().unwrap();
+    client
+        .compensate_pose([0.0, 0.0, 280.0, 0.0, 0.0, 0.0])
+        .unwrap();
+    assert!(
+        eventually(Duration::from_secs(5), || nodes_of(
+            &victims.iter().copied().collect()
+        ) == 0),
+        "stale nodes of killed clients remain"
+    );
+}
+
+#[test]
+fn a_deployer_killed_mid_deploy_leaves_the_old_model_serving() {
+    let dir = tempfile::tempdir().unwrap();
+    let (old, old_path) = save_smooth_model(dir.path(), 3);
+    let (_, new_path) = save_smooth_model(dir.path(), 4);
+    let state = dir.path().join("state");
+    let instance = unique_instance("deploydie");
+    let service = ServiceProcess::start(
+        &instance,
+        &["--state-dir", p(&state), "--model", p(&old_path)],
+    );
+    for _ in 0..5 {
+        let child = spawn_test_client(&instance, &["deploy-and-die", "--model", p(&new_path)]);
+        let output = child.wait_with_output().unwrap();
+        use std::os::unix::process::ExitStatusExt;
+        assert_eq!(output.status.signal(), Some(libc::SIGKILL));
+    }
+    // Give the service time to validate what it received.
+    std::thread::sleep(Duration::from_millis(500));
+    let mut client = service.client().unwrap();
+    let status = client.status().unwrap();
+    assert_eq!(status.generation, 1);
+    assert!(status.model.contains("smooth_model(3)"), "{}", status.model);
+    let pose = [1.0, 2.0, 300.0, 0.5, 0.5, 0.5];
+    let point = client.compensate_pose(pose).unwrap();
+    let expected = compensate_pose(&Geometry::prototype(), Some(&old), &Pose::from_mm_deg(pose));
+    assert_eq!(point.legs, expected.legs);
+    // The persisted model is still the old one: a restart serves it.
+    drop(client);
+    service.kill();
+    let service = ServiceProcess::start(&instance, &["--state-dir", p(&state)]);
+    let mut client = service.client().unwrap();
+    assert!(client.status().unwrap().model.contains("smooth_model(3)"));
+    // A deployer that stays for the answer is accepted as usual.
+    let bytes = std::fs::read(&new_path).unwrap();
+    assert!(matches!(
+        client.deploy(&bytes).unwrap(),
+        DeployOutcome::Accepted { generation: 2, .. }
+    ));
+}
+
+#[test]
+fn a_state_directory_that_cannot_be_written_is_reported_and_serving_goes_on() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_, first) = save_smooth_model(dir.path(), 5);
+    let (second_model, second) = save_smooth_model(dir.path(), 6);
+    let state = dir.path().join("state");
+    let instance = unique_instance("unwritable");
+    let service =
+        ServiceProcess::start(&instance, &["--state-dir", p(&state), "--model", p(&first)]);
+    // The model file's place is taken by a directory: writing it fails whoever we are (root
+    // ignores permission bits, not this).
+    std::fs::remove_file(state.join("model.hxm")).unwrap();
+    std::fs::create_dir(state.join("model.hxm")).unwrap();
+    let mut client = service.client().unwrap();
+    match client.deploy(&std::fs::read(&second).unwrap()).unwrap() {
+        DeployOutcome::Accepted {
+            generation,
+            warning,
+        } => {
+            assert_eq!(generation, 2);
+            assert!(warning.contains("not persisted"), "{warning}");
+        }
+        refused => panic!("{refused:?}"),
+    }
+    let status = client.status().unwrap();
+    assert_eq!(status.persist_failures, 1);
+    assert_eq!(status.generation, 2);
+    let pose = [0.0, 5.0, 290.0, 0.0, 1.0, 0.0];
+    let point = client.compensate_pose(pose).unwrap();
+    let expected = compensate_pose(
+        &Geometry::prototype(),
+        Some(&second_model),
+        &Pose::from_mm_deg(pose),
+    );
+    assert_eq!((point.legs, point.generation), (expected.legs, 2));
+    // The status line says it too.
+    let output = hexacomp_tests::run("hexacomp-client", &["--instance", &instance, "status"]);
+    let text = String::from_utf8_lossy(&output.stdout);
+    assert!(text.contains("NOT persisted"), "{text}");
+}
