@@ -132,14 +132,15 @@ pub fn test_client_report(child: std::process::Child) -> serde_json::Value {
     })
 }
 
-/// Resident memory of process `pid`, KiB (`VmRSS` of `/proc/<pid>/status`).
-pub fn rss_kib(pid: u32) -> u64 {
+/// A memory figure of process `pid` from `/proc/<pid>/status`, KiB: `VmRSS` (all resident
+/// memory, shared-memory pages included), `RssAnon` (heap and stacks: where a leak shows).
+pub fn memory_kib(pid: u32, field: &str) -> u64 {
     let status = std::fs::read_to_string(format!("/proc/{pid}/status")).expect("process status");
     status
         .lines()
-        .find_map(|l| l.strip_prefix("VmRSS:"))
+        .find_map(|l| l.strip_prefix(field)?.strip_prefix(':'))
         .and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok())
-        .expect("VmRSS in /proc/<pid>/status")
+        .unwrap_or_else(|| panic!("{field} in /proc/{pid}/status"))
 }
 
 /// A running `hexacomp-service` child process, killed when dropped.

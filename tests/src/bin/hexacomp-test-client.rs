@@ -256,7 +256,8 @@ fn flood(instance: &str, duration: Duration) -> anyhow::Result<serde_json::Value
                 drop(response);
                 in_flight.pop_front();
             } else {
-                std::hint::spin_loop();
+                // Misbehaving towards the service, not towards the machine's other processes.
+                std::thread::yield_now();
             }
         }
     }
@@ -284,6 +285,7 @@ fn no_collect(instance: &str, duration: Duration) -> anyhow::Result<serde_json::
             None => {
                 limit_hits += 1;
                 unread.pop_front();
+                std::thread::yield_now();
             }
         }
     }

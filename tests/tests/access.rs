@@ -1,0 +1,92 @@
+//! Access: what a running service leaves on the machine is not writable by other users — its
+//! state directory (owner only) and iceoryx2's shared memory and management files (owner only;
+//! iceoryx2's one global id counter excepted). The permission model is in README.md.
+
+use std::os::unix::fs::{MetadataExt, PermissionsExt};
+use std::path::{Path, PathBuf};
+
+use hexacomp_tests::{ServiceProcess, save_smooth_model, unique_instance};
+
+/// Files and directories under `dir` (recursively) owned by `uid`, with their modes.
+fn owned_entries(dir: &Path, uid: u32, keep: &dyn Fn(&Path) -> bool) -> Vec<(PathBuf, u32, bool)> {
+    let mut found = Vec::new();
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return found;
+    };
+    for entry in entries.flatten() {
+        let path = entry.path();
+        // Entries of other tests' processes may vanish while we look.
+        let Ok(meta) = std::fs::symlink_metadata(&path) else {
+            continue;
+        };
+        if meta.uid() == uid && keep(&path) {
+            found.push((path.clone(), meta.mode() & 0o7777, meta.is_dir()));
+        }
+        if meta.is_dir() {
+            found.extend(owned_entries(&path, uid, keep));
+        }
+    }
+    found
+}
+
+#[test]
+fn state_directory_and_shared_memory_are_not_writable_by_other_users() {
+    let dir = tempfile::tempdir().unwrap();
+    let state = dir.path().join("state");
+    // Even a state directory that everybody may write is tightened to its owner at start.
+    std::fs::create_dir(&state).unwrap();
+    std::fs::set_permissions(&state, std::fs::Permissions::from_mode(0o777)).unwrap();
+    let (_, model) = save_smooth_model(dir.path(), 41);
+    let instance = unique_instance("access");
+    let service = ServiceProcess::start(
+        &instance,
+        &[
+            "--state-dir",
+            state.to_str().unwrap(),
+            "--model",
+            model.to_str().unwrap(),
+        ],
+    );
+    let mut client = service.client().unwrap();
+    client.deploy(&std::fs::read(&model).unwrap()).unwrap();
+
+    let state_mode = std::fs::metadata(&state).unwrap().mode() & 0o777;
+    assert_eq!(state_mode, 0o700, "state directory mode {state_mode:o}");
+    let uid = unsafe { libc::geteuid() };
+    let persisted = owned_entries(&state, uid, &|_| true);
+    assert!(
+        persisted.len() >= 2,
+        "model and generation files: {persisted:?}"
+    );
+    for (path, mode, _) in &persisted {
+        assert_eq!(mode & 0o022, 0, "{} mode {mode:o}", path.display());
+    }
+
+    // iceoryx2's files while the service and a client run: shared memory in /dev/shm, node
+    // and service records under /tmp/iceoryx2.
+    let iceoryx = |p: &Path| {
+        p.file_name()
+            .and_then(|n| n.to_str())
+            .is_some_and(|n| n.starts_with("iox2_") && !n.ends_with(".global_mgmt"))
+    };
+    let mut files = owned_entries(Path::new("/dev/shm"), uid, &iceoryx);
+    files.extend(owned_entries(Path::new("/tmp/iceoryx2"), uid, &|_| true));
+    let shared_memory = files
+        .iter()
+        .filter(|(p, _, _)| p.starts_with("/dev/shm"))
+        .count();
+    assert!(shared_memory >= 3, "the service's shared memory: {files:?}");
+    for (path, mode, is_dir) in &files {
+        if *is_dir {
+            assert_eq!(mode & 0o022, 0, "{} mode {mode:o}", path.display());
+        } else {
+            assert_eq!(mode & 0o077, 0, "{} mode {mode:o}", path.display());
+        }
+    }
+    eprintln!(
+        "checked {} persisted files and {} iceoryx2 entries ({shared_memory} shared-memory \
+         segments)",
+        persisted.len(),
+        files.len()
+    );
+}
