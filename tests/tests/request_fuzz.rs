@@ -2,7 +2,8 @@
 //! what `hexacomp-client` never would: every bit pattern of a point (NaN, ±∞, subnormals, huge
 //! values), any protocol version and kind, any count up to and beyond a request's limit. Each
 //! request gets an answer within its deadline, with the outcome its header calls for, and each
-//! point exactly what the compensator computes in this process.
+//! point exactly what the compensator computes in this process. Longer runs:
+//! `HEXACOMP_FUZZ_REQUESTS=100000 cargo test --release -p hexacomp-tests --test request_fuzz`.
 
 use std::time::{Duration, Instant};
 
@@ -57,7 +58,13 @@ impl Random {
     }
 }
 
-const REQUESTS: usize = 3000;
+/// Requests per run: 3000, or `HEXACOMP_FUZZ_REQUESTS`.
+fn requests() -> usize {
+    std::env::var("HEXACOMP_FUZZ_REQUESTS")
+        .ok()
+        .and_then(|n| n.parse().ok())
+        .unwrap_or(3000)
+}
 
 #[test]
 fn any_request_gets_its_outcome_and_every_point_exactly_the_compensators_answer() {
@@ -93,7 +100,8 @@ fn any_request_gets_its_outcome_and_every_point_exactly_the_compensators_answer(
     let mut random = Random(0x5eed_0001);
     let mut outcomes = [0usize; 3];
     let mut statuses = [0usize; 6];
-    for r in 0..REQUESTS {
+    let requests = requests();
+    for r in 0..requests {
         let protocol = match random.below(8) {
             0 => random.next() as u32,
             _ => PROTOCOL_VERSION,
@@ -172,7 +180,7 @@ fn any_request_gets_its_outcome_and_every_point_exactly_the_compensators_answer(
     ] {
         assert!(statuses[status as usize] > 0, "statuses {statuses:?}");
     }
-    eprintln!("{REQUESTS} requests: outcomes {outcomes:?}, point statuses {statuses:?}");
+    eprintln!("{requests} requests: outcomes {outcomes:?}, point statuses {statuses:?}");
 
     // A request beyond the limit (a client port made for bigger loans) gets its own outcome.
     let report = test_client_report(spawn_test_client(

@@ -346,7 +346,8 @@ fn a_second_service_for_the_same_instance_is_refused_and_the_absent_one_is_repor
         matches!(absent, hexacomp_client::Error::ServiceAbsent { .. }),
         "{absent:?}"
     );
-    let _service = ServiceProcess::start(&instance, &["--state-dir", p(&dir.path().join("a"))]);
+    let service = ServiceProcess::start(&instance, &["--state-dir", p(&dir.path().join("a"))]);
+    let mut first = service.client().unwrap();
     let output = std::process::Command::new(hexacomp_tests::binary("hexacomp-service"))
         .args([
             "--instance",
@@ -362,6 +363,12 @@ fn a_second_service_for_the_same_instance_is_refused_and_the_absent_one_is_repor
         message.contains("is already served by another hexacomp-service"),
         "{message}"
     );
+    // The first service was not disturbed: its client is served as before.
+    let point = first
+        .compensate_pose([0.0, 0.0, 280.0, 0.0, 0.0, 0.0])
+        .unwrap();
+    assert_eq!(point.status, PointStatus::NoModel);
+    assert_eq!(first.status().unwrap().errors, 0);
 }
 
 /// CPU time (user + system) a process has used, from /proc, in seconds.
