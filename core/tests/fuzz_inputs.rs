@@ -5,12 +5,15 @@
 //! fuzz_inputs`; crashers proptest finds are written to `fuzz_inputs.proptest-regressions`
 //! beside this file and replayed first on every run.
 
+mod common;
+
 use std::path::Path;
 
+use common::model;
 use hexacomp_core::compensator::{PointStatus, compensate_legs, compensate_pose};
 use hexacomp_core::formats::{read_corrections, read_joints, read_measurements, read_poses};
-use hexacomp_core::model::{Model, NetworkInput, Networks, Provenance};
-use hexacomp_core::network::{Network, Normalisation};
+use hexacomp_core::model::{Model, Networks};
+use hexacomp_core::network::Network;
 use hexacomp_core::{Geometry, Pose};
 use proptest::prelude::*;
 
@@ -87,32 +90,6 @@ fn apply(bytes: &[u8], edits: &[Edit]) -> Vec<u8> {
         }
     }
     out
-}
-
-fn model(geometry: &Geometry) -> Model {
-    let network = |seed: f64| {
-        let count = Network::weight_count(3, 1);
-        Network::from_weights(
-            3,
-            1,
-            (0..count)
-                .map(|i| (i as f64 * 0.37 + seed).sin() * 0.1)
-                .collect(),
-        )
-        .unwrap()
-    };
-    Model {
-        networks: Networks::Decoupled((0..6).map(|i| network(i as f64)).collect()),
-        input: NetworkInput::Equivalent,
-        normalisation: Normalisation {
-            mean: [355.0; 6],
-            span: [140.0; 6],
-        },
-        training_range: [[282.0, 428.0]; 6],
-        correction_bounds: [[-1.5, 1.5]; 6],
-        geometry: geometry.fingerprint(),
-        provenance: Provenance::default(),
-    }
 }
 
 /// A model file's bytes with the length field and checksum recomputed after `edits` to its

@@ -173,6 +173,17 @@ impl ServiceProcess {
         service
     }
 
+    /// Starts the service for `instance` with its state in `state_dir`, serving `model`.
+    pub fn with_model(
+        instance: &str,
+        state_dir: &std::path::Path,
+        model: &std::path::Path,
+    ) -> Self {
+        let (state, model) = (state_dir.to_str(), model.to_str());
+        let (state, model) = state.zip(model).expect("UTF-8 paths");
+        Self::start(instance, &["--state-dir", state, "--model", model])
+    }
+
     fn wait_until_serving(&self) {
         let deadline = std::time::Instant::now() + std::time::Duration::from_secs(10);
         loop {

@@ -38,15 +38,7 @@ fn state_directory_and_shared_memory_are_not_writable_by_other_users() {
     std::fs::set_permissions(&state, std::fs::Permissions::from_mode(0o777)).unwrap();
     let (_, model) = save_smooth_model(dir.path(), 41);
     let instance = unique_instance("access");
-    let service = ServiceProcess::start(
-        &instance,
-        &[
-            "--state-dir",
-            state.to_str().unwrap(),
-            "--model",
-            model.to_str().unwrap(),
-        ],
-    );
+    let service = ServiceProcess::with_model(&instance, &state, &model);
     let mut client = service.client().unwrap();
     client.deploy(&std::fs::read(&model).unwrap()).unwrap();
 

@@ -60,8 +60,7 @@ fn the_service_sigkilled_mid_stream_five_times_restarts_without_cleanup_and_clie
     let state = dir.path().join("state");
     let (model, path) = save_smooth_model(dir.path(), 1);
     let instance = unique_instance("killloop");
-    let mut service =
-        ServiceProcess::start(&instance, &["--state-dir", p(&state), "--model", p(&path)]);
+    let mut service = ServiceProcess::with_model(&instance, &state, &path);
     // Three NC-like clients stream through every kill (1 kHz, 200 ms deadline).
     let streams: Vec<_> = (0..3)
         .map(|_| {
@@ -132,10 +131,7 @@ fn clients_sigkilled_mid_request_do_not_disturb_the_others_and_their_slots_are_r
     let dir = tempfile::tempdir().unwrap();
     let (_, path) = save_smooth_model(dir.path(), 2);
     let instance = unique_instance("killclients");
-    let service = ServiceProcess::start(
-        &instance,
-        &["--state-dir", p(&dir.path().join("s")), "--model", p(&path)],
-    );
+    let service = ServiceProcess::with_model(&instance, &dir.path().join("s"), &path);
     let survivors: Vec<_> = (0..2)
         .map(|_| {
             spawn_test_client(
@@ -188,10 +184,7 @@ fn a_deployer_killed_mid_deploy_leaves_the_old_model_serving() {
     let (_, new_path) = save_smooth_model(dir.path(), 4);
     let state = dir.path().join("state");
     let instance = unique_instance("deploydie");
-    let service = ServiceProcess::start(
-        &instance,
-        &["--state-dir", p(&state), "--model", p(&old_path)],
-    );
+    let service = ServiceProcess::with_model(&instance, &state, &old_path);
     for _ in 0..5 {
         let child = spawn_test_client(&instance, &["deploy-and-die", "--model", p(&new_path)]);
         let output = child.wait_with_output().unwrap();
@@ -229,8 +222,7 @@ fn a_state_directory_that_cannot_be_written_is_reported_and_serving_goes_on() {
     let (second_model, second) = save_smooth_model(dir.path(), 6);
     let state = dir.path().join("state");
     let instance = unique_instance("unwritable");
-    let service =
-        ServiceProcess::start(&instance, &["--state-dir", p(&state), "--model", p(&first)]);
+    let service = ServiceProcess::with_model(&instance, &state, &first);
     // The model file's place is taken by a directory: writing it fails whoever we are (root
     // ignores permission bits, not this).
     std::fs::remove_file(state.join("model.hxm")).unwrap();

@@ -21,15 +21,7 @@ fn sixteen_clients_are_served_beside_a_flooder_and_a_client_that_never_reads() {
     let dir = tempfile::tempdir().unwrap();
     let (_, model) = save_smooth_model(dir.path(), 21);
     let instance = unique_instance("load16");
-    let service = ServiceProcess::start(
-        &instance,
-        &[
-            "--state-dir",
-            dir.path().join("s").to_str().unwrap(),
-            "--model",
-            model.to_str().unwrap(),
-        ],
-    );
+    let service = ServiceProcess::with_model(&instance, &dir.path().join("s"), &model);
     let seconds = "6";
     let good: Vec<_> = (0..WELL_BEHAVED)
         .map(|i| {
@@ -101,15 +93,7 @@ fn soak_memory_stays_flat_through_streams_batches_swaps_and_client_churn() {
         .map(|seed| save_smooth_model(dir.path(), 30 + seed).1)
         .collect();
     let instance = unique_instance("soak");
-    let service = ServiceProcess::start(
-        &instance,
-        &[
-            "--state-dir",
-            dir.path().join("s").to_str().unwrap(),
-            "--model",
-            models[0].to_str().unwrap(),
-        ],
-    );
+    let service = ServiceProcess::with_model(&instance, &dir.path().join("s"), &models[0]);
     let total = seconds.to_string();
     let streams: Vec<_> = [
         ("1", "1000"),

@@ -71,15 +71,7 @@ fn any_request_gets_its_outcome_and_every_point_exactly_the_compensators_answer(
     let dir = tempfile::tempdir().unwrap();
     let (model, path) = save_smooth_model(dir.path(), 11);
     let instance = unique_instance("fuzzwire");
-    let service = ServiceProcess::start(
-        &instance,
-        &[
-            "--state-dir",
-            dir.path().join("s").to_str().unwrap(),
-            "--model",
-            path.to_str().unwrap(),
-        ],
-    );
+    let service = ServiceProcess::with_model(&instance, &dir.path().join("s"), &path);
     let g = Geometry::prototype();
     let node = NodeBuilder::new()
         .signal_handling_mode(SignalHandlingMode::Disabled)
