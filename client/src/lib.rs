@@ -22,6 +22,7 @@
 
 #![warn(missing_docs)]
 
+pub mod c_api;
 pub mod wire;
 
 use std::time::{Duration, Instant};
@@ -324,6 +325,11 @@ impl Client {
         Ok(client)
     }
 
+    /// Changes the deadline of every later call.
+    pub fn set_timeout(&mut self, timeout: Duration) {
+        self.timeout = timeout;
+    }
+
     /// Compensates one pose `[x, y, z, a, b, c]` (mm, degrees).
     pub fn compensate_pose(&mut self, pose: [f64; 6]) -> Result<CompensatedPoint, Error> {
         let mut out = [CompensatedPoint::empty()];
@@ -347,12 +353,23 @@ impl Client {
         points: &[[f64; 6]],
         out: &mut [CompensatedPoint],
     ) -> Result<(), Error> {
+        assert_eq!(points.len(), out.len(), "one output per point");
+        self.compensate_each(kind, points, |i, point| out[i] = point)
+    }
+
+    /// Compensates up to [`MAX_BATCH`] points of one kind in one request and hands each result
+    /// to `write` with its index, straight from the response in shared memory.
+    pub fn compensate_each(
+        &mut self,
+        kind: RequestKind,
+        points: &[[f64; 6]],
+        mut write: impl FnMut(usize, CompensatedPoint),
+    ) -> Result<(), Error> {
         if points.len() > MAX_BATCH {
             return Err(Error::BatchTooLarge {
                 points: points.len(),
             });
         }
-        assert_eq!(points.len(), out.len(), "one output per point");
         let mut request = self
             .compensate
             .loan_slice_uninit(points.len())
@@ -386,20 +403,23 @@ impl Client {
             outcome => return Err(Error::Refused { outcome }),
         }
         let payload = response.payload();
-        if payload.len() != out.len() {
+        if payload.len() != points.len() {
             return Err(Error::Transport(format!(
                 "the service answered {} points for {}",
                 payload.len(),
-                out.len()
+                points.len()
             )));
         }
-        for (slot, p) in out.iter_mut().zip(payload) {
-            *slot = CompensatedPoint {
-                legs: p.legs,
-                corrections: p.corrections,
-                status: PointStatus::from_u8(p.status).unwrap_or(PointStatus::InvalidInput),
-                generation: p.generation,
-            };
+        for (i, p) in payload.iter().enumerate() {
+            write(
+                i,
+                CompensatedPoint {
+                    legs: p.legs,
+                    corrections: p.corrections,
+                    status: PointStatus::from_u8(p.status).unwrap_or(PointStatus::InvalidInput),
+                    generation: p.generation,
+                },
+            );
         }
         Ok(())
     }

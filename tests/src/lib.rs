@@ -24,7 +24,7 @@ fn binary_dir() -> &'static PathBuf {
             .to_path_buf();
         let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
         let mut build = Command::new(cargo);
-        build.args(["build", "--workspace", "--bins", "--quiet"]);
+        build.args(["build", "--workspace", "--bins", "--lib", "--quiet"]);
         if dir.file_name().is_some_and(|n| n == "release") {
             build.arg("--release");
         }
@@ -34,6 +34,12 @@ fn binary_dir() -> &'static PathBuf {
         assert!(status.success(), "building the workspace binaries failed");
         dir
     })
+}
+
+/// The directory of the workspace's built libraries, among them the C client library
+/// (`libhexacomp_client.a`, `libhexacomp_client.so`).
+pub fn library_dir() -> &'static std::path::Path {
+    binary_dir()
 }
 
 /// The path of workspace binary `name` (e.g. `hexacomp-trainer`), built if needed.

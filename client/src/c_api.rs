@@ -1,0 +1,406 @@
+//! The C ABI of the client, for NC kernels written in C (`include/hexacomp.h`, generated from
+//! this file by cbindgen; `libhexacomp_client.a` / `.so`).
+//!
+//! Every function returns a [`HexacompError`] code (`HEXACOMP_OK` = 0) and writes its results
+//! through out-pointers; [`hexacomp_error_message`] names a code, and
+//! [`hexacomp_last_error_detail`] gives the calling thread's last error in full. No panic crosses
+//! the boundary: one is caught and returned as `HEXACOMP_ERROR_INTERNAL`. Units as in the Rust
+//! API: poses `[x, y, z, a, b, c]` in mm and degrees, legs and corrections in mm.
+//!
+//! A `HexacompClient` is used by one thread at a time; it owns shared-memory ports and is
+//! released with [`hexacomp_close`].
+
+use std::cell::RefCell;
+use std::ffi::{CStr, CString, c_char};
+use std::panic::{AssertUnwindSafe, catch_unwind};
+use std::time::Duration;
+
+use crate::wire::{MAX_BATCH, RequestKind};
+use crate::{Client, ClientOptions, CompensatedPoint, Error};
+
+/// Outcome of a call. The numeric values are part of the ABI.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum HexacompError {
+    /// Success.
+    HexacompOk = 0,
+    /// A null pointer, a string that is not UTF-8, or a count out of range.
+    HexacompErrorInvalidArgument = 1,
+    /// The instance name cannot be part of a service name.
+    HexacompErrorInvalidInstance = 2,
+    /// No service runs for the instance.
+    HexacompErrorServiceAbsent = 3,
+    /// The service did not answer within the client's timeout.
+    HexacompErrorTimeout = 4,
+    /// The service speaks another protocol version.
+    HexacompErrorProtocolMismatch = 5,
+    /// More than `HEXACOMP_MAX_BATCH` points in one request.
+    HexacompErrorBatchTooLarge = 6,
+    /// This client exceeded its points-per-second budget at the service; nothing computed.
+    HexacompErrorOverloaded = 7,
+    /// The service refused the request (an outcome this library does not know).
+    HexacompErrorRefused = 8,
+    /// The shared-memory transport failed.
+    HexacompErrorTransport = 9,
+    /// A bug in this library (a caught panic); the detail says where.
+    HexacompErrorInternal = 10,
+}
+
+/// Most points in one batch request.
+pub const HEXACOMP_MAX_BATCH: usize = 1024;
+const _: () = assert!(HEXACOMP_MAX_BATCH == MAX_BATCH);
+
+/// Point status values (`HexacompPoint::status`), as in the Rust `PointStatus`.
+pub const HEXACOMP_STATUS_OK: u8 = 0;
+/// A nominal or corrected leg is outside the stroke: the legs are the uncorrected ones.
+pub const HEXACOMP_STATUS_OUT_OF_STROKE: u8 = 1;
+/// Compensated, outside the range the model was trained on.
+pub const HEXACOMP_STATUS_OUTSIDE_TRAINED_RANGE: u8 = 2;
+/// A correction was clamped to the model's bounds.
+pub const HEXACOMP_STATUS_CLAMPED: u8 = 3;
+/// A non-finite input: nothing computed.
+pub const HEXACOMP_STATUS_INVALID_INPUT: u8 = 4;
+/// No model loaded: the legs are the nominal ones.
+pub const HEXACOMP_STATUS_NO_MODEL: u8 = 5;
+
+/// What a batch's points are.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum HexacompKind {
+    /// Poses `[x, y, z, a, b, c]`, mm and degrees.
+    HexacompKindPoses = 0,
+    /// Nominal leg lengths `[q1..q6]`, mm.
+    HexacompKindJoints = 1,
+}
+
+/// One compensated point.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HexacompPoint {
+    /// Leg lengths to command, mm.
+    pub legs: [f64; 6],
+    /// Corrections applied, mm.
+    pub corrections: [f64; 6],
+    /// Generation of the model that computed the point (0: none).
+    pub generation: u64,
+    /// `HEXACOMP_STATUS_*`.
+    pub status: u8,
+}
+
+/// The service's counters.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct HexacompStatus {
+    /// Generation of the model serving (0: none).
+    pub generation: u64,
+    /// Compensation requests answered since the service started.
+    pub requests: u64,
+    /// Points answered.
+    pub points: u64,
+    /// Requests refused or failed.
+    pub errors: u64,
+    /// Requests answered "overloaded".
+    pub overloaded: u64,
+    /// Accepted models that could not be persisted.
+    pub persist_failures: u64,
+    /// Nanoseconds since the service started.
+    pub uptime_ns: u64,
+}
+
+/// A connection to one service instance (opaque).
+pub struct HexacompClient {
+    client: Client,
+}
+
+thread_local! {
+    static LAST_ERROR: RefCell<CString> = RefCell::new(CString::default());
+}
+
+fn remember(detail: &str) {
+    let text = CString::new(detail.replace('\0', " ")).unwrap_or_default();
+    LAST_ERROR.with(|last| *last.borrow_mut() = text);
+}
+
+fn code_of(error: &Error) -> HexacompError {
+    match error {
+        Error::InvalidInstance { .. } => HexacompError::HexacompErrorInvalidInstance,
+        Error::ServiceAbsent { .. } => HexacompError::HexacompErrorServiceAbsent,
+        Error::Timeout { .. } => HexacompError::HexacompErrorTimeout,
+        Error::ProtocolMismatch { .. } => HexacompError::HexacompErrorProtocolMismatch,
+        Error::BatchTooLarge { .. } => HexacompError::HexacompErrorBatchTooLarge,
+        Error::Overloaded => HexacompError::HexacompErrorOverloaded,
+        Error::Refused { .. } => HexacompError::HexacompErrorRefused,
+        Error::ModelTooLarge { .. } => HexacompError::HexacompErrorInvalidArgument,
+        _ => HexacompError::HexacompErrorTransport,
+    }
+}
+
+/// Runs `body`, turning errors and panics into codes (and the thread's last error detail).
+fn guarded(body: impl FnOnce() -> Result<(), (HexacompError, String)>) -> HexacompError {
+    match catch_unwind(AssertUnwindSafe(body)) {
+        Ok(Ok(())) => HexacompError::HexacompOk,
+        Ok(Err((code, detail))) => {
+            remember(&detail);
+            code
+        }
+        Err(panic) => {
+            let what = panic
+                .downcast_ref::<&str>()
+                .map(|s| s.to_string())
+                .or_else(|| panic.downcast_ref::<String>().cloned())
+                .unwrap_or_default();
+            remember(&format!("internal error (caught panic): {what}"));
+            HexacompError::HexacompErrorInternal
+        }
+    }
+}
+
+fn invalid(detail: &str) -> (HexacompError, String) {
+    (HexacompError::HexacompErrorInvalidArgument, detail.into())
+}
+
+fn failed(error: Error) -> (HexacompError, String) {
+    (code_of(&error), error.to_string())
+}
+
+fn point(p: &CompensatedPoint) -> HexacompPoint {
+    HexacompPoint {
+        legs: p.legs,
+        corrections: p.corrections,
+        generation: p.generation,
+        status: p.status as u8,
+    }
+}
+
+/// A client by pointer, or the invalid-argument error.
+///
+/// # Safety
+/// `client` is null or was returned by [`hexacomp_connect`] and not closed.
+unsafe fn client_mut<'a>(
+    client: *mut HexacompClient,
+) -> Result<&'a mut HexacompClient, (HexacompError, String)> {
+    unsafe { client.as_mut() }.ok_or_else(|| invalid("client is null"))
+}
+
+/// The name of an error code, as a static NUL-terminated string (never null).
+#[unsafe(no_mangle)]
+pub extern "C" fn hexacomp_error_message(code: HexacompError) -> *const c_char {
+    let text: &'static CStr = match code {
+        HexacompError::HexacompOk => c"ok",
+        HexacompError::HexacompErrorInvalidArgument => c"invalid argument",
+        HexacompError::HexacompErrorInvalidInstance => c"invalid instance name",
+        HexacompError::HexacompErrorServiceAbsent => c"no hexacomp service runs for the instance",
+        HexacompError::HexacompErrorTimeout => c"the service did not answer within the timeout",
+        HexacompError::HexacompErrorProtocolMismatch => c"protocol version mismatch",
+        HexacompError::HexacompErrorBatchTooLarge => c"batch larger than HEXACOMP_MAX_BATCH",
+        HexacompError::HexacompErrorOverloaded => c"overloaded: client over its budget",
+        HexacompError::HexacompErrorRefused => c"the service refused the request",
+        HexacompError::HexacompErrorTransport => c"shared-memory transport failed",
+        HexacompError::HexacompErrorInternal => c"internal error in hexacomp-client",
+    };
+    text.as_ptr()
+}
+
+/// The calling thread's last error in full (empty before any error), NUL-terminated; valid
+/// until the thread's next failing call.
+#[unsafe(no_mangle)]
+pub extern "C" fn hexacomp_last_error_detail() -> *const c_char {
+    LAST_ERROR.with(|last| last.borrow().as_ptr())
+}
+
+/// Connects to the service of `instance` (NUL-terminated, e.g. `"default"`); every later call
+/// waits at most `timeout_us` µs for its answer. On success `*client` is the new client.
+///
+/// # Safety
+/// `instance` is null or a NUL-terminated string; `client` is null or writable.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn hexacomp_connect(
+    instance: *const c_char,
+    timeout_us: u64,
+    client: *mut *mut HexacompClient,
+) -> HexacompError {
+    guarded(|| {
+        if instance.is_null() || client.is_null() {
+            return Err(invalid("instance and client must not be null"));
+        }
+        let name = unsafe { CStr::from_ptr(instance) }
+            .to_str()
+            .map_err(|_| invalid("instance is not UTF-8"))?;
+        let options = ClientOptions {
+            timeout: Duration::from_micros(timeout_us),
+        };
+        let connected = Client::connect(name, &options).map_err(failed)?;
+        unsafe { *client = Box::into_raw(Box::new(HexacompClient { client: connected })) };
+        Ok(())
+    })
+}
+
+/// Changes how long each call waits for its answer, µs.
+///
+/// # Safety
+/// `client` is null or a client from [`hexacomp_connect`], not closed.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn hexacomp_set_timeout(
+    client: *mut HexacompClient,
+    timeout_us: u64,
+) -> HexacompError {
+    guarded(|| {
+        unsafe { client_mut(client) }?
+            .client
+            .set_timeout(Duration::from_micros(timeout_us));
+        Ok(())
+    })
+}
+
+/// Compensates up to `HEXACOMP_MAX_BATCH` points of one kind in one request: `points` holds
+/// `count` rows of six values, `out` receives `count` results. Every point of a batch is
+/// computed by the same model generation.
+///
+/// # Safety
+/// `client` as for [`hexacomp_set_timeout`]; `points` readable and `out` writable for `count`
+/// elements (or null with `count` 0).
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn hexacomp_compensate_batch(
+    client: *mut HexacompClient,
+    kind: HexacompKind,
+    points: *const [f64; 6],
+    count: usize,
+    out: *mut HexacompPoint,
+) -> HexacompError {
+    guarded(|| {
+        let client = unsafe { client_mut(client) }?;
+        if count > MAX_BATCH {
+            return Err(failed(Error::BatchTooLarge { points: count }));
+        }
+        if count > 0 && (points.is_null() || out.is_null()) {
+            return Err(invalid("points and out must not be null"));
+        }
+        let (points, out) = if count == 0 {
+            (&[][..], &mut [][..])
+        } else {
+            unsafe {
+                (
+                    std::slice::from_raw_parts(points, count),
+                    std::slice::from_raw_parts_mut(out, count),
+                )
+            }
+        };
+        let kind = match kind {
+            HexacompKind::HexacompKindPoses => RequestKind::Poses,
+            HexacompKind::HexacompKindJoints => RequestKind::Joints,
+        };
+        client
+            .client
+            .compensate_each(kind, points, |i, result| out[i] = point(&result))
+            .map_err(failed)
+    })
+}
+
+/// Compensates one set of nominal leg lengths `legs[6]` (mm).
+///
+/// # Safety
+/// As for [`hexacomp_compensate_batch`] with `count` 1.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn hexacomp_compensate_joints(
+    client: *mut HexacompClient,
+    legs: *const f64,
+    out: *mut HexacompPoint,
+) -> HexacompError {
+    unsafe {
+        hexacomp_compensate_batch(
+            client,
+            HexacompKind::HexacompKindJoints,
+            legs.cast(),
+            1,
+            out,
+        )
+    }
+}
+
+/// Compensates one pose `pose[6]` = x, y, z (mm), a, b, c (degrees).
+///
+/// # Safety
+/// As for [`hexacomp_compensate_batch`] with `count` 1.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn hexacomp_compensate_pose(
+    client: *mut HexacompClient,
+    pose: *const f64,
+    out: *mut HexacompPoint,
+) -> HexacompError {
+    unsafe {
+        hexacomp_compensate_batch(client, HexacompKind::HexacompKindPoses, pose.cast(), 1, out)
+    }
+}
+
+/// The service's counters and model generation.
+///
+/// # Safety
+/// `client` as for [`hexacomp_set_timeout`]; `out` null or writable.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn hexacomp_status(
+    client: *mut HexacompClient,
+    out: *mut HexacompStatus,
+) -> HexacompError {
+    guarded(|| {
+        let client = unsafe { client_mut(client) }?;
+        let out = unsafe { out.as_mut() }.ok_or_else(|| invalid("out is null"))?;
+        let s = client.client.status().map_err(failed)?;
+        *out = HexacompStatus {
+            generation: s.generation,
+            requests: s.requests,
+            points: s.points,
+            errors: s.errors,
+            overloaded: s.overloaded,
+            persist_failures: s.persist_failures,
+            uptime_ns: s.uptime.as_nanos() as u64,
+        };
+        Ok(())
+    })
+}
+
+/// Releases a client and its shared-memory ports. Null is ignored.
+///
+/// # Safety
+/// `client` is null or a client from [`hexacomp_connect`], not used afterwards.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn hexacomp_close(client: *mut HexacompClient) {
+    if !client.is_null() {
+        let _ = catch_unwind(AssertUnwindSafe(|| drop(unsafe { Box::from_raw(client) })));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn detail() -> String {
+        unsafe { CStr::from_ptr(hexacomp_last_error_detail()) }
+            .to_string_lossy()
+            .into_owned()
+    }
+
+    #[test]
+    fn a_panic_becomes_the_internal_error_code_with_its_message() {
+        let code = guarded(|| panic!("boom at the boundary"));
+        assert_eq!(code, HexacompError::HexacompErrorInternal);
+        assert!(detail().contains("boom at the boundary"), "{}", detail());
+    }
+
+    #[test]
+    fn every_code_has_a_message_and_bad_arguments_are_refused_without_touching_them() {
+        for code in 0..=10 {
+            // The codes are dense from 0 to 10.
+            let code: HexacompError = unsafe { std::mem::transmute(code as u32) };
+            let text = unsafe { CStr::from_ptr(hexacomp_error_message(code)) };
+            assert!(!text.to_bytes().is_empty());
+        }
+        let mut client = std::ptr::null_mut();
+        let code = unsafe { hexacomp_connect(c"bad/name".as_ptr(), 1000, &mut client) };
+        assert_eq!(code, HexacompError::HexacompErrorInvalidInstance);
+        assert!(client.is_null());
+        assert!(detail().contains("bad/name"));
+        let code = unsafe { hexacomp_status(std::ptr::null_mut(), std::ptr::null_mut()) };
+        assert_eq!(code, HexacompError::HexacompErrorInvalidArgument);
+        unsafe { hexacomp_close(std::ptr::null_mut()) };
+    }
+}

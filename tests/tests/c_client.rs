@@ -1,0 +1,107 @@
+//! The C library (`libhexacomp_client.a` and `.so`, `client/include/hexacomp.h`) used by a C
+//! program compiled here with the system's C compiler, against a running service: every point
+//! it prints equals the compensator's answer bit for bit, and its error paths give codes.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use hexacomp_core::Geometry;
+use hexacomp_core::compensator::{compensate_legs, compensate_pose};
+use hexacomp_core::pose::Pose;
+use hexacomp_tests::{ServiceProcess, library_dir, save_smooth_model, unique_instance};
+
+fn workspace() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .unwrap()
+        .to_path_buf()
+}
+
+/// Compiles `tests/c/client_test.c` against the static or the shared library.
+fn compile(out: &Path, shared: bool) -> PathBuf {
+    let libs = library_dir();
+    let exe = out.join(if shared {
+        "client_test_shared"
+    } else {
+        "client_test_static"
+    });
+    let mut cc = Command::new(std::env::var("CC").unwrap_or_else(|_| "cc".into()));
+    cc.args(["-std=c11", "-Wall", "-Wextra", "-Werror", "-O2", "-I"])
+        .arg(workspace().join("client/include"))
+        .arg(workspace().join("tests/c/client_test.c"))
+        .arg("-o")
+        .arg(&exe);
+    if shared {
+        cc.arg("-L").arg(libs).arg("-lhexacomp_client");
+        cc.arg(format!("-Wl,-rpath,{}", libs.display()));
+    } else {
+        // The static library needs what Rust's standard library links (`cargo rustc --
+        // --print native-static-libs`).
+        cc.arg(libs.join("libhexacomp_client.a"));
+        cc.args(["-lgcc_s", "-lutil", "-lrt", "-lpthread", "-ldl", "-lc"]);
+    }
+    cc.arg("-lm");
+    let output = cc.output().expect("running the C compiler");
+    assert!(
+        output.status.success(),
+        "compiling the C test program failed:\n{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    exe
+}
+
+fn numbers(fields: &[&str]) -> [f64; 6] {
+    std::array::from_fn(|k| fields[k].parse().unwrap())
+}
+
+#[test]
+fn a_c_program_linked_statically_and_dynamically_gets_the_compensators_answers() {
+    let dir = tempfile::tempdir().unwrap();
+    let (model, path) = save_smooth_model(dir.path(), 51);
+    let instance = unique_instance("cabi");
+    let _service = ServiceProcess::with_model(&instance, &dir.path().join("s"), &path);
+    let g = Geometry::prototype();
+    for shared in [false, true] {
+        let exe = compile(dir.path(), shared);
+        let output = Command::new(&exe).arg(&instance).output().unwrap();
+        let stdout = String::from_utf8_lossy(&output.stdout);
+        assert!(
+            output.status.success(),
+            "{} failed:\n{}\n{stdout}",
+            exe.display(),
+            String::from_utf8_lossy(&output.stderr)
+        );
+        let mut checked = 0;
+        for line in stdout.lines() {
+            let fields: Vec<&str> = line.split(' ').collect();
+            match fields[0] {
+                "S" => assert_eq!(fields[1], "1"),
+                "P" | "J" | "B" => {
+                    let input = numbers(&fields[2..8]);
+                    let expected = if fields[0] == "J" {
+                        compensate_legs(&g, Some(&model), &input)
+                    } else {
+                        compensate_pose(&g, Some(&model), &Pose::from_mm_deg(input))
+                    };
+                    assert_eq!(fields[8], (expected.status as u8).to_string(), "{line}");
+                    assert_eq!(fields[9], "1", "{line}");
+                    let legs = numbers(&fields[10..16]);
+                    let corrections = numbers(&fields[16..22]);
+                    for k in 0..6 {
+                        assert_eq!(legs[k].to_bits(), expected.legs[k].to_bits(), "{line}");
+                        assert_eq!(
+                            corrections[k].to_bits(),
+                            expected.corrections[k].to_bits(),
+                            "{line}"
+                        );
+                    }
+                    checked += 1;
+                }
+                "OK" => {}
+                other => panic!("unexpected line {other:?}"),
+            }
+        }
+        assert_eq!(checked, 3 * 64);
+        assert_eq!(stdout.lines().last(), Some("OK"));
+    }
+}
