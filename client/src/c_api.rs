@@ -208,8 +208,10 @@ pub extern "C" fn hexacomp_last_error_detail() -> *const c_char {
     LAST_ERROR.with(|last| last.borrow().as_ptr())
 }
 
-/// Connects to the service of `instance` (NUL-terminated, e.g. `"default"`); every later call
-/// waits at most `timeout_us` µs for its answer. On success `*client` is the new client.
+/// Connects to the service of `instance` (NUL-terminated, e.g. `"default"`); every later
+/// compensation waits at most `timeout_us` µs for its answer (connecting and status requests
+/// at least 100 ms: the service answers them from a thread that polls every 10 ms). On success
+/// `*client` is the new client.
 ///
 /// # Safety
 /// `instance` is null or a NUL-terminated string; `client` is null or writable.

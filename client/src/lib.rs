@@ -152,10 +152,15 @@ pub fn iceoryx_name(instance: &str, endpoint: Endpoint) -> Result<ServiceName, E
         .map_err(transport)
 }
 
+/// The shortest deadline of status requests (also made by [`Client::connect`]), whatever the
+/// client's timeout: the service's control thread answers them within 10 ms.
+pub const MIN_CONTROL_DEADLINE: Duration = Duration::from_millis(100);
+
 /// Settings of a client.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ClientOptions {
-    /// Deadline of every call.
+    /// Deadline of every compensation call (status requests and connecting wait at least
+    /// [`MIN_CONTROL_DEADLINE`], deploys ten times this).
     pub timeout: Duration,
 }
 
@@ -425,9 +430,12 @@ impl Client {
     }
 
     /// The service's raw status report.
+    /// Waits at least [`MIN_CONTROL_DEADLINE`]: the service answers status requests from its
+    /// control thread, which polls every 10 ms, so a compensation deadline of a few hundred µs
+    /// would fail every status request (and every connect).
     fn status_report(&mut self) -> Result<StatusReport, Error> {
         let pending = self.status.send_copy(0).map_err(transport)?;
-        let report = wait_for(self.timeout, || {
+        let report = wait_for(self.timeout.max(MIN_CONTROL_DEADLINE), || {
             pending.receive().map(|r| r.map(|r| *r.payload()))
         })?;
         if report.protocol != PROTOCOL_VERSION {
