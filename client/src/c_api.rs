@@ -62,6 +62,16 @@ pub const HEXACOMP_STATUS_CLAMPED: u8 = 3;
 pub const HEXACOMP_STATUS_INVALID_INPUT: u8 = 4;
 /// No model loaded: the legs are the nominal ones.
 pub const HEXACOMP_STATUS_NO_MODEL: u8 = 5;
+// cbindgen writes literals only: tie each value to the status it mirrors.
+const _: () = {
+    use hexacomp_core::compensator::PointStatus;
+    assert!(HEXACOMP_STATUS_OK == PointStatus::Ok as u8);
+    assert!(HEXACOMP_STATUS_OUT_OF_STROKE == PointStatus::OutOfStroke as u8);
+    assert!(HEXACOMP_STATUS_OUTSIDE_TRAINED_RANGE == PointStatus::OutsideTrainedRange as u8);
+    assert!(HEXACOMP_STATUS_CLAMPED == PointStatus::Clamped as u8);
+    assert!(HEXACOMP_STATUS_INVALID_INPUT == PointStatus::InvalidInput as u8);
+    assert!(HEXACOMP_STATUS_NO_MODEL == PointStatus::NoModel as u8);
+};
 
 /// What a batch's points are.
 #[repr(C)]

@@ -50,19 +50,21 @@ impl Admission {
         }
     }
 
-    /// Whether `client` (its iceoryx2 client id) may have `points` computed at `now`: within its
-    /// budget, or beyond it while `others_waiting()` says no other request waits (asked only
-    /// then). Admitted points are taken from the budget, which does not go below empty.
+    /// Whether `client` (its iceoryx2 client id) may have `points` computed at `now()`: within
+    /// its budget, or beyond it while `others_waiting()` says no other request waits (asked
+    /// only then). Admitted points are taken from the budget, which does not go below empty.
+    /// Without a budget neither the clock nor `others_waiting` is asked.
     pub fn admit(
         &mut self,
         client: u128,
         points: usize,
-        now: Instant,
+        now: impl FnOnce() -> Instant,
         others_waiting: impl FnOnce() -> bool,
     ) -> bool {
         let Some(rate) = self.rate else {
             return true;
         };
+        let now = now();
         let bucket = self.bucket(client, now);
         let elapsed = now.saturating_duration_since(bucket.refilled).as_secs_f64();
         bucket.tokens = (bucket.tokens + elapsed * rate).min(BURST_POINTS);
@@ -114,7 +116,10 @@ mod tests {
         // 1000 points every millisecond = exactly the rate, for 10 s of simulated time.
         for ms in 0..10_000u64 {
             let now = start + Duration::from_millis(ms);
-            assert!(admission.admit(7, 1000, now, || true), "refused at {ms} ms");
+            assert!(
+                admission.admit(7, 1000, || now, || true),
+                "refused at {ms} ms"
+            );
         }
     }
 
@@ -126,7 +131,7 @@ mod tests {
         // A full batch every 100 µs for 1 s: ten times the rate.
         for tick in 0..10_000u64 {
             let now = start + Duration::from_micros(100 * tick);
-            if admission.admit(1, MAX_BATCH, now, || true) {
+            if admission.admit(1, MAX_BATCH, || now, || true) {
                 admitted += MAX_BATCH;
             }
         }
@@ -142,9 +147,9 @@ mod tests {
     fn one_client_flooding_does_not_take_another_clients_budget() {
         let mut admission = Admission::new(Some(1000.0));
         let now = Instant::now();
-        while admission.admit(1, 1, now, || true) {}
-        assert!(!admission.admit(1, 1, now, || true));
-        assert!(admission.admit(2, 100, now, || true));
+        while admission.admit(1, 1, || now, || true) {}
+        assert!(!admission.admit(1, 1, || now, || true));
+        assert!(admission.admit(2, 100, || now, || true));
     }
 
     #[test]
@@ -153,13 +158,13 @@ mod tests {
         let start = Instant::now();
         for client in 0..(3 * SLOTS) as u128 {
             let now = start + Duration::from_micros(client as u64);
-            assert!(admission.admit(client, 1, now, || true));
+            assert!(admission.admit(client, 1, || now, || true));
         }
         // The most recent client kept its (slightly drained) bucket.
         let last = (3 * SLOTS - 1) as u128;
         let now = start + Duration::from_micros(last as u64);
-        assert!(admission.admit(last, 4000, now, || true));
-        assert!(!admission.admit(last, 100, now, || true));
+        assert!(admission.admit(last, 4000, || now, || true));
+        assert!(!admission.admit(last, 100, || now, || true));
     }
 
     #[test]
@@ -168,15 +173,20 @@ mod tests {
         let now = Instant::now();
         let mut asked = false;
         for _ in 0..100 {
-            assert!(admission.admit(5, MAX_BATCH, now, || false));
+            assert!(admission.admit(5, MAX_BATCH, || now, || false));
         }
-        assert!(!admission.admit(5, 1, now, || {
-            asked = true;
-            true
-        }));
+        assert!(!admission.admit(
+            5,
+            1,
+            || now,
+            || {
+                asked = true;
+                true
+            }
+        ));
         assert!(asked);
         // Within the budget, whether others wait is not even asked.
-        assert!(admission.admit(6, 1, now, || unreachable!()));
+        assert!(admission.admit(6, 1, || now, || unreachable!()));
     }
 
     #[test]
@@ -184,9 +194,10 @@ mod tests {
         let mut admission = Admission::new(None);
         let now = Instant::now();
         for _ in 0..100_000 {
-            assert!(admission.admit(3, MAX_BATCH, now, || true));
+            assert!(admission.admit(3, MAX_BATCH, || now, || true));
         }
         let mut zero = Admission::new(Some(0.0));
-        assert!(zero.admit(3, MAX_BATCH, now, || true));
+        // Without a budget the clock is not read.
+        assert!(zero.admit(3, MAX_BATCH, || -> Instant { unreachable!() }, || true));
     }
 }

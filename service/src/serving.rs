@@ -285,7 +285,7 @@ fn triage(
     if count > MAX_BATCH {
         return Err(RequestOutcome::BatchTooLarge);
     }
-    if !admission.admit(client, count, std::time::Instant::now(), others_waiting) {
+    if !admission.admit(client, count, std::time::Instant::now, others_waiting) {
         return Err(RequestOutcome::Overloaded);
     }
     Ok(kind)
