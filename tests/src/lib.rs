@@ -149,6 +149,62 @@ pub fn memory_kib(pid: u32, field: &str) -> u64 {
         .unwrap_or_else(|| panic!("{field} in /proc/{pid}/status"))
 }
 
+/// A client port on the compensation endpoint, used directly (not through `hexacomp-client`)
+/// to send what the client library never would.
+pub type RawClient = iceoryx2::port::client::Client<
+    iceoryx2::prelude::ipc::Service,
+    [hexacomp_client::wire::PointRequest],
+    hexacomp_client::wire::RequestHeader,
+    [hexacomp_client::wire::PointResponse],
+    hexacomp_client::wire::ResponseHeader,
+>;
+
+/// The compensation endpoint's service as a raw client opens it.
+pub type RawFactory = iceoryx2::service::port_factory::request_response::PortFactory<
+    iceoryx2::prelude::ipc::Service,
+    [hexacomp_client::wire::PointRequest],
+    hexacomp_client::wire::RequestHeader,
+    [hexacomp_client::wire::PointResponse],
+    hexacomp_client::wire::ResponseHeader,
+>;
+
+/// Opens the compensation endpoint of `instance` with a [`RawClient`] that may loan
+/// `max_points` per request (more than a request may carry, if asked). The node and the
+/// service must outlive the port.
+pub fn raw_client(
+    instance: &str,
+    max_points: usize,
+) -> Result<
+    (
+        iceoryx2::prelude::Node<iceoryx2::prelude::ipc::Service>,
+        RawFactory,
+        RawClient,
+    ),
+    String,
+> {
+    use hexacomp_client::wire::{PointRequest, PointResponse, RequestHeader, ResponseHeader};
+    use iceoryx2::prelude::*;
+    let node = NodeBuilder::new()
+        .signal_handling_mode(SignalHandlingMode::Disabled)
+        .create::<ipc::Service>()
+        .map_err(|e| format!("node: {e}"))?;
+    let name = hexacomp_client::iceoryx_name(instance, hexacomp_client::Endpoint::Compensate)
+        .map_err(|e| e.to_string())?;
+    let factory = node
+        .service_builder(&name)
+        .request_response::<[PointRequest], [PointResponse]>()
+        .request_user_header::<RequestHeader>()
+        .response_user_header::<ResponseHeader>()
+        .open()
+        .map_err(|e| format!("opening the compensation endpoint: {e:?}"))?;
+    let client = factory
+        .client_builder()
+        .initial_max_slice_len(max_points)
+        .create()
+        .map_err(|e| format!("client port: {e:?}"))?;
+    Ok((node, factory, client))
+}
+
 /// A running `hexacomp-service` child process, killed when dropped.
 pub struct ServiceProcess {
     child: std::process::Child,

@@ -8,17 +8,15 @@
 use std::time::{Duration, Instant};
 
 use hexacomp_client::wire::{
-    MAX_BATCH, PROTOCOL_VERSION, PointRequest, PointResponse, RequestHeader, RequestKind,
-    RequestOutcome, ResponseHeader,
+    MAX_BATCH, PROTOCOL_VERSION, PointRequest, RequestHeader, RequestKind, RequestOutcome,
 };
-use hexacomp_client::{Endpoint, iceoryx_name};
 use hexacomp_core::Geometry;
 use hexacomp_core::compensator::{PointStatus, compensate_legs, compensate_pose};
 use hexacomp_core::pose::Pose;
 use hexacomp_tests::{
-    ServiceProcess, save_smooth_model, spawn_test_client, test_client_report, unique_instance,
+    ServiceProcess, raw_client, save_smooth_model, spawn_test_client, test_client_report,
+    unique_instance,
 };
-use iceoryx2::prelude::*;
 
 /// SplitMix64: a small deterministic generator, so that a failure replays from its seed.
 struct Random(u64);
@@ -73,22 +71,7 @@ fn any_request_gets_its_outcome_and_every_point_exactly_the_compensators_answer(
     let instance = unique_instance("fuzzwire");
     let service = ServiceProcess::with_model(&instance, &dir.path().join("s"), &path);
     let g = Geometry::prototype();
-    let node = NodeBuilder::new()
-        .signal_handling_mode(SignalHandlingMode::Disabled)
-        .create::<ipc::Service>()
-        .unwrap();
-    let factory = node
-        .service_builder(&iceoryx_name(&instance, Endpoint::Compensate).unwrap())
-        .request_response::<[PointRequest], [PointResponse]>()
-        .request_user_header::<RequestHeader>()
-        .response_user_header::<ResponseHeader>()
-        .open()
-        .unwrap();
-    let client = factory
-        .client_builder()
-        .initial_max_slice_len(MAX_BATCH)
-        .create()
-        .unwrap();
+    let (_node, _factory, client) = raw_client(&instance, MAX_BATCH).unwrap();
     let mut random = Random(0x5eed_0001);
     let mut outcomes = [0usize; 3];
     let mut statuses = [0usize; 6];

@@ -16,6 +16,7 @@ use hexacomp_client::wire::{
 };
 use hexacomp_client::{Client, ClientOptions, Endpoint, Error, iceoryx_name};
 use hexacomp_core::compensator::PointStatus;
+use hexacomp_tests::{RawClient, raw_client};
 use iceoryx2::prelude::*;
 use serde_json::json;
 
@@ -169,45 +170,6 @@ fn stream(
     }))
 }
 
-type RawClient = iceoryx2::port::client::Client<
-    ipc::Service,
-    [PointRequest],
-    RequestHeader,
-    [PointResponse],
-    ResponseHeader,
->;
-
-type RawFactory = iceoryx2::service::port_factory::request_response::PortFactory<
-    ipc::Service,
-    [PointRequest],
-    RequestHeader,
-    [PointResponse],
-    ResponseHeader,
->;
-
-/// A client port on the compensation endpoint that may loan `max_points` per request.
-fn raw_client(
-    instance: &str,
-    max_points: usize,
-) -> anyhow::Result<(Node<ipc::Service>, RawFactory, RawClient)> {
-    let node = NodeBuilder::new()
-        .signal_handling_mode(SignalHandlingMode::Disabled)
-        .create::<ipc::Service>()?;
-    let factory = node
-        .service_builder(&iceoryx_name(instance, Endpoint::Compensate)?)
-        .request_response::<[PointRequest], [PointResponse]>()
-        .request_user_header::<RequestHeader>()
-        .response_user_header::<ResponseHeader>()
-        .open()
-        .map_err(|e| anyhow!("opening the compensation endpoint: {e:?}"))?;
-    let client = factory
-        .client_builder()
-        .initial_max_slice_len(max_points)
-        .create()
-        .map_err(|e| anyhow!("client port: {e:?}"))?;
-    Ok((node, factory, client))
-}
-
 type Pending = iceoryx2::pending_response::PendingResponse<
     ipc::Service,
     [PointRequest],
@@ -237,7 +199,7 @@ fn send(client: &RawClient, points: usize, offset: usize) -> anyhow::Result<Opti
 
 fn flood(instance: &str, duration: Duration) -> anyhow::Result<serde_json::Value> {
     const POINTS: usize = hexacomp_client::wire::MAX_BATCH;
-    let (_node, _factory, client) = raw_client(instance, POINTS)?;
+    let (_node, _factory, client) = raw_client(instance, POINTS).map_err(anyhow::Error::msg)?;
     let mut in_flight: VecDeque<Pending> = VecDeque::new();
     let (mut sent, mut served, mut overloaded, mut other) = (0u64, 0u64, 0u64, 0u64);
     let start = Instant::now();
@@ -272,7 +234,7 @@ fn flood(instance: &str, duration: Duration) -> anyhow::Result<serde_json::Value
 }
 
 fn no_collect(instance: &str, duration: Duration) -> anyhow::Result<serde_json::Value> {
-    let (_node, _factory, client) = raw_client(instance, 16)?;
+    let (_node, _factory, client) = raw_client(instance, 16).map_err(anyhow::Error::msg)?;
     let mut unread: VecDeque<Pending> = VecDeque::new();
     let (mut sent, mut limit_hits) = (0u64, 0u64);
     let start = Instant::now();
@@ -293,7 +255,7 @@ fn no_collect(instance: &str, duration: Duration) -> anyhow::Result<serde_json::
 }
 
 fn oversize(instance: &str, points: usize) -> anyhow::Result<serde_json::Value> {
-    let (_node, _factory, client) = raw_client(instance, points)?;
+    let (_node, _factory, client) = raw_client(instance, points).map_err(anyhow::Error::msg)?;
     let pending = send(&client, points, 0)?.context("in-flight limit on the first request")?;
     let deadline = Instant::now() + Duration::from_secs(2);
     loop {
