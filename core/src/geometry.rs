@@ -271,8 +271,7 @@ impl Geometry {
                 "leg_range [{min}, {max}] must satisfy 0 < min < max (mm)"
             ));
         }
-        check_distinct("base_joints", &self.base_joints)?;
-        check_distinct("platform_joints", &self.platform_joints)?;
+        check_legs_distinct(&self.base_joints, &self.platform_joints)?;
         check_targets_not_collinear(&self.targets)?;
         if w.radius < 0.0 {
             return invalid(format!("workspace.radius {} mm is negative", w.radius));
@@ -357,12 +356,14 @@ fn check_finite_rows(field: &str, v: &[DVec3]) -> Result<()> {
     Ok(())
 }
 
-fn check_distinct(field: &str, v: &[DVec3]) -> Result<()> {
-    for i in 0..v.len() {
-        for j in i + 1..v.len() {
-            if v[i].distance(v[j]) < 1e-6 {
+/// Rejects two legs between the same pair of joint centres (closer than 1 nm). Legs may share one
+/// joint centre: 3-3 and 6-3 platforms (LinuxCNC's hexapod sim among them) pair their legs so.
+fn check_legs_distinct(base: &[DVec3; LEGS], platform: &[DVec3; LEGS]) -> Result<()> {
+    for i in 0..LEGS {
+        for j in i + 1..LEGS {
+            if base[i].distance(base[j]) < 1e-6 && platform[i].distance(platform[j]) < 1e-6 {
                 return Err(Error::InvalidGeometry(format!(
-                    "{field} rows {i} and {j} coincide"
+                    "legs {i} and {j} join the same base and platform joint centres"
                 )));
             }
         }
@@ -425,6 +426,17 @@ mod tests {
             Geometry::prototype().fingerprint().to_string(),
             PROTOTYPE_FINGERPRINT
         );
+    }
+
+    #[test]
+    fn legs_may_share_one_joint_centre_but_not_both() {
+        let mut paired = Geometry::prototype();
+        paired.leg_range = [100.0, 1000.0]; // room for the moved joint's leg at home
+        paired.base_joints[1] = paired.base_joints[0];
+        paired.validate().unwrap();
+        paired.platform_joints[1] = paired.platform_joints[0];
+        let message = paired.validate().unwrap_err().to_string();
+        assert!(message.contains("legs 0 and 1"), "{message}");
     }
 
     const PROTOTYPE_FINGERPRINT: &str = "6dbc9d4c037e4df1";

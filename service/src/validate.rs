@@ -1,18 +1,18 @@
 //! Validation of a deployed model, off the serving thread: format, checksum, geometry
 //! fingerprint, finite weights (the model file reader), no jumps between neighbouring points
-//! (a bound valid everywhere), then the model's outputs over its training range.
+//! (a bound valid everywhere), then the model's outputs over the configurations the platform
+//! reaches.
 
 use hexacomp_core::model::Model;
-use hexacomp_core::{Geometry, LEGS};
-use rand::{RngExt, SeedableRng};
-use rand_chacha::ChaCha8Rng;
+use hexacomp_core::sampling::{SamplerOptions, WorkspaceSampler};
+use hexacomp_core::{Geometry, LEGS, inverse_kinematics};
 
-/// Points sampled uniformly in the training-range box.
+/// Poses sampled uniformly over the geometry's workspace.
 const SAMPLES: usize = 4096;
 /// Samples checked between two yields of the core (about 20 µs of work).
 const SAMPLES_PER_SLICE: usize = 64;
-/// Largest fraction of box samples whose raw correction may exceed the bounds (corners of the
-/// six-dimensional box are configurations the platform never reaches; the clamp covers them).
+/// Largest fraction of sampled configurations whose raw correction may exceed the bounds (the
+/// bounds are the training data's extremes with a margin, the clamp covers the rest).
 const OUT_OF_BOUNDS_FRACTION: f64 = 0.05;
 /// Neighbouring points: leg vectors this far apart (Euclidean), mm. At a 1 kHz servo period, a
 /// leg moving 100 mm/s travels this far between two commands.
@@ -43,16 +43,28 @@ pub fn validate(bytes: &[u8], geometry: &Geometry) -> Result<Model, String> {
              (at most {MAX_JUMP_MM} mm allowed)"
         ));
     }
-    let mut rng = ChaCha8Rng::seed_from_u64(0x6865_7861);
+    // The legs of workspace poses, not the training-range box: most of the six-dimensional box
+    // is leg combinations no pose has, where a network extrapolates freely and is never asked.
+    let mut poses = WorkspaceSampler::new(geometry, 0x6865_7861, SamplerOptions::default())
+        .map_err(|e| format!("cannot sample the geometry's workspace: {e}"))?;
     let mut outside = 0usize;
+    let mut checked = 0usize;
     for sample in 0..SAMPLES {
         if sample % SAMPLES_PER_SLICE == 0 {
             std::thread::yield_now();
         }
-        let q: [f64; LEGS] = std::array::from_fn(|i| {
+        let pose = poses
+            .sample()
+            .map_err(|e| format!("cannot sample the geometry's workspace: {e}"))?;
+        let q = inverse_kinematics(geometry, &pose).lengths;
+        let trained = (0..LEGS).all(|i| {
             let [lo, hi] = model.training_range[i];
-            lo + (hi - lo) * rng.random::<f64>()
+            (lo..=hi).contains(&q[i])
         });
+        if !trained {
+            continue; // answered "outside trained range", never computed
+        }
+        checked += 1;
         let dq = model.raw_corrections(&q);
         if dq.iter().any(|d| !d.is_finite()) {
             return Err(format!("non-finite correction at legs {q:?}"));
@@ -63,10 +75,11 @@ pub fn validate(bytes: &[u8], geometry: &Geometry) -> Result<Model, String> {
         });
         outside += usize::from(beyond);
     }
-    let fraction = outside as f64 / SAMPLES as f64;
+    let fraction = outside as f64 / checked.max(1) as f64;
     if fraction > OUT_OF_BOUNDS_FRACTION {
         return Err(format!(
-            "corrections exceed the model's own bounds at {:.1} % of its training range",
+            "corrections exceed the model's own bounds at {:.1} % of the workspace poses \
+             inside its training range",
             100.0 * fraction
         ));
     }

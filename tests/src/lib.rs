@@ -6,6 +6,8 @@
 
 #![warn(missing_docs)]
 
+pub mod linuxcnc;
+
 use std::path::PathBuf;
 use std::process::{Command, Output};
 use std::sync::OnceLock;
@@ -73,6 +75,14 @@ pub fn unique_instance(test: &str) -> String {
 /// from `seed`, corrections within ±0.5 mm), made without training: quick, and the same for
 /// the same seed.
 pub fn smooth_model(seed: u64) -> hexacomp_core::model::Model {
+    smooth_model_for(&hexacomp_core::Geometry::prototype(), seed)
+}
+
+/// [`smooth_model`] for `geometry`: normalised over its stroke, trained range 5 mm inside it.
+pub fn smooth_model_for(
+    geometry: &hexacomp_core::Geometry,
+    seed: u64,
+) -> hexacomp_core::model::Model {
     use hexacomp_core::model::{Model, NetworkInput, Networks, Provenance};
     use hexacomp_core::network::{Network, Normalisation};
     let network = |leg: usize| {
@@ -82,16 +92,17 @@ pub fn smooth_model(seed: u64) -> hexacomp_core::model::Model {
             .collect();
         Network::from_weights(3, 1, weights).expect("a valid network")
     };
+    let [min, max] = geometry.leg_range;
     Model {
         networks: Networks::Decoupled((0..6).map(network).collect()),
         input: NetworkInput::Commanded,
         normalisation: Normalisation {
-            mean: [355.0; 6],
-            span: [140.0; 6],
+            mean: [(min + max) / 2.0; 6],
+            span: [max - min - 10.0; 6],
         },
-        training_range: [[285.0, 425.0]; 6],
+        training_range: [[min + 5.0, max - 5.0]; 6],
         correction_bounds: [[-0.5, 0.5]; 6],
-        geometry: hexacomp_core::Geometry::prototype().fingerprint(),
+        geometry: geometry.fingerprint(),
         provenance: Provenance {
             source: format!("hexacomp-tests smooth_model({seed})"),
             ..Provenance::default()

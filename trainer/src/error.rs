@@ -14,6 +14,15 @@ pub enum Error {
     #[error("invalid setting: {0}")]
     InvalidSetting(String),
 
+    /// A LinuxCNC configuration cannot be read as a genhexkins hexapod.
+    #[error("LinuxCNC configuration {}: {message}", path.display())]
+    LinuxCncConfig {
+        /// The ini or HAL file at fault.
+        path: std::path::PathBuf,
+        /// What is wrong with it.
+        message: String,
+    },
+
     /// The data cannot support the requested computation (too few configurations, none usable).
     #[error("insufficient data: {0}")]
     InsufficientData(String),

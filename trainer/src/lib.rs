@@ -8,7 +8,8 @@
 //! - [`train`], [`evaluate`]: the networks and their check on the virtual platform;
 //! - [`svg`], [`table`]: plots and terminal tables for reports;
 //! - [`identify`]: the model-based baseline — identification of the geometric parameters by
-//!   iterative least squares, compensation by the identified inverse kinematics.
+//!   iterative least squares, compensation by the identified inverse kinematics;
+//! - [`linuxcnc`]: the geometry of a LinuxCNC hexapod configuration (genhexkins).
 //!
 //! Units: mm and radians in memory, mm and degrees in files.
 
@@ -19,6 +20,7 @@ pub mod corrections;
 pub mod error;
 pub mod evaluate;
 pub mod identify;
+pub mod linuxcnc;
 pub mod plan;
 pub mod svg;
 pub mod table;

@@ -1,0 +1,151 @@
+component hexacomp "Hexapod joint compensation by a running hexacomp-service, between motion's joint commands and the joint drives";
+
+description """
+Every servo period the component sends the six nominal joint positions (leg lengths, from
+\\fBjoint.N.pos-cmd\\fR) that motion commands to a running hexacomp-service and adds the corrections
+to the motor position commands (\\fBjoint.N.motor-pos-cmd\\fR, which differ from the joint positions
+by the offset homing set) on their way to the drives. It waits at
+most \\fBwait-us\\fR microseconds for the answer. On a timeout, an absent service or an answer that
+is not ok, it keeps applying the last good corrections, raises \\fBfault\\fR and counts the period in
+\\fBfault-count\\fR: it never outputs an unchecked value. Before the first good answer the held
+corrections are zero (the nominal joints pass through). While \\fBhomed\\fR is false (wire it to
+\\fBmotion.is-all-homed\\fR) the joint positions mean nothing: the component asks nothing, raises no
+fault and ramps the correction out.
+
+The feedback pins remove the applied correction from the drive feedback again, so that motion sees
+the nominal joint positions and computes no following error from the correction.
+
+\\fBenable\\fR switches compensation on and off at run time; the applied share \\fBblend\\fR moves
+to its target at 1/\\fBramp-time\\fR per second, so switching mid-motion changes the joints by at
+most |correction|·period/ramp-time per period.
+
+Wire \\fBfault\\fR to \\fBmotion.feed-inhibit\\fR to stop the machine while compensation is lost:
+it resumes by itself when the service answers again.
+""";
+
+notes """
+The module connects when it is loaded and, while no service answers a connection, retries once a
+second from the servo thread (a connection attempt takes milliseconds: on a real-time kernel, start
+the service before LinuxCNC). A connected component survives restarts of the service.
+The service and LinuxCNC must run as the same user (iceoryx2's files are private to it).
+""";
+
+see_also "hexacomp-service(1), motion(9)";
+
+pin in float joint_in-#[6] "Nominal joint position (leg length) from joint.N.pos-cmd, machine units";
+pin in float motor_in-#[6] "Motor position command from joint.N.motor-pos-cmd, machine units";
+pin out float motor_out-#[6] "Compensated motor position command for the drive, machine units";
+pin in bit homed = 1 "Compensate only while true (wire to motion.is-all-homed)";
+pin in float feedback_in-#[6] "Joint position feedback from the drive, machine units";
+pin out float feedback_out-#[6] "Feedback minus the applied correction, for joint.N.motor-pos-fb, machine units";
+pin out float correction-#[6] "Correction added this period (blend times the held correction), machine units";
+pin out bit fault "True while compensation fails: no service, no answer within wait-us, or a point not ok";
+pin out u32 fault_count "Servo periods in which compensation failed, since loading";
+pin out u32 model_generation "Generation of the service's model that computed the held corrections (0: none yet)";
+pin out u32 point_status "Status of the last answered point (HEXACOMP_STATUS_*: 0 ok, 1 out of stroke, 2 outside trained range, 3 clamped, 4 invalid input, 5 no model)";
+pin out s32 last_error "Result of the last call to the service (HexacompError: 0 ok, 3 service absent, 4 timeout, ...)";
+pin out float blend "Share of the held correction applied, 0 to 1";
+
+param rw bit enable = 1 "Apply the corrections (changes ramp over ramp-time)";
+param rw float ramp_time = 1.0 "Seconds to go from no correction to the full one and back";
+param rw float mm_per_unit = 1.0 "Millimetres per machine unit: 1 for mm machines, 25.4 for inch machines";
+param rw u32 wait_us = 200 "Longest wait for the service's answer in a servo period, microseconds";
+
+modparam dummy instance "Name of the hexacomp-service instance to use (default: default)";
+
+variable void *connection;
+variable double held[6];
+variable double retry_in;
+variable unsigned applied_wait_us;
+
+option extra_setup yes;
+option extra_cleanup yes;
+
+function _ "Compensate the six joints (add to the servo thread after motion-controller, before the drives)";
+
+license "Apache-2.0";
+author "hexacomp developers";
+;;
+#include "hexacomp.h"
+
+static char *instance = "default";
+RTAPI_MP_STRING(instance, "Name of the hexacomp-service instance to use");
+
+/* Seconds between connection attempts while no service answers. */
+#define RETRY_INTERVAL_S 1.0
+
+static int try_connect(struct __comp_state *__comp_inst) {
+    HexacompClient *client = 0;
+    HexacompError result = hexacomp_connect(instance, wait_us, &client);
+    if (result != HEXACOMP_OK) {
+        last_error = result;
+        return 0;
+    }
+    connection = client;
+    applied_wait_us = wait_us;
+    rtapi_print_msg(RTAPI_MSG_INFO, "hexacomp: connected to instance '%s'\n", instance);
+    return 1;
+}
+
+EXTRA_SETUP() {
+    connection = 0;
+    retry_in = RETRY_INTERVAL_S;
+    if (!try_connect(__comp_inst)) {
+        rtapi_print_msg(RTAPI_MSG_ERR,
+                        "hexacomp: no hexacomp-service for instance '%s' (%s); retrying every %.0f s\n",
+                        instance, hexacomp_error_message(last_error), RETRY_INTERVAL_S);
+    }
+    return 0;
+}
+
+EXTRA_CLEANUP() {
+    struct __comp_state *__comp_inst;
+    for (__comp_inst = __comp_first_inst; __comp_inst; __comp_inst = __comp_inst->_next) {
+        if (connection) hexacomp_close((HexacompClient *)connection);
+        connection = 0;
+    }
+}
+
+/* Asks the service for the corrections of the current nominal joints; returns 1 and updates
+   held[] only for an ok answer. */
+static int ask_service(struct __comp_state *__comp_inst, long period) {
+    double legs_mm[6];
+    HexacompPoint answer;
+    HexacompError result;
+    int i;
+    if (!connection) {
+        retry_in -= period * 1e-9;
+        if (retry_in > 0) return 0;
+        retry_in = RETRY_INTERVAL_S;
+        if (!try_connect(__comp_inst)) return 0;
+    }
+    if (applied_wait_us != wait_us) {
+        hexacomp_set_timeout((HexacompClient *)connection, wait_us);
+        applied_wait_us = wait_us;
+    }
+    for (i = 0; i < 6; i++) legs_mm[i] = joint_in(i) * mm_per_unit;
+    result = hexacomp_compensate_joints((HexacompClient *)connection, legs_mm, &answer);
+    last_error = result;
+    if (result != HEXACOMP_OK) return 0;
+    point_status = answer.status;
+    if (answer.status != HEXACOMP_STATUS_OK) return 0;
+    for (i = 0; i < 6; i++) held[i] = answer.corrections[i] / mm_per_unit;
+    model_generation = answer.generation;
+    return 1;
+}
+
+FUNCTION(_) {
+    int i;
+    double step = ramp_time > 0 ? period * 1e-9 / ramp_time : 1.0;
+    double target = enable && homed ? 1.0 : 0.0;
+    int ok = homed ? ask_service(__comp_inst, period) : 1;
+    fault = !ok;
+    if (!ok) fault_count++;
+    if (blend < target) blend = blend + step > target ? target : blend + step;
+    if (blend > target) blend = blend - step < target ? target : blend - step;
+    for (i = 0; i < 6; i++) {
+        correction(i) = blend * held[i];
+        motor_out(i) = motor_in(i) + correction(i);
+        feedback_out(i) = feedback_in(i) - correction(i);
+    }
+}

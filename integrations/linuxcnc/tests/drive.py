@@ -1,0 +1,164 @@
+#!/usr/bin/python3
+"""Headless LinuxCNC display for hexacomp's tests: runs the plan in $HEXACOMP_DRIVE_PLAN.
+
+LinuxCNC starts the ini's [DISPLAY]DISPLAY program and shuts down when it exits. This one resets
+E-stop, switches the machine on, homes, enables world (teleop) mode, then, as the plan (JSON) says:
+  "sampler": {"channel": N, "cfg": TYPES, "out": FILE}
+                                           records every sample of the HAL sampler's FIFO N
+                                           (full precision, one line of Python reprs each);
+  "mdi": [[x, y, z, a, b, c], ...]         moves to each pose by MDI G0 and records the joints;
+  "program": FILE                          runs the G-code program to its end;
+  "started": FILE                          is created once the program runs;
+and writes "results" (JSON): homing, the recorded poses and joints, the program's outcome and
+every message of LinuxCNC's error channel. Its own failures also end up in the results.
+"""
+import json
+import os
+import sys
+import threading
+import time
+import traceback
+
+import hal
+import linuxcnc
+
+PLAN = json.load(open(os.environ["HEXACOMP_DRIVE_PLAN"]))
+RESULTS = {"homed": False, "mdi": [], "program": None, "errors": [], "failure": None}
+stat, command, errors = linuxcnc.stat(), linuxcnc.command(), linuxcnc.error_channel()
+
+
+def collect_errors():
+    while True:
+        message = errors.poll()
+        if not message:
+            return
+        RESULTS["errors"].append(message[1])
+
+
+def wait_until(condition, seconds, what):
+    deadline = time.time() + seconds
+    while time.time() < deadline:
+        stat.poll()
+        collect_errors()
+        if condition():
+            return
+        time.sleep(0.01)
+    raise TimeoutError(f"{what} within {seconds} s")
+
+
+def component_state():
+    """The hexacomp component's status pins, for failure messages."""
+    pins = ["fault", "fault-count", "last-error", "point-status", "model-generation", "blend"]
+    return ", ".join(f"{pin} {hal.get_value('hexacomp.0.' + pin)}" for pin in pins)
+
+
+def prepare_machine():
+    command.state(linuxcnc.STATE_ESTOP_RESET)
+    command.state(linuxcnc.STATE_ON)
+    wait_until(lambda: stat.task_state == linuxcnc.STATE_ON, 10, "machine on")
+    command.home(-1)
+    wait_until(lambda: all(stat.homed[j] for j in range(6)), 30, "homing")
+    RESULTS["homed"] = True
+    command.teleop_enable(1)
+    command.wait_complete(5)
+    command.mode(linuxcnc.MODE_MDI)
+    command.wait_complete(5)
+
+
+def move_to_poses(poses):
+    for pose in poses:
+        words = " ".join(f"{axis}{value:.10f}" for axis, value in zip("XYZABC", pose))
+        command.mdi(f"G0 {words}")
+        outcome = command.wait_complete(60)
+        if outcome != linuxcnc.RCS_DONE:
+            collect_errors()
+            raise RuntimeError(f"MDI G0 {words}: wait_complete gave {outcome}; {component_state()}")
+        # The commanded position at the pose and the joints still: the move is over.
+        def settled():
+            at_pose = all(abs(stat.position[k] - pose[k]) < 1e-9 for k in range(6))
+            return at_pose and stat.inpos and stat.queue == 0
+        wait_until(settled, 10, f"reaching {words}")
+        joints = [stat.joint[j]["output"] for j in range(6)]
+        time.sleep(0.02)
+        wait_until(lambda: [stat.joint[j]["output"] for j in range(6)] == joints, 10,
+                   f"joints still at {words}")
+        RESULTS["mdi"].append({
+            "pose": pose,
+            "position": list(stat.position[:6]),
+            "joints": joints,
+        })
+
+
+def run_program(path, started_marker):
+    command.mode(linuxcnc.MODE_AUTO)
+    command.wait_complete(5)
+    command.program_open(path)
+    command.wait_complete(5)
+    began = time.time()
+    command.auto(linuxcnc.AUTO_RUN, 0)
+    wait_until(lambda: stat.interp_state != linuxcnc.INTERP_IDLE, 10, "program start")
+    if started_marker:
+        open(started_marker, "w").close()
+    wait_until(lambda: stat.interp_state == linuxcnc.INTERP_IDLE, 600, "program end")
+    RESULTS["program"] = {
+        "seconds": time.time() - began,
+        "position": list(stat.position[:6]),
+        "task_state_on": stat.task_state == linuxcnc.STATE_ON,
+    }
+
+
+class Recorder(threading.Thread):
+    """Copies the sampler FIFO to a file until stopped, then drains it."""
+
+    def __init__(self, component, channel, cfg, path):
+        super().__init__(daemon=True)
+        self.stream = hal.stream(component, hal.sampler_base + channel, cfg)
+        self.out = open(path, "w")
+        self.stopping = threading.Event()
+        self.start()
+
+    def run(self):
+        while True:
+            sample = self.stream.read()
+            if sample is not None:
+                self.out.write(" ".join(repr(value) for value in sample) + "\n")
+            elif self.stopping.is_set():
+                break
+            else:
+                time.sleep(0.002)
+        self.out.close()
+
+    def stop(self):
+        self.stopping.set()
+        self.join(10)
+        RESULTS["sampler_overruns"] = self.stream.num_overruns
+
+
+def main():
+    sampler = None
+    try:
+        # A HAL component of this process: for the sampler stream and for reading pins.
+        component = hal.component("hexacomp-drive")
+        if "sampler" in PLAN:
+            settings = PLAN["sampler"]
+            sampler = Recorder(component, settings["channel"], settings["cfg"], settings["out"])
+        component.ready()
+        prepare_machine()
+        move_to_poses(PLAN.get("mdi", []))
+        if "program" in PLAN:
+            run_program(PLAN["program"], PLAN.get("started"))
+        time.sleep(0.2)
+        collect_errors()
+    except Exception:
+        collect_errors()
+        RESULTS["failure"] = traceback.format_exc()
+    finally:
+        if sampler:
+            sampler.stop()
+        json.dump(RESULTS, open(PLAN["results"], "w"), indent=1)
+        command.state(linuxcnc.STATE_OFF)
+        # Ends LinuxCNC: its start script waits for the display and then cleans up.
+        sys.exit(0)
+
+
+main()

@@ -1,0 +1,479 @@
+//! Running LinuxCNC's hexapod simulation with hexacomp's HAL component, headless.
+//!
+//! [`SimConfig::prepare`] copies the example configuration (`integrations/linuxcnc/hexapod-sim`)
+//! into a fresh directory, points its `DISPLAY` at the driver script
+//! (`integrations/linuxcnc/tests/drive.py`), converts its geometry with `hexacomp-trainer
+//! geometry --from-linuxcnc`, writes a model for it, and gives iceoryx2 a root path inside the
+//! directory (`config/iceoryx2.toml`, which iceoryx2 reads from the working directory). LinuxCNC
+//! refuses to run as root: under root, LinuxCNC and the service run as [`LINUXCNC_USER`].
+
+use std::os::unix::process::CommandExt;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::OnceLock;
+use std::time::{Duration, Instant};
+
+use hexacomp_core::Geometry;
+use hexacomp_core::model::Model;
+
+use crate::{binary, library_dir, smooth_model_for};
+
+/// The unprivileged user LinuxCNC runs as when the tests run as root (`.ci/run` creates it).
+pub const LINUXCNC_USER: &str = "hexacnc";
+/// The component's longest wait for the service in the tests, µs (of the 1 ms servo period).
+pub const WAIT_US: u32 = 900;
+/// The pins the test sampler records: the `cfg` string of its `loadrt sampler`.
+pub const SAMPLER_CFG: &str = "ffffffffffffffffffbuf";
+
+/// True when LinuxCNC and halcompile are installed. Without them the LinuxCNC tests say so and
+/// pass, unless `HEXACOMP_REQUIRE_LINUXCNC` is set (as `.ci/run` does): then they fail.
+pub fn linuxcnc_available(test: &str) -> bool {
+    let installed = ["/usr/bin/linuxcnc", "/usr/bin/halcompile"]
+        .iter()
+        .all(|p| Path::new(p).exists());
+    if !installed {
+        assert!(
+            std::env::var_os("HEXACOMP_REQUIRE_LINUXCNC").is_none(),
+            "{test}: LinuxCNC is required (HEXACOMP_REQUIRE_LINUXCNC) but not installed; \
+             apt-get install linuxcnc-uspace linuxcnc-uspace-dev"
+        );
+        eprintln!("{test}: skipped, LinuxCNC is not installed (see .ci/run)");
+    }
+    installed
+}
+
+/// The repository's `integrations/linuxcnc` directory.
+pub fn integration_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../integrations/linuxcnc")
+}
+
+/// The release build of the service and the client library (what a machine runs: a debug
+/// build inside the servo thread would time out), built once per process.
+fn release_dir() -> &'static Path {
+    static DIR: OnceLock<PathBuf> = OnceLock::new();
+    DIR.get_or_init(|| {
+        let target = library_dir()
+            .parent()
+            .expect("target/<profile>")
+            .to_path_buf();
+        let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+        let status = Command::new(cargo)
+            .args(["build", "--release", "--locked", "--quiet"])
+            .args(["-p", "hexacomp-service", "-p", "hexacomp-client"])
+            .env("CARGO_TARGET_DIR", &target)
+            .status()
+            .expect("running cargo build --release");
+        assert!(
+            status.success(),
+            "building the release service and client failed"
+        );
+        target.join("release")
+    })
+}
+
+/// Builds the HAL component against the release client library and installs it into
+/// LinuxCNC's module directory (rtapi_app loads modules only from there), once per process.
+fn install_component() {
+    static DONE: OnceLock<()> = OnceLock::new();
+    DONE.get_or_init(|| {
+        let out = std::env::temp_dir().join(format!("hexacomp-hal-{}", std::process::id()));
+        let status = Command::new(integration_dir().join("build-component.sh"))
+            .arg("--out")
+            .arg(&out)
+            .arg("--client-lib")
+            .arg(release_dir().join("libhexacomp_client.a"))
+            .stdout(Stdio::null())
+            .status()
+            .expect("running build-component.sh");
+        assert!(status.success(), "building the HAL component failed");
+        let modules = Path::new("/usr/lib/linuxcnc/modules");
+        let staged = modules.join(".hexacomp.so.new");
+        std::fs::copy(out.join("hexacomp.so"), &staged).unwrap_or_else(|e| {
+            panic!(
+                "installing the HAL component into {} needs write access ({e}): run the tests \
+                 as root or install it with `sudo integrations/linuxcnc/build-component.sh \
+                 --install`",
+                modules.display()
+            )
+        });
+        std::fs::rename(&staged, modules.join("hexacomp.so")).expect("installing hexacomp.so");
+        let _ = std::fs::remove_dir_all(out);
+    });
+}
+
+/// The user and group ids to run LinuxCNC and the service as: [`LINUXCNC_USER`] under root,
+/// else `None` (the current user).
+fn run_as() -> Option<(u32, u32)> {
+    // SAFETY: geteuid has no preconditions.
+    if unsafe { libc::geteuid() } != 0 {
+        return None;
+    }
+    let output = Command::new("id")
+        .args(["-u", LINUXCNC_USER])
+        .output()
+        .expect("running id");
+    let uid = String::from_utf8_lossy(&output.stdout).trim().parse().unwrap_or_else(|_| {
+        panic!("LinuxCNC refuses root: create the user {LINUXCNC_USER} (useradd -m {LINUXCNC_USER})")
+    });
+    let output = Command::new("id")
+        .args(["-g", LINUXCNC_USER])
+        .output()
+        .expect("running id");
+    let gid = String::from_utf8_lossy(&output.stdout)
+        .trim()
+        .parse()
+        .expect("a group id");
+    Some((uid, gid))
+}
+
+/// A prepared copy of the example configuration, removed when dropped.
+pub struct SimConfig {
+    /// The configuration directory (ini, HAL files, geometry, model, logs, results).
+    pub dir: PathBuf,
+    /// The geometry converted from the configuration (mm).
+    pub geometry: Geometry,
+    /// The model the service serves.
+    pub model: Model,
+    user: Option<(u32, u32)>,
+}
+
+impl SimConfig {
+    /// Prepares a configuration in a new directory under the system's temporary directory;
+    /// `adapt_ini` may change the ini text (the display is already replaced).
+    pub fn prepare(test: &str, adapt_ini: impl FnOnce(String) -> String) -> Self {
+        install_component();
+        let dir = std::env::temp_dir().join(format!("hexacomp-lcnc-{test}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(dir.join("config")).expect("config directory");
+        for entry in std::fs::read_dir(integration_dir().join("hexapod-sim")).expect("example") {
+            let path = entry.expect("example entry").path();
+            std::fs::copy(&path, dir.join(path.file_name().expect("a file name")))
+                .expect("copying the example configuration");
+        }
+        std::fs::copy(
+            integration_dir().join("tests/drive.py"),
+            dir.join("drive.py"),
+        )
+        .expect("copying drive.py");
+        std::fs::copy(
+            release_dir().join("hexacomp-service"),
+            dir.join("hexacomp-service"),
+        )
+        .expect("copying hexacomp-service");
+        let ini = dir.join("hexapod-hexacomp.ini");
+        let text = std::fs::read_to_string(&ini).expect("reading the ini");
+        let display = format!("DISPLAY = {}", dir.join("drive.py").display());
+        let text = adapt_ini(text.replace("DISPLAY = axis", &display));
+        // The servo thread of LinuxCNC's non-realtime mode on a shared 2-core VM is preempted for
+        // hundreds of µs; a real machine keeps the example's 200 µs.
+        let hal = dir.join("hexacomp.hal");
+        let wiring = std::fs::read_to_string(&hal).expect("reading hexacomp.hal");
+        let wiring = wiring.replace(
+            "setp hexacomp.0.wait-us 200",
+            &format!("setp hexacomp.0.wait-us {WAIT_US}"),
+        );
+        std::fs::write(&hal, wiring).expect("writing hexacomp.hal");
+        std::fs::write(&ini, text).expect("writing the ini");
+        std::fs::write(
+            dir.join("config/iceoryx2.toml"),
+            format!(
+                "[global]\nroot-path = \"{}/iceoryx2/\"\nprefix = \"{}\"\n",
+                dir.display(),
+                shm_prefix(&dir)
+            ),
+        )
+        .expect("writing the iceoryx2 config");
+
+        write_sampler_hal(&dir);
+        let geometry_file = dir.join("geometry.toml");
+        let output = Command::new(binary("hexacomp-trainer"))
+            .args(["geometry", "--from-linuxcnc"])
+            .arg(&ini)
+            .arg("--out")
+            .arg(&geometry_file)
+            .output()
+            .expect("running hexacomp-trainer geometry");
+        assert!(
+            output.status.success(),
+            "converting the LinuxCNC geometry: {}",
+            String::from_utf8_lossy(&output.stderr)
+        );
+        let geometry = Geometry::load(&geometry_file).expect("the converted geometry");
+        let model = smooth_model_for(&geometry, 3);
+        model
+            .save(&dir.join("model.hxm"))
+            .expect("saving the model");
+
+        let user = run_as();
+        if let Some((uid, gid)) = user {
+            let status = Command::new("chown")
+                .arg("-R")
+                .arg(format!("{uid}:{gid}"))
+                .arg(&dir)
+                .status()
+                .expect("running chown");
+            assert!(status.success(), "chown of {}", dir.display());
+        }
+        Self {
+            dir,
+            geometry,
+            model,
+            user,
+        }
+    }
+
+    /// A command running `program` in the configuration directory as the LinuxCNC user.
+    fn command(&self, program: impl AsRef<std::ffi::OsStr>) -> Command {
+        let mut command = Command::new(program);
+        command.current_dir(&self.dir).stdin(Stdio::null());
+        if let Some((uid, gid)) = self.user {
+            command
+                .uid(uid)
+                .gid(gid)
+                .env("HOME", &self.dir)
+                .env("USER", LINUXCNC_USER)
+                .env("LOGNAME", LINUXCNC_USER);
+        }
+        command
+    }
+
+    /// Starts `hexacomp-service` (instance `default`, this configuration's geometry and model)
+    /// and waits until it serves; `log` names its log file in the directory.
+    pub fn start_service(&self, log: &str) -> SimService {
+        let log_path = self.dir.join(log);
+        let mut child = self
+            .command(self.dir.join("hexacomp-service"))
+            .args(["--instance", "default", "--geometry", "geometry.toml"])
+            .args([
+                "--model",
+                "model.hxm",
+                "--state-dir",
+                "state",
+                "--wait",
+                "event",
+            ])
+            .stdout(Stdio::null())
+            .stderr(std::fs::File::create(&log_path).expect("service log"))
+            .spawn()
+            .expect("starting hexacomp-service");
+        let deadline = Instant::now() + Duration::from_secs(20);
+        loop {
+            let text = std::fs::read_to_string(&log_path).unwrap_or_default();
+            if text.contains("serving instance") {
+                return SimService(child);
+            }
+            if let Ok(Some(status)) = child.try_wait() {
+                panic!("hexacomp-service exited ({status}):\n{text}");
+            }
+            assert!(
+                Instant::now() < deadline,
+                "hexacomp-service did not come up:\n{text}"
+            );
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+
+    /// Starts LinuxCNC with the driver script following `plan` (JSON; `results` is set here).
+    pub fn start_linuxcnc(&self, mut plan: serde_json::Value) -> LinuxCncRun {
+        let results = self.dir.join("results.json");
+        plan["results"] = serde_json::json!(results);
+        let plan_path = self.dir.join("plan.json");
+        std::fs::write(&plan_path, plan.to_string()).expect("writing the plan");
+        let child = self
+            .command("linuxcnc")
+            .arg("hexapod-hexacomp.ini")
+            .env("HEXACOMP_DRIVE_PLAN", &plan_path)
+            .stdout(std::fs::File::create(self.dir.join("linuxcnc.out")).expect("log"))
+            .stderr(std::fs::File::create(self.dir.join("linuxcnc.err")).expect("log"))
+            .spawn()
+            .expect("starting linuxcnc");
+        LinuxCncRun {
+            child,
+            results,
+            dir: self.dir.clone(),
+        }
+    }
+
+    /// A path in the configuration directory.
+    pub fn path(&self, name: &str) -> PathBuf {
+        self.dir.join(name)
+    }
+
+    /// Loads the test sampler (`SAMPLER_CFG`: joints 0–5 leg lengths `joint.N.pos-cmd`,
+    /// 6–11 motor commands into the component, 12–17 out of it, fault, fault count, blend) with
+    /// the configuration's HAL files.
+    pub fn add_sampler(ini: String) -> String {
+        ini.replace(
+            "HALFILE = hexacomp.hal\n",
+            "HALFILE = hexacomp.hal\nHALFILE = sampling.hal\n",
+        )
+    }
+}
+
+/// Writes `sampling.hal`, the HAL file [`SimConfig::add_sampler`] names, into `dir`.
+fn write_sampler_hal(dir: &Path) {
+    let mut hal = format!("loadrt sampler depth=8000 cfg={SAMPLER_CFG}\n");
+    hal += "addf sampler.0 servo-thread\n";
+    let mut pin = 0;
+    for signal in ["hexacomp:leg-", "hexacomp:motor-", "J"] {
+        for joint in 0..6 {
+            let name = if signal == "J" {
+                format!("J{joint}:pos-cmd")
+            } else {
+                format!("{signal}{joint}")
+            };
+            hal += &format!("net {name} => sampler.0.pin.{pin}\n");
+            pin += 1;
+        }
+    }
+    hal += &format!("net hexacomp:fault => sampler.0.pin.{pin}\n");
+    hal += &format!(
+        "net hexacomp:fault-count hexacomp.0.fault-count => sampler.0.pin.{}\n",
+        pin + 1
+    );
+    hal += &format!(
+        "net hexacomp:blend hexacomp.0.blend => sampler.0.pin.{}\n",
+        pin + 2
+    );
+    std::fs::write(dir.join("sampling.hal"), hal).expect("writing sampling.hal");
+}
+
+/// The iceoryx2 file prefix of a configuration: its /dev/shm files are its own.
+fn shm_prefix(dir: &Path) -> String {
+    let name = dir.file_name().unwrap_or_default().to_string_lossy();
+    format!("{}_", name.replace("hexacomp-lcnc-", "hx").replace('-', ""))
+}
+
+impl Drop for SimConfig {
+    fn drop(&mut self) {
+        let prefix = shm_prefix(&self.dir);
+        for entry in std::fs::read_dir("/dev/shm")
+            .into_iter()
+            .flatten()
+            .flatten()
+        {
+            if entry.file_name().to_string_lossy().starts_with(&prefix) {
+                let _ = std::fs::remove_file(entry.path());
+            }
+        }
+        if !std::thread::panicking() {
+            let _ = std::fs::remove_dir_all(&self.dir);
+        }
+    }
+}
+
+/// A running `hexacomp-service` of a [`SimConfig`], killed when dropped.
+pub struct SimService(Child);
+
+impl SimService {
+    /// Kills the service with SIGKILL and reaps it.
+    pub fn kill(mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+impl Drop for SimService {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// A running LinuxCNC, killed when dropped before it finished.
+pub struct LinuxCncRun {
+    child: Child,
+    results: PathBuf,
+    dir: PathBuf,
+}
+
+impl Drop for LinuxCncRun {
+    fn drop(&mut self) {
+        if self.child.try_wait().ok().flatten().is_none() {
+            let _ = self.child.kill();
+            let _ = self.child.wait();
+        }
+    }
+}
+
+impl LinuxCncRun {
+    /// Waits for LinuxCNC to end (it ends when the driver script does) and returns the
+    /// script's results; panics with LinuxCNC's logs after `timeout` or without results.
+    pub fn finish(&mut self, timeout: Duration) -> serde_json::Value {
+        let deadline = Instant::now() + timeout;
+        while self
+            .child
+            .try_wait()
+            .expect("waiting for linuxcnc")
+            .is_none()
+        {
+            if Instant::now() > deadline {
+                let _ = self.child.kill();
+                let _ = self.child.wait();
+                panic!("LinuxCNC did not finish in {timeout:?}:\n{}", self.logs());
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        let text = std::fs::read_to_string(&self.results)
+            .unwrap_or_else(|e| panic!("no results from drive.py ({e}):\n{}", self.logs()));
+        let results: serde_json::Value = serde_json::from_str(&text).expect("results JSON");
+        assert!(
+            results["failure"].is_null(),
+            "drive.py failed: {}\n{}",
+            results["failure"].as_str().unwrap_or_default(),
+            self.logs()
+        );
+        results
+    }
+
+    fn logs(&self) -> String {
+        let mut text = String::new();
+        for name in ["linuxcnc.out", "linuxcnc.err", "service.log"] {
+            let log = std::fs::read_to_string(self.dir.join(name)).unwrap_or_default();
+            let tail: Vec<&str> = log.lines().rev().take(40).collect();
+            text += &format!("--- {name} (last lines)\n");
+            for line in tail.iter().rev() {
+                text += line;
+                text += "\n";
+            }
+        }
+        text
+    }
+}
+
+/// One servo period recorded by the test sampler, machine units (inch).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Sample {
+    /// Leg lengths `joint.N.pos-cmd`.
+    pub legs: [f64; 6],
+    /// Motor commands into the component (`joint.N.motor-pos-cmd`).
+    pub motor_in: [f64; 6],
+    /// Motor commands out of the component, to the drives.
+    pub motor_out: [f64; 6],
+    /// The component's fault pin.
+    pub fault: bool,
+    /// The component's fault count.
+    pub fault_count: u64,
+    /// The component's blend (share of the correction applied).
+    pub blend: f64,
+}
+
+/// Reads the samples drive.py recorded (one line of Python reprs per servo period).
+pub fn read_samples(path: &Path) -> Vec<Sample> {
+    let text = std::fs::read_to_string(path).expect("reading samples");
+    text.lines()
+        .map(|line| {
+            let words: Vec<&str> = line.split_whitespace().collect();
+            assert_eq!(words.len(), SAMPLER_CFG.len(), "sample line {line:?}");
+            let float = |i: usize| -> f64 { words[i].parse().expect("a float") };
+            Sample {
+                legs: std::array::from_fn(float),
+                motor_in: std::array::from_fn(|j| float(6 + j)),
+                motor_out: std::array::from_fn(|j| float(12 + j)),
+                fault: words[18] == "True",
+                fault_count: words[19].parse().expect("a count"),
+                blend: float(20),
+            }
+        })
+        .collect()
+}
