@@ -47,31 +47,8 @@ pub fn integration_dir() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../integrations/linuxcnc")
 }
 
-/// The release build of the service and the client library (what a machine runs: a debug
-/// build inside the servo thread would time out), built once per process.
-fn release_dir() -> &'static Path {
-    static DIR: OnceLock<PathBuf> = OnceLock::new();
-    DIR.get_or_init(|| {
-        let target = library_dir()
-            .parent()
-            .expect("target/<profile>")
-            .to_path_buf();
-        let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-        let status = Command::new(cargo)
-            .args(["build", "--release", "--locked", "--quiet"])
-            .args(["-p", "hexacomp-service", "-p", "hexacomp-client"])
-            .env("CARGO_TARGET_DIR", &target)
-            .status()
-            .expect("running cargo build --release");
-        assert!(
-            status.success(),
-            "building the release service and client failed"
-        );
-        target.join("release")
-    })
-}
-
-/// Builds the HAL component against the release client library and installs it into
+/// Builds the HAL component against the client library of this build (the workspace's dev
+/// profile is optimised) and installs it into
 /// LinuxCNC's module directory (rtapi_app loads modules only from there), once per process.
 fn install_component() {
     static DONE: OnceLock<()> = OnceLock::new();
@@ -81,7 +58,7 @@ fn install_component() {
             .arg("--out")
             .arg(&out)
             .arg("--client-lib")
-            .arg(release_dir().join("libhexacomp_client.a"))
+            .arg(library_dir().join("libhexacomp_client.a"))
             .stdout(Stdio::null())
             .status()
             .expect("running build-component.sh");
@@ -108,21 +85,16 @@ fn run_as() -> Option<(u32, u32)> {
     if unsafe { libc::geteuid() } != 0 {
         return None;
     }
-    let output = Command::new("id")
-        .args(["-u", LINUXCNC_USER])
-        .output()
-        .expect("running id");
-    let uid = String::from_utf8_lossy(&output.stdout).trim().parse().unwrap_or_else(|_| {
-        panic!("LinuxCNC refuses root: create the user {LINUXCNC_USER} (useradd -m {LINUXCNC_USER})")
-    });
-    let output = Command::new("id")
-        .args(["-g", LINUXCNC_USER])
-        .output()
-        .expect("running id");
-    let gid = String::from_utf8_lossy(&output.stdout)
-        .trim()
-        .parse()
-        .expect("a group id");
+    let name = std::ffi::CString::new(LINUXCNC_USER).expect("a user name");
+    // SAFETY: `name` is a valid C string; getpwnam returns null or a pointer to a static entry,
+    // read at once on this thread.
+    let entry = unsafe { libc::getpwnam(name.as_ptr()) };
+    assert!(
+        !entry.is_null(),
+        "LinuxCNC refuses root: create the user {LINUXCNC_USER} (useradd -m {LINUXCNC_USER})"
+    );
+    // SAFETY: checked non-null above.
+    let (uid, gid) = unsafe { ((*entry).pw_uid, (*entry).pw_gid) };
     Some((uid, gid))
 }
 
@@ -155,11 +127,8 @@ impl SimConfig {
             dir.join("drive.py"),
         )
         .expect("copying drive.py");
-        std::fs::copy(
-            release_dir().join("hexacomp-service"),
-            dir.join("hexacomp-service"),
-        )
-        .expect("copying hexacomp-service");
+        std::fs::copy(binary("hexacomp-service"), dir.join("hexacomp-service"))
+            .expect("copying hexacomp-service");
         let ini = dir.join("hexapod-hexacomp.ini");
         let text = std::fs::read_to_string(&ini).expect("reading the ini");
         let display = format!("DISPLAY = {}", dir.join("drive.py").display());
