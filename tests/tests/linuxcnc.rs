@@ -69,6 +69,63 @@ fn compensating(samples: &[Sample]) -> Vec<Sample> {
         .collect()
 }
 
+/// Largest difference between a correction the component added and the one it should have, in:
+/// the rounding of `motor_in + correction`, far below the corrections (1e-3 in).
+const CORRECTION_TOLERANCE_IN: f64 = 1e-12;
+
+/// What [`check_periods`] saw.
+struct PeriodCheck {
+    /// Periods faulted (no good answer in time).
+    faults: usize,
+    /// Largest |added − service's correction| over the periods not faulted, in.
+    worst: f64,
+    /// Largest service correction, in.
+    largest_correction: f64,
+}
+
+/// Checks every period (the first must not be faulted): without a fault the component added the
+/// service's correction for that period's legs, with one it held the previous period's.
+fn check_periods(sim: &SimConfig, periods: &[Sample]) -> PeriodCheck {
+    assert!(!periods[0].fault, "the checked periods start with a fault");
+    let mut check = PeriodCheck {
+        faults: 0,
+        worst: 0.0,
+        largest_correction: 0.0,
+    };
+    for (i, sample) in periods.iter().enumerate() {
+        let added = applied_correction(sample);
+        if sample.fault {
+            check.faults += 1;
+            let held = applied_correction(&periods[i - 1]);
+            assert!(
+                max_difference(added, held) <= CORRECTION_TOLERANCE_IN,
+                "faulted period did not hold the correction: {sample:?}"
+            );
+            continue;
+        }
+        let expected = expected_correction(sim, sample);
+        let difference = max_difference(added, expected);
+        check.worst = check.worst.max(difference);
+        check.largest_correction = (expected.iter())
+            .map(|c| c.abs())
+            .fold(check.largest_correction, f64::max);
+        assert!(
+            difference <= CORRECTION_TOLERANCE_IN,
+            "legs {:?}: added {added:?}, the service's {expected:?}",
+            sample.legs
+        );
+    }
+    check
+}
+
+/// Periods in which the legs moved.
+fn moving_periods(periods: &[Sample]) -> usize {
+    periods
+        .windows(2)
+        .filter(|w| w[0].legs != w[1].legs)
+        .count()
+}
+
 #[test]
 fn linuxcnc_joints_equal_hexacomp_inverse_kinematics_for_mdi_poses() {
     if !linuxcnc_available("mdi_inverse_kinematics") {
@@ -188,33 +245,11 @@ fn a_program_runs_with_the_component_adding_the_services_corrections() {
         "{} compensated periods",
         compensating.len()
     );
-    let mut worst = 0.0f64;
-    let mut largest_correction = 0.0f64;
-    let mut faults = 0usize;
-    for (i, sample) in compensating.iter().enumerate() {
-        if sample.fault {
-            // A period without an answer in time: the previous period's correction, held.
-            faults += 1;
-            let held = applied_correction(&compensating[i - 1]);
-            assert!(
-                max_difference(applied_correction(sample), held) <= 1e-12,
-                "{sample:?}"
-            );
-            continue;
-        }
-        let expected = expected_correction(&sim, sample);
-        let difference = max_difference(applied_correction(sample), expected);
-        worst = worst.max(difference);
-        largest_correction =
-            largest_correction.max(expected.iter().map(|c| c.abs()).fold(0.0, f64::max));
-        // 1e-12 in: rounding of motor_in + correction, far below the corrections (1e-3 in).
-        assert!(
-            difference <= 1e-12,
-            "legs {:?}: applied {:?}, expected {expected:?}",
-            sample.legs,
-            applied_correction(sample)
-        );
-    }
+    let PeriodCheck {
+        faults,
+        worst,
+        largest_correction,
+    } = check_periods(&sim, &compensating);
     // Not zero on this VM: LinuxCNC's non-realtime servo thread and the service share two
     // cores with everything else, and a period now and then misses even a 900 µs wait.
     assert!(
@@ -222,10 +257,7 @@ fn a_program_runs_with_the_component_adding_the_services_corrections() {
         "{faults} of {} periods faulted (more than 0.5 %)",
         compensating.len()
     );
-    let moved = compensating
-        .windows(2)
-        .filter(|w| w[0].legs != w[1].legs)
-        .count();
+    let moved = moving_periods(&compensating);
     assert!(moved > 2000, "the legs moved in only {moved} periods");
     assert!(
         results["errors"].as_array().is_some_and(|e| e.is_empty()),
@@ -282,9 +314,9 @@ fn killing_the_service_mid_program_faults_holds_and_recovers() {
     assert!(!before.fault);
     let held = applied_correction(&before);
     for sample in &compensating[first..end] {
-        // The last good correction, held (1e-12 in: rounding of motor_in + correction).
+        // The last good correction, held.
         assert!(
-            max_difference(applied_correction(sample), held) <= 1e-12,
+            max_difference(applied_correction(sample), held) <= CORRECTION_TOLERANCE_IN,
             "{sample:?}"
         );
     }
@@ -301,28 +333,17 @@ fn killing_the_service_mid_program_faults_holds_and_recovers() {
         (end - first) as u64
     );
     // Recovered: the service's corrections again, the program ran to its end.
-    for sample in &compensating[end..] {
-        if !sample.fault {
-            let difference = max_difference(
-                applied_correction(sample),
-                expected_correction(&sim, sample),
-            );
-            assert!(difference <= 1e-12, "after recovery {sample:?}");
-        }
-    }
-    let moved_after = compensating[end..]
-        .windows(2)
-        .filter(|w| w[0].legs != w[1].legs)
-        .count();
+    check_periods(&sim, &compensating[end..]);
+    let moved_after = moving_periods(&compensating[end..]);
     assert!(
         moved_after > 500,
         "the machine moved {moved_after} periods after recovery"
     );
     eprintln!(
-        "outage {} periods: correction held, legs still from period {} on; {} periods moving \
+        "outage {} periods: correction held, legs still from period {} of it on; {} periods moving \
          after recovery; program {:.1} s",
         end - first,
-        500,
+        stopped - first,
         moved_after,
         results["program"]["seconds"].as_f64().unwrap_or_default()
     );
