@@ -45,17 +45,17 @@ pub fn validate(bytes: &[u8], geometry: &Geometry) -> Result<Model, String> {
     }
     // The legs of workspace poses, not the training-range box: most of the six-dimensional box
     // is leg combinations no pose has, where a network extrapolates freely and is never asked.
+    let unsampleable =
+        |e: hexacomp_core::Error| format!("cannot sample the geometry's workspace: {e}");
     let mut poses = WorkspaceSampler::new(geometry, 0x6865_7861, SamplerOptions::default())
-        .map_err(|e| format!("cannot sample the geometry's workspace: {e}"))?;
+        .map_err(unsampleable)?;
     let mut outside = 0usize;
     let mut checked = 0usize;
     for sample in 0..SAMPLES {
         if sample % SAMPLES_PER_SLICE == 0 {
             std::thread::yield_now();
         }
-        let pose = poses
-            .sample()
-            .map_err(|e| format!("cannot sample the geometry's workspace: {e}"))?;
+        let pose = poses.sample().map_err(unsampleable)?;
         let q = inverse_kinematics(geometry, &pose).lengths;
         let trained = (0..LEGS).all(|i| {
             let [lo, hi] = model.training_range[i];

@@ -116,21 +116,20 @@ impl LinuxCncHexapod {
         }
         let home = parse_numbers::<6>(ini.first("TRAJ", "HOME").unwrap_or("0 0 0 0 0 0"))
             .map_err(|m| fail(format!("[TRAJ]HOME: {m}")))?;
+        let limit = |leg: usize, key: &str| -> Result<f64> {
+            let section = format!("JOINT_{leg}");
+            let text = ini
+                .first(&section, key)
+                .ok_or_else(|| fail(format!("no [{section}]{key}: the leg travel is needed")))?;
+            let [value] =
+                parse_numbers::<1>(text).map_err(|m| fail(format!("[{section}]{key}: {m}")))?;
+            Ok(value)
+        };
+        // The travel every leg allows.
         let mut joint_limits = [f64::NEG_INFINITY, f64::INFINITY];
         for leg in 0..LEGS {
-            let section = format!("JOINT_{leg}");
-            for (key, bound) in [("MIN_LIMIT", 0), ("MAX_LIMIT", 1)] {
-                let text = ini.first(&section, key).ok_or_else(|| {
-                    fail(format!("no [{section}]{key}: the leg travel is needed"))
-                })?;
-                let [value] =
-                    parse_numbers::<1>(text).map_err(|m| fail(format!("[{section}]{key}: {m}")))?;
-                joint_limits[bound] = if bound == 0 {
-                    joint_limits[0].max(value)
-                } else {
-                    joint_limits[1].min(value)
-                };
-            }
+            joint_limits[0] = joint_limits[0].max(limit(leg, "MIN_LIMIT")?);
+            joint_limits[1] = joint_limits[1].min(limit(leg, "MAX_LIMIT")?);
         }
         let machine = ini
             .first("EMC", "MACHINE")
