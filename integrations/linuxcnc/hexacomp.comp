@@ -56,7 +56,6 @@ modparam dummy instance "Name of the hexacomp-service instance to use (default: 
 variable void *connection;
 variable double held[6];
 variable double retry_in;
-variable unsigned applied_wait_us;
 
 option extra_setup yes;
 option extra_cleanup yes;
@@ -82,7 +81,6 @@ static int try_connect(struct __comp_state *__comp_inst) {
         return 0;
     }
     connection = client;
-    applied_wait_us = wait_us;
     rtapi_print_msg(RTAPI_MSG_INFO, "hexacomp: connected to instance '%s'\n", instance);
     return 1;
 }
@@ -119,10 +117,8 @@ static int ask_service(struct __comp_state *__comp_inst, long period) {
         retry_in = RETRY_INTERVAL_S;
         if (!try_connect(__comp_inst)) return 0;
     }
-    if (applied_wait_us != wait_us) {
-        hexacomp_set_timeout((HexacompClient *)connection, wait_us);
-        applied_wait_us = wait_us;
-    }
+    /* wait-us may change at run time; setting it is a field store. */
+    hexacomp_set_timeout((HexacompClient *)connection, wait_us);
     for (i = 0; i < 6; i++) legs_mm[i] = joint_in(i) * mm_per_unit;
     result = hexacomp_compensate_joints((HexacompClient *)connection, legs_mm, &answer);
     last_error = result;
