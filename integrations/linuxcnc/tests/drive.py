@@ -52,6 +52,27 @@ def component_state():
     return ", ".join(f"{pin} {hal.get_value('hexacomp.0.' + pin)}" for pin in pins)
 
 
+def joint_outputs():
+    return [stat.joint[j]["output"] for j in range(6)]
+
+
+def steady_joints(seconds, where):
+    """The joint outputs once two polls 50 ms apart read exactly the same values."""
+    deadline = time.time() + seconds
+    stat.poll()
+    previous = joint_outputs()
+    while time.time() < deadline:
+        time.sleep(0.05)
+        stat.poll()
+        collect_errors()
+        current = joint_outputs()
+        if current == previous:
+            return current
+        previous = current
+    step = max(abs(a - b) for a, b in zip(current, previous))
+    raise TimeoutError(f"joints at {where} still moving after {seconds} s (last step {step:.3e})")
+
+
 def prepare_machine():
     command.state(linuxcnc.STATE_ESTOP_RESET)
     command.state(linuxcnc.STATE_ON)
@@ -73,15 +94,13 @@ def move_to_poses(poses):
         if outcome != linuxcnc.RCS_DONE:
             collect_errors()
             raise RuntimeError(f"MDI G0 {words}: wait_complete gave {outcome}; {component_state()}")
-        # The commanded position at the pose and the joints still: the move is over.
+        # The commanded position at the pose: the move is over, but for the planner's last steps,
+        # which may still be below the 1e-9 tolerance, so the joints are read once they are still.
         def settled():
             at_pose = all(abs(stat.position[k] - pose[k]) < 1e-9 for k in range(6))
             return at_pose and stat.inpos and stat.queue == 0
         wait_until(settled, 10, f"reaching {words}")
-        joints = [stat.joint[j]["output"] for j in range(6)]
-        time.sleep(0.02)
-        wait_until(lambda: [stat.joint[j]["output"] for j in range(6)] == joints, 10,
-                   f"joints still at {words}")
+        joints = steady_joints(10, words)
         RESULTS["mdi"].append({
             "pose": pose,
             "position": list(stat.position[:6]),
