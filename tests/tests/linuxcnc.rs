@@ -17,7 +17,9 @@ use std::time::Duration;
 use hexacomp_core::compensator::{PointStatus, compensate_legs};
 use hexacomp_core::sampling::{SamplerOptions, WorkspaceSampler};
 use hexacomp_core::{Pose, inverse_kinematics};
-use hexacomp_tests::linuxcnc::{Sample, SimConfig, SimService, linuxcnc_available, read_samples};
+use hexacomp_tests::linuxcnc::{
+    Sample, SimConfig, SimService, linuxcnc_available, read_samples, realtime_kernel,
+};
 use serde_json::json;
 
 /// One LinuxCNC at a time.
@@ -250,11 +252,17 @@ fn a_program_runs_with_the_component_adding_the_services_corrections() {
         worst,
         largest_correction,
     } = check_periods(&sim, &compensating);
-    // Not zero on this VM: LinuxCNC's non-realtime servo thread and the service share two
-    // cores with everything else, and a period now and then misses even a 900 µs wait.
+    // No fault where LinuxCNC runs realtime. Without PREEMPT_RT its servo thread is an ordinary
+    // thread sharing the cores, and now and then a period misses even a 900 µs wait.
+    let realtime = realtime_kernel();
+    let allowed = if realtime {
+        0
+    } else {
+        compensating.len() / 200
+    };
     assert!(
-        faults * 200 <= compensating.len(),
-        "{faults} of {} periods faulted (more than 0.5 %)",
+        faults <= allowed,
+        "{faults} of {} periods faulted, at most {allowed} allowed (realtime kernel: {realtime})",
         compensating.len()
     );
     let moved = moving_periods(&compensating);
@@ -267,7 +275,7 @@ fn a_program_runs_with_the_component_adding_the_services_corrections() {
     eprintln!(
         "{} compensated periods ({moved} moving), largest correction {largest_correction:.6} in, \
          largest |applied − service| {worst:.1e} in, {faults} periods faulted (timeouts, \
-         correction held), {} in the whole run; program {:.1} s",
+         correction held), {} in the whole run, homing included; program {:.1} s",
         compensating.len(),
         last.fault_count,
         results["program"]["seconds"].as_f64().unwrap_or_default()
