@@ -35,14 +35,14 @@ def collect_errors():
         RESULTS["errors"].append(message[1])
 
 
-def wait_until(condition, seconds, what):
+def wait_until(condition, seconds, what, interval=0.01):
     deadline = time.time() + seconds
     while time.time() < deadline:
         stat.poll()
         collect_errors()
         if condition():
             return
-        time.sleep(0.01)
+        time.sleep(interval)
     raise TimeoutError(f"{what} within {seconds} s")
 
 
@@ -58,19 +58,14 @@ def joint_outputs():
 
 def steady_joints(seconds, where):
     """The joint outputs once two polls 50 ms apart read exactly the same values."""
-    deadline = time.time() + seconds
-    stat.poll()
-    previous = joint_outputs()
-    while time.time() < deadline:
-        time.sleep(0.05)
-        stat.poll()
-        collect_errors()
-        current = joint_outputs()
-        if current == previous:
-            return current
-        previous = current
-    step = max(abs(a - b) for a, b in zip(current, previous))
-    raise TimeoutError(f"joints at {where} still moving after {seconds} s (last step {step:.3e})")
+    readings = []
+
+    def still():
+        readings.append(joint_outputs())
+        return len(readings) > 1 and readings[-1] == readings[-2]
+
+    wait_until(still, seconds, f"joints still at {where}", interval=0.05)
+    return readings[-1]
 
 
 def prepare_machine():
