@@ -224,7 +224,7 @@ impl SimConfig {
                 "model.hxm",
                 "--state-dir",
                 "state",
-                // Spinning on a core of its own: LinuxCNC's servo thread runs on the last one.
+                // Spinning on CPU 0: LinuxCNC's servo thread runs on the last one.
                 "--wait",
                 "spin",
                 "--cpu",
