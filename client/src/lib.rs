@@ -23,15 +23,17 @@
 #![warn(missing_docs)]
 
 pub mod c_api;
+mod waiting;
 pub mod wire;
 
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use hexacomp_core::compensator::PointStatus;
 use iceoryx2::port::client::Client as Port;
 use iceoryx2::prelude::*;
 use iceoryx2::service::port_factory::request_response::PortFactory;
 use thiserror::Error;
+use waiting::Waiter;
 
 use wire::{
     DeployReply, MAX_BATCH, MAX_MODEL_BYTES, PROTOCOL_VERSION, PointRequest, PointResponse,
@@ -250,6 +252,8 @@ pub struct Client {
     _wake_factory: Option<iceoryx2::service::port_factory::event::PortFactory<ipc::Service>>,
     _node: Node<ipc::Service>,
     timeout: Duration,
+    /// How compensation calls wait for their answers.
+    waiter: Waiter,
 }
 
 impl std::fmt::Debug for Client {
@@ -313,6 +317,7 @@ impl Client {
             _wake_factory: None,
             _node: node,
             timeout: options.timeout,
+            waiter: Waiter::default(),
         };
         // A service that sleeps in a WaitSet needs a notification after each request.
         if client.status_report()?.wait_mode == wire::WAIT_EVENT {
@@ -388,7 +393,7 @@ impl Client {
         if let Some(wake) = &self.wake {
             wake.notify().map_err(transport)?;
         }
-        let response = wait_for(self.timeout, || pending.receive())?;
+        let response = self.waiter.wait_for(self.timeout, || pending.receive())?;
         let header = *response.user_header();
         if header.protocol != PROTOCOL_VERSION
             || header.outcome == RequestOutcome::ProtocolMismatch as u32
@@ -435,7 +440,7 @@ impl Client {
     /// would fail every status request (and every connect).
     fn status_report(&mut self) -> Result<StatusReport, Error> {
         let pending = self.status.send_copy(0).map_err(transport)?;
-        let report = wait_for(self.timeout.max(MIN_CONTROL_DEADLINE), || {
+        let report = Waiter::default().wait_for(self.timeout.max(MIN_CONTROL_DEADLINE), || {
             pending.receive().map(|r| r.map(|r| *r.payload()))
         })?;
         if report.protocol != PROTOCOL_VERSION {
@@ -482,7 +487,7 @@ impl Client {
             .map_err(transport)?
             .write_from_fn(|i| model_file[i]);
         let pending = request.send().map_err(transport)?;
-        let reply = wait_for(self.timeout * 10, || {
+        let reply = Waiter::default().wait_for(self.timeout * 10, || {
             pending.receive().map(|r| r.map(|r| *r.payload()))
         })?;
         Ok(if reply.accepted == 1 {
@@ -508,35 +513,6 @@ impl CompensatedPoint {
             status: PointStatus::NoModel,
             generation: 0,
         }
-    }
-}
-
-/// Polls `receive` until it yields or `timeout` has passed.
-fn wait_for<T, E: std::fmt::Display>(
-    timeout: Duration,
-    mut receive: impl FnMut() -> Result<Option<T>, E>,
-) -> Result<T, Error> {
-    let deadline = Instant::now() + timeout;
-    let mut spins = 0u32;
-    loop {
-        if let Some(value) = receive().map_err(transport)? {
-            return Ok(value);
-        }
-        if Instant::now() > deadline {
-            return Err(Error::Timeout { timeout });
-        }
-        wait_a_little(&mut spins);
-    }
-}
-
-/// Spins briefly (the answer usually comes within microseconds), then yields the core so that a
-/// 2-core machine keeps the service running.
-fn wait_a_little(spins: &mut u32) {
-    *spins += 1;
-    if *spins < 2000 {
-        std::hint::spin_loop();
-    } else {
-        std::thread::yield_now();
     }
 }
 

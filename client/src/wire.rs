@@ -19,6 +19,9 @@ pub const MAX_MODEL_BYTES: usize = 1 << 20;
 /// Clients one service instance admits.
 pub const MAX_CLIENTS: usize = 32;
 
+/// Compensation requests one client may have waiting for their answers at once.
+pub const MAX_REQUESTS_IN_FLIGHT: usize = 4;
+
 /// Nodes that may use one endpoint: every client, plus the service's own threads and a margin
 /// for tools (status, deploy) connecting at the same time.
 pub const MAX_NODES: usize = MAX_CLIENTS + 4;

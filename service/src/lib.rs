@@ -8,8 +8,10 @@
 #![warn(missing_docs)]
 
 pub mod admission;
+pub mod answering;
 pub mod cli;
 pub mod control;
+pub mod fair_queue;
 pub mod realtime;
 pub mod serving;
 pub mod state;

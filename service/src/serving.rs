@@ -8,8 +8,8 @@ use std::time::Duration;
 
 use crossbeam_channel::{Receiver, Sender};
 use hexacomp_client::wire::{
-    MAX_BATCH, MAX_CLIENTS, MAX_NODES, PROTOCOL_VERSION, PointRequest, PointResponse,
-    RequestHeader, RequestKind, RequestOutcome, ResponseHeader,
+    MAX_BATCH, MAX_CLIENTS, MAX_NODES, MAX_REQUESTS_IN_FLIGHT, PROTOCOL_VERSION, PointRequest,
+    PointResponse, RequestHeader, RequestKind, RequestOutcome, ResponseHeader,
 };
 use hexacomp_client::{Endpoint, iceoryx_name};
 use hexacomp_core::compensator::{compensate_legs, compensate_pose};
@@ -18,7 +18,7 @@ use iceoryx2::prelude::*;
 use iceoryx2::waitset::WaitSetRunResult;
 use iceoryx2_bb_posix::signal::SignalHandler;
 
-use crate::admission::Admission;
+use crate::answering::Answerer;
 use crate::{Counters, Generation};
 
 /// Computes one point of a request. Allocation-free.
@@ -134,7 +134,7 @@ pub fn compensation_endpoint(
         .response_user_header::<ResponseHeader>()
         .max_clients(MAX_CLIENTS)
         .max_servers(1)
-        .max_active_requests_per_client(4)
+        .max_active_requests_per_client(MAX_REQUESTS_IN_FLIGHT)
         .max_nodes(MAX_NODES)
         // Open when clients still hold the service of a killed server: its dead node is
         // cleaned up when this node is created, which frees the one server slot.
@@ -165,7 +165,6 @@ pub fn serve(setup: ServingSetup, ready: Sender<Result<(), String>>) {
         wait,
         client_budget,
     } = setup;
-    let mut admission = Admission::new(client_budget);
     let started = (|| -> Result<_, String> {
         let node = NodeBuilder::new()
             .create::<ipc::Service>()
@@ -209,6 +208,7 @@ pub fn serve(setup: ServingSetup, ready: Sender<Result<(), String>>) {
             .zip(waitset.attach_interval(Duration::from_millis(10)).ok()),
         _ => None,
     };
+    let mut answerer = Answerer::new(&server, &geometry, &counters, client_budget);
     while !stop.load(Ordering::Relaxed) {
         // A new model switches in between two requests; the old one goes back to be freed.
         if let Ok(next) = incoming.try_recv() {
@@ -217,16 +217,8 @@ pub fn serve(setup: ServingSetup, ready: Sender<Result<(), String>>) {
                 let _ = retired.try_send(old);
             }
         }
-        match server.receive() {
-            Ok(Some(active)) => answer(
-                &active,
-                &server,
-                &geometry,
-                current.as_deref(),
-                &mut admission,
-                &counters,
-            ),
-            Ok(None) => match (&waitset, &wake, &guards) {
+        if !answerer.answer_next(current.as_deref()) {
+            match (&waitset, &wake, &guards) {
                 (Some(waitset), Some((_, listener)), Some(_)) => {
                     let result = waitset.wait_and_process_once_with_timeout(
                         |_| CallbackProgression::Continue,
@@ -253,92 +245,12 @@ pub fn serve(setup: ServingSetup, ready: Sender<Result<(), String>>) {
                         stop.store(true, Ordering::Relaxed);
                     }
                 }
-            },
-            Err(e) => {
-                tracing::warn!("receiving a request failed: {e:?}");
-                counters.errors.fetch_add(1, Ordering::Relaxed);
             }
         }
     }
     if let Some(old) = current.take() {
         let _ = retired.try_send(old);
     }
-}
-
-type ActiveRequest = iceoryx2::active_request::ActiveRequest<
-    ipc::Service,
-    [PointRequest],
-    RequestHeader,
-    [PointResponse],
-    ResponseHeader,
->;
-
-/// What to do with a request: compute its points, or answer at once with an outcome and none.
-fn triage(
-    header: &RequestHeader,
-    count: usize,
-    client: u128,
-    admission: &mut Admission,
-    others_waiting: impl FnOnce() -> bool,
-) -> Result<RequestKind, RequestOutcome> {
-    let kind = check_header(header)?;
-    if count > MAX_BATCH {
-        return Err(RequestOutcome::BatchTooLarge);
-    }
-    if !admission.admit(client, count, std::time::Instant::now, others_waiting) {
-        return Err(RequestOutcome::Overloaded);
-    }
-    Ok(kind)
-}
-
-/// Answers one request from its loaned payload straight into a loaned response.
-fn answer(
-    active: &ActiveRequest,
-    server: &CompensationServer,
-    geometry: &Geometry,
-    model: Option<&Generation>,
-    admission: &mut Admission,
-    counters: &Counters,
-) {
-    let header = *active.user_header();
-    let points = active.payload();
-    let count = points.len();
-    let others_waiting = || server.has_requests().unwrap_or(false);
-    let triaged = triage(
-        &header,
-        count,
-        active.origin().value(),
-        admission,
-        others_waiting,
-    );
-    let (outcome, kind) = match triaged {
-        Ok(kind) => (RequestOutcome::Served, Some(kind)),
-        Err(outcome) => (outcome, None),
-    };
-    let sent = match active.loan_slice_uninit(if kind.is_some() { count } else { 0 }) {
-        Ok(loan) => {
-            let mut response = loan.write_from_fn(|i| match kind {
-                Some(kind) => compute_point(geometry, model, kind, &points[i]),
-                None => PointResponse::default(),
-            });
-            *response.user_header_mut() = ResponseHeader {
-                protocol: PROTOCOL_VERSION,
-                outcome: outcome as u32,
-                generation: model.map_or(0, |g| g.number),
-            };
-            response.send().is_ok()
-        }
-        Err(_) => false,
-    };
-    let counter = match (sent, outcome) {
-        (true, RequestOutcome::Served) => {
-            counters.points.fetch_add(count as u64, Ordering::Relaxed);
-            &counters.requests
-        }
-        (true, RequestOutcome::Overloaded) => &counters.overloaded,
-        _ => &counters.errors,
-    };
-    counter.fetch_add(1, Ordering::Relaxed);
 }
 
 type WakeParts = (
