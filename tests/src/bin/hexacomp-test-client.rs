@@ -63,6 +63,13 @@ enum Command {
         #[arg(long, default_value_t = 2.0)]
         seconds: f64,
     },
+    /// Keep one core busy as `flood` and `no-collect` do (a loop that yields), without talking to
+    /// the service: the control that takes the same CPU as a misbehaving client.
+    Burn {
+        /// How long, seconds.
+        #[arg(long, default_value_t = 2.0)]
+        seconds: f64,
+    },
     /// One request with more points than a request may carry.
     Oversize {
         /// Points in the request.
@@ -97,6 +104,7 @@ fn main() -> anyhow::Result<()> {
         Command::NoCollect { seconds } => {
             no_collect(&args.instance, Duration::from_secs_f64(seconds))?
         }
+        Command::Burn { seconds } => burn(Duration::from_secs_f64(seconds)),
         Command::Oversize { points } => oversize(&args.instance, points)?,
         Command::DeployAndDie { model } => deploy_and_die(&args.instance, &model)?,
     };
@@ -252,6 +260,16 @@ fn no_collect(instance: &str, duration: Duration) -> anyhow::Result<serde_json::
         }
     }
     Ok(json!({ "mode": "no-collect", "sent": sent, "limit_hits": limit_hits }))
+}
+
+fn burn(duration: Duration) -> serde_json::Value {
+    let start = Instant::now();
+    let mut loops = 0u64;
+    while start.elapsed() < duration {
+        loops += 1;
+        std::thread::yield_now();
+    }
+    json!({ "mode": "burn", "loops": loops })
 }
 
 fn oversize(instance: &str, points: usize) -> anyhow::Result<serde_json::Value> {
