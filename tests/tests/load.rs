@@ -27,9 +27,11 @@ const ROUNDS: usize = 2;
 const CLIENT_BUDGET: &str = "300000";
 
 /// The share of their throughput the well-behaved clients may lose to the flooder and the
-/// client that never reads, beyond the CPU those take (measured: 7–11 % on a 2-core machine; see the fairness section of
-/// the README).
-const MAX_THROUGHPUT_LOSS: f64 = 0.25;
+/// client that never reads, beyond the CPU those take. Measured on a 2-core machine: 1–15 %
+/// lost on the whole, the worst client up to 17 % when idle and up to 40 % with other heavy load
+/// (a build, a package install) beside the test; the serving loop without the fair queue lost
+/// 55–70 % (worst client 72–86 %).
+const MAX_THROUGHPUT_LOSS: f64 = 0.4;
 
 /// Starts the sixteen 1 kHz clients (every fourth sends batches of 16) and the misbehaving
 /// clients `others` (test-client argument lists) at once; returns their reports.
