@@ -27,10 +27,10 @@ const ROUNDS: usize = 2;
 const CLIENT_BUDGET: &str = "300000";
 
 /// The share of their throughput the well-behaved clients may lose to the flooder and the
-/// client that never reads, beyond the CPU those take. Measured on a 2-core machine: 1–15 %
-/// lost on the whole, the worst client up to 17 % when idle and up to 40 % with other heavy load
-/// (a build, a package install) beside the test; the serving loop without the fair queue lost
-/// 55–70 % (worst client 72–86 %).
+/// client that never reads, beyond the CPU those take. Measured on a 2-core machine, 22 runs:
+/// 1–16 % lost on the whole and the worst client up to 20 % when idle or beside a release build,
+/// 25 % (worst client 31 %) in one run with a package install beside it; the serving loop
+/// without the fair queue lost 55–69 % (worst client 72–86 %).
 const MAX_THROUGHPUT_LOSS: f64 = 0.4;
 
 /// Starts the sixteen 1 kHz clients (every fourth sends batches of 16) and the misbehaving
