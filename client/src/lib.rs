@@ -26,7 +26,7 @@ pub mod c_api;
 mod waiting;
 pub mod wire;
 
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use hexacomp_core::compensator::PointStatus;
 use iceoryx2::port::client::Client as Port;
@@ -438,11 +438,32 @@ impl Client {
     /// Waits at least [`MIN_CONTROL_DEADLINE`]: the service answers status requests from its
     /// control thread, which polls every 10 ms, so a compensation deadline of a few hundred µs
     /// would fail every status request (and every connect).
+    /// A request that reached no status server (the endpoint outlives a killed service, and a
+    /// restarted one creates its server a moment after its compensation endpoint) would never
+    /// be answered: it is sent again, every millisecond, until one receives it or the deadline
+    /// passes.
     fn status_report(&mut self) -> Result<StatusReport, Error> {
-        let pending = self.status.send_copy(0).map_err(transport)?;
-        let report = Waiter::default().wait_for(self.timeout.max(MIN_CONTROL_DEADLINE), || {
-            pending.receive().map(|r| r.map(|r| *r.payload()))
-        })?;
+        let timeout = self.timeout.max(MIN_CONTROL_DEADLINE);
+        let deadline = Instant::now() + timeout;
+        let pending = loop {
+            let pending = self.status.send_copy(0).map_err(transport)?;
+            if pending.number_of_server_connections() > 0 {
+                break pending;
+            }
+            if Instant::now() >= deadline {
+                return Err(Error::Timeout { timeout });
+            }
+            std::thread::sleep(Duration::from_millis(1));
+        };
+        let remaining = deadline.saturating_duration_since(Instant::now());
+        let report = Waiter::default()
+            .wait_for(remaining, || {
+                pending.receive().map(|r| r.map(|r| *r.payload()))
+            })
+            .map_err(|e| match e {
+                Error::Timeout { .. } => Error::Timeout { timeout },
+                other => other,
+            })?;
         if report.protocol != PROTOCOL_VERSION {
             return Err(Error::ProtocolMismatch {
                 service: report.protocol,
