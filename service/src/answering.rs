@@ -95,13 +95,19 @@ impl<'a> Answerer<'a> {
         }
     }
 
-    /// Between two steps of a large batch: answers the small requests that wait, fairly.
+    /// Between two steps of a large batch: answers the small requests that wait, at most one
+    /// per client, in the order they arrived, outside the rounds (the batch's round goes on).
     fn answer_small_waiting(&mut self, model: Option<&Generation>) {
         self.receive_waiting();
-        while let Some((client, active)) = self
-            .waiting
-            .pop_where(|active| active.payload().len() <= STEP_POINTS)
-        {
+        let mut answered = [0u128; MAX_CLIENTS];
+        let mut count = 0;
+        while let Some((client, active)) = self.waiting.take_first(|client, active| {
+            active.payload().len() <= STEP_POINTS && !answered[..count].contains(&client)
+        }) {
+            if count < MAX_CLIENTS {
+                answered[count] = client;
+                count += 1;
+            }
             self.answer(&active, client, model);
         }
     }

@@ -51,31 +51,20 @@ impl<R> FairQueue<R> {
     /// The next request to answer and its client: the earliest-arrived request of a client not
     /// yet answered this round; when every waiting client has been, a new round starts.
     pub fn pop(&mut self) -> Option<(u128, R)> {
-        self.pop_where(|_| true)
-    }
-
-    /// Like [`pop`](Self::pop), among the requests for which `eligible` holds only.
-    pub fn pop_where(&mut self, mut eligible: impl FnMut(&R) -> bool) -> Option<(u128, R)> {
-        let mut first_eligible = None;
-        let mut next = None;
-        for (index, (client, request)) in self.waiting.iter().enumerate() {
-            if !eligible(request) {
-                continue;
-            }
-            first_eligible.get_or_insert(index);
-            if !self.answered.contains(client) {
-                next = Some(index);
-                break;
-            }
+        if self.waiting.is_empty() {
+            return None;
         }
-        let next = match (next, first_eligible) {
-            (Some(index), _) => index,
-            // Every eligible client was answered this round: the next round starts.
-            (None, Some(index)) => {
+        let next = match self
+            .waiting
+            .iter()
+            .position(|(client, _)| !self.answered.contains(client))
+        {
+            Some(index) => index,
+            // Every waiting client was answered this round: the next round starts.
+            None => {
                 self.answered.clear();
-                index
+                0
             }
-            (None, None) => return None,
         };
         let (client, request) = self.waiting.remove(next);
         if self.answered.len() == self.answered.capacity() {
@@ -83,6 +72,17 @@ impl<R> FairQueue<R> {
         }
         self.answered.push(client);
         Some((client, request))
+    }
+
+    /// Takes the earliest-arrived request for which `eligible(client, request)` holds, outside
+    /// the rounds: the current round is neither advanced nor reset (used between the steps of
+    /// a large batch, whose own round goes on after it).
+    pub fn take_first(&mut self, mut eligible: impl FnMut(u128, &R) -> bool) -> Option<(u128, R)> {
+        let index = self
+            .waiting
+            .iter()
+            .position(|(client, request)| eligible(*client, request))?;
+        Some(self.waiting.remove(index))
     }
 }
 
@@ -146,19 +146,40 @@ mod tests {
     }
 
     #[test]
-    fn only_eligible_requests_are_taken_fairly_among_themselves() {
+    fn taking_outside_the_rounds_takes_the_earliest_eligible_one() {
         let mut queue = FairQueue::with_capacity(8, 4);
         queue.push(1, "big");
         queue.push(2, "s1");
-        queue.push(2, "s2");
         queue.push(3, "t1");
-        let small = |r: &&str| !r.starts_with('b');
-        assert_eq!(queue.pop_where(small).unwrap(), (2, "s1"));
-        assert_eq!(queue.pop_where(small).unwrap(), (3, "t1"));
-        assert_eq!(queue.pop_where(small).unwrap(), (2, "s2"));
-        assert!(queue.pop_where(small).is_none());
-        assert_eq!(queue.waiting.len(), 1);
+        queue.push(2, "s2");
+        let small = |_: u128, r: &&str| !r.starts_with('b');
+        assert_eq!(queue.take_first(small).unwrap(), (2, "s1"));
+        assert_eq!(
+            queue.take_first(|c, r| c != 3 && small(c, r)).unwrap(),
+            (2, "s2")
+        );
+        assert_eq!(queue.take_first(small).unwrap(), (3, "t1"));
+        assert!(queue.take_first(small).is_none());
         assert_eq!(queue.pop().unwrap(), (1, "big"));
+    }
+
+    #[test]
+    fn taking_outside_the_rounds_does_not_reset_the_round() {
+        let mut queue = FairQueue::with_capacity(16, 4);
+        // A small client answered first, then a flooder's backlog and a batch client behind it.
+        queue.push(9, "s0");
+        for r in ["f1", "f2", "f3"] {
+            queue.push(1, r);
+        }
+        queue.push(2, "b1");
+        assert_eq!(queue.pop().unwrap().1, "s0");
+        assert_eq!(queue.pop().unwrap().1, "f1");
+        // During the flooder's batch the small client (answered this round) sends again and is
+        // taken between two steps; the flooder's next request must still wait for the batch
+        // client.
+        queue.push(9, "s1");
+        assert_eq!(queue.take_first(|c, _| c == 9).unwrap().1, "s1");
+        assert_eq!(drain(&mut queue), ["b1", "f2", "f3"]);
     }
 
     #[test]

@@ -1,0 +1,120 @@
+//! The answering order with real iceoryx2 ports, driven step by step in this process: requests
+//! are queued first, then [`Answerer::answer_next`] is called and what each client got is read.
+//! No timing is involved: every request waits before the first answer.
+
+use hexacomp_client::wire::{
+    PROTOCOL_VERSION, PointRequest, PointResponse, RequestHeader, RequestKind, RequestOutcome,
+    ResponseHeader,
+};
+use hexacomp_core::Geometry;
+use hexacomp_service::Counters;
+use hexacomp_service::answering::Answerer;
+use hexacomp_service::serving::compensation_endpoint;
+use iceoryx2::prelude::*;
+
+type ClientPort = iceoryx2::port::client::Client<
+    ipc::Service,
+    [PointRequest],
+    RequestHeader,
+    [PointResponse],
+    ResponseHeader,
+>;
+type Pending = iceoryx2::pending_response::PendingResponse<
+    ipc::Service,
+    [PointRequest],
+    RequestHeader,
+    [PointResponse],
+    ResponseHeader,
+>;
+
+/// Sends `points` copies of the home pose; the request waits for its answer.
+fn send(client: &ClientPort, points: usize) -> Pending {
+    let mut request = client.loan_slice_uninit(points).expect("loan");
+    *request.user_header_mut() = RequestHeader {
+        protocol: PROTOCOL_VERSION,
+        kind: RequestKind::Poses as u32,
+    };
+    let request = request.write_from_fn(|_| PointRequest {
+        values: [0.0, 0.0, 280.0, 0.0, 0.0, 0.0],
+    });
+    request.send().expect("send")
+}
+
+/// How many points the answer to `pending` carries, if it has come (served requests only).
+fn answered_points(pending: &Pending) -> Option<usize> {
+    let response = pending.receive().expect("receive")?;
+    assert_eq!(
+        response.user_header().outcome,
+        RequestOutcome::Served as u32
+    );
+    Some(response.payload().len())
+}
+
+/// A node, the compensation endpoint of a fresh instance and `clients` client ports on it, in
+/// the order created (iceoryx2 scans its clients in that order).
+fn endpoint_with_clients(
+    test: &str,
+    clients: usize,
+) -> (
+    Node<ipc::Service>,
+    hexacomp_service::serving::CompensationEndpoint,
+    Vec<ClientPort>,
+) {
+    let node = NodeBuilder::new()
+        .signal_handling_mode(SignalHandlingMode::Disabled)
+        .create::<ipc::Service>()
+        .expect("node");
+    let instance = format!("answering-{test}-{}", std::process::id());
+    let endpoint = compensation_endpoint(&node, &instance).expect("endpoint");
+    let ports = (0..clients)
+        .map(|_| {
+            endpoint
+                .0
+                .client_builder()
+                .initial_max_slice_len(hexacomp_client::wire::MAX_BATCH)
+                .create()
+                .expect("client port")
+        })
+        .collect();
+    (node, endpoint, ports)
+}
+
+#[test]
+fn a_client_behind_a_backlog_is_answered_second_not_fifth() {
+    let (_node, (_service, server), ports) = endpoint_with_clients("backlog", 2);
+    let (flooder, paced) = (&ports[0], &ports[1]);
+    let backlog: Vec<_> = (0..4).map(|_| send(flooder, 8)).collect();
+    let single = send(paced, 1);
+    let geometry = Geometry::prototype();
+    let counters = Counters::default();
+    let mut answerer = Answerer::new(&server, &geometry, &counters, None);
+    assert!(answerer.answer_next(None));
+    assert!(answerer.answer_next(None));
+    // Two answers: one for each client, whichever iceoryx2 found first.
+    assert_eq!(answered_points(&single), Some(1));
+    let flooder_answered = backlog.iter().filter_map(answered_points).count();
+    assert_eq!(flooder_answered, 1);
+    // The rest of the backlog follows.
+    for _ in 0..3 {
+        assert!(answerer.answer_next(None));
+    }
+    assert!(!answerer.answer_next(None));
+    assert_eq!(
+        counters.requests.load(std::sync::atomic::Ordering::Relaxed),
+        5
+    );
+}
+
+#[test]
+fn a_large_batch_steps_aside_for_a_single_point_that_waits() {
+    let (_node, (_service, server), ports) = endpoint_with_clients("step", 2);
+    let (batch, single) = (send(&ports[0], 1024), send(&ports[1], 1));
+    let geometry = Geometry::prototype();
+    let counters = Counters::default();
+    let mut answerer = Answerer::new(&server, &geometry, &counters, None);
+    // One step of the serving loop answers the batch, and the single point during it.
+    assert!(answerer.answer_next(None));
+    assert_eq!(answered_points(&batch), Some(1024));
+    assert_eq!(answered_points(&single), Some(1));
+    assert!(!answerer.answer_next(None));
+}
