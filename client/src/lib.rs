@@ -450,10 +450,11 @@ impl Client {
             if pending.number_of_server_connections() > 0 {
                 break pending;
             }
-            if Instant::now() >= deadline {
+            let now = Instant::now();
+            if now >= deadline {
                 return Err(Error::Timeout { timeout });
             }
-            std::thread::sleep(Duration::from_millis(1));
+            std::thread::sleep(Duration::from_millis(1).min(deadline - now));
         };
         let remaining = deadline.saturating_duration_since(Instant::now());
         let report = Waiter::default()
