@@ -35,7 +35,8 @@ struct Args {
 
 #[derive(Debug, Subcommand)]
 enum Command {
-    /// Compensate poses through hexacomp-client, one request at a time, as an NC does.
+    /// Compensate poses through hexacomp-client, one request at a time, as an NC does. Prints
+    /// `connected` on standard error once connected (a test may wait for it).
     Stream {
         /// How long, seconds.
         #[arg(long, default_value_t = 2.0)]
@@ -133,6 +134,7 @@ fn stream(
     timeout: Duration,
 ) -> anyhow::Result<serde_json::Value> {
     let mut client = Client::connect(instance, &ClientOptions { timeout })?;
+    eprintln!("connected");
     let mut latency = Histogram::<u64>::new(3)?;
     let (mut requests, mut overloaded, mut timeouts, mut other_errors) = (0u64, 0u64, 0u64, 0u64);
     let mut bad_points = 0u64;
