@@ -1,13 +1,20 @@
-/* The C client library against a running service: connect, compensate poses, joints and a
- * batch, status, every error path. Prints one line per point, inputs and results with %.17g
- * (exact round trip), for the Rust test to check against the compensator. Exit code 0 when
- * every expectation held; a message on stderr otherwise.
+/* The C client library against a running service: connect, compensate poses, joints and
+ * batches, status, every error path, and the deadline of a call to a stopped service. Prints one
+ * line per point, inputs and results with %.17g (exact round trip), for the Rust test to check
+ * against the compensator. Exit code 0 when every expectation held; a message on stderr
+ * otherwise.
  *
- * usage: client_test INSTANCE */
+ * usage: client_test INSTANCE SERVICE_PID
+ * SERVICE_PID is stopped (SIGSTOP) for the deadline checks and continued (SIGCONT) after. */
+#define _POSIX_C_SOURCE 200809L
 #include <math.h>
+#include <signal.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/types.h>
+#include <time.h>
 
 #include "hexacomp.h"
 
@@ -29,11 +36,60 @@ static void print_point(char tag, int i, const double in[6], const HexacompPoint
     printf("\n");
 }
 
+static int64_t now_us(void) {
+    struct timespec t;
+    clock_gettime(CLOCK_MONOTONIC, &t);
+    return (int64_t)t.tv_sec * 1000000 + t.tv_nsec / 1000;
+}
+
+/* The state letter of process `pid` from /proc/PID/stat ('T' when stopped), '?' if unreadable. */
+static char process_state(pid_t pid) {
+    char path[64];
+    snprintf(path, sizeof path, "/proc/%ld/stat", (long)pid);
+    FILE *f = fopen(path, "r");
+    if (f == NULL) return '?';
+    char line[512];
+    size_t n = fread(line, 1, sizeof line - 1, f);
+    fclose(f);
+    line[n] = '\0';
+    /* The state follows the command name, which is in parentheses and may hold spaces. */
+    char *end = strrchr(line, ')');
+    return end != NULL && end[1] == ' ' ? end[2] : '?';
+}
+
+/* Stops `pid` and returns once the kernel reports it stopped (SIGSTOP is delivered
+ * asynchronously: a request sent right after kill() may still be answered). */
+static int stop_process(pid_t pid) {
+    if (kill(pid, SIGSTOP) != 0) return 0;
+    for (int i = 0; i < 10000; i++) {
+        if (process_state(pid) == 'T') return 1;
+        struct timespec step = {0, 1000000};
+        nanosleep(&step, NULL);
+    }
+    return 0;
+}
+
+/* A pose call to the stopped service with deadline `timeout_us`: it must give the timeout code,
+ * no earlier than the deadline. Prints "T <deadline µs> <waited µs>". */
+static void expect_timeout(HexacompClient *client, uint64_t timeout_us) {
+    double pose[6] = {1.0, 2.0, 280.0, 0.5, 0.5, 0.5};
+    HexacompPoint p;
+    expect(hexacomp_set_timeout(client, timeout_us) == HEXACOMP_OK, "set timeout");
+    int64_t start = now_us();
+    HexacompError e = hexacomp_compensate_pose(client, pose, &p);
+    int64_t waited = now_us() - start;
+    expect(e == HEXACOMP_ERROR_TIMEOUT, "a stopped service gives the timeout code");
+    expect(waited >= (int64_t)timeout_us, "the call waits for its whole deadline");
+    expect(strstr(hexacomp_last_error_detail(), "did not answer") != NULL, "timeout detail");
+    printf("T %llu %lld\n", (unsigned long long)timeout_us, (long long)waited);
+}
+
 int main(int argc, char **argv) {
-    if (argc != 2) {
-        fprintf(stderr, "usage: %s INSTANCE\n", argv[0]);
+    if (argc != 3) {
+        fprintf(stderr, "usage: %s INSTANCE SERVICE_PID\n", argv[0]);
         return 2;
     }
+    pid_t service = (pid_t)atol(argv[2]);
     HexacompClient *client = NULL;
 
     /* Errors come back as codes with a message, never as a crash. */
@@ -46,8 +102,9 @@ int main(int argc, char **argv) {
     expect(hexacomp_connect(NULL, 100000, &client) == HEXACOMP_ERROR_INVALID_ARGUMENT, "null");
     expect(client == NULL, "no client after failures");
 
-    /* A servo-period deadline: connecting and status still work (they wait at least 100 ms). */
-    HexacompError e = hexacomp_connect(argv[1], 300, &client);
+    /* A deadline far above any answer time: a busy machine must not fail the checks below. The
+     * deadline itself is checked against a stopped service at the end. */
+    HexacompError e = hexacomp_connect(argv[1], 10000000, &client);
     expect(e == HEXACOMP_OK && client != NULL, "connect");
     if (e != HEXACOMP_OK) return 1;
 
@@ -73,6 +130,14 @@ int main(int argc, char **argv) {
     expect(hexacomp_compensate_batch(client, HEXACOMP_KIND_POSES, poses, 64, batch) ==
                HEXACOMP_OK, "batch");
     for (int i = 0; i < 64; i++) print_point('B', i, poses[i], &batch[i]);
+    double joints[64][6];
+    for (int i = 0; i < 64; i++)
+        for (int k = 0; k < 6; k++) joints[i][k] = 330.0 + 2.0 * k + i * 0.4;
+    expect(hexacomp_compensate_batch(client, HEXACOMP_KIND_JOINTS, joints, 64, batch) ==
+               HEXACOMP_OK, "batch of joints");
+    for (int i = 0; i < 64; i++) print_point('K', i, joints[i], &batch[i]);
+    expect(hexacomp_compensate_batch(client, HEXACOMP_KIND_POSES, NULL, 0, NULL) == HEXACOMP_OK,
+           "a batch of 0 points");
 
     expect(hexacomp_compensate_batch(client, HEXACOMP_KIND_POSES, poses, HEXACOMP_MAX_BATCH + 1,
                                      batch) == HEXACOMP_ERROR_BATCH_TOO_LARGE, "too large");
@@ -80,9 +145,23 @@ int main(int argc, char **argv) {
                HEXACOMP_ERROR_INVALID_ARGUMENT, "null points");
     expect(hexacomp_compensate_pose(NULL, poses[0], batch) == HEXACOMP_ERROR_INVALID_ARGUMENT,
            "null client");
-    expect(hexacomp_set_timeout(client, 200000) == HEXACOMP_OK, "timeout");
-    expect(hexacomp_status(client, &status) == HEXACOMP_OK && status.points >= 3 * 64,
-           "status after the requests");
+    expect(hexacomp_status(client, &status) == HEXACOMP_OK, "status after the requests");
+    printf("R %llu %llu\n", (unsigned long long)status.requests,
+           (unsigned long long)status.points);
+
+    /* The deadline set by hexacomp_set_timeout, against a stopped service: a short one gives the
+     * timeout code after its own duration, far sooner than the 10 s the client connected with;
+     * a longer one waits longer. */
+    expect(stop_process(service), "stopping the service");
+    expect_timeout(client, 50000);
+    expect_timeout(client, 300000);
+    expect(kill(service, SIGCONT) == 0, "continuing the service");
+    /* Continued, the service answers again; answers to the abandoned requests are not taken
+     * for this one. */
+    HexacompPoint p;
+    expect(hexacomp_set_timeout(client, 10000000) == HEXACOMP_OK, "set timeout");
+    expect(hexacomp_compensate_pose(client, poses[5], &p) == HEXACOMP_OK, "after continuing");
+    print_point('A', 5, poses[5], &p);
 
     hexacomp_close(client);
     hexacomp_close(NULL);

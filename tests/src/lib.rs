@@ -121,18 +121,45 @@ pub fn save_smooth_model(
     (model, path)
 }
 
-/// Starts `hexacomp-test-client --instance <instance> <args>` with its JSON report piped.
+/// Starts `hexacomp-test-client --instance <instance> <args>` with its JSON report piped, and its
+/// standard input piped: a `stream` without `--seconds` runs until [`test_client_report`] closes
+/// it.
 pub fn spawn_test_client(instance: &str, args: &[&str]) -> std::process::Child {
     Command::new(binary("hexacomp-test-client"))
         .args(["--instance", instance])
         .args(args)
+        .stdin(std::process::Stdio::piped())
         .stdout(std::process::Stdio::piped())
         .stderr(std::process::Stdio::piped())
         .spawn()
         .expect("starting hexacomp-test-client")
 }
 
-/// Waits for a test client and parses its JSON report; panics with its stderr on failure.
+/// Waits until a `stream` test client reports on its standard error that it is connected; panics
+/// with what it said instead. Reads byte by byte, so the rest of its standard error stays in
+/// the pipe for [`test_client_report`].
+pub fn wait_until_connected(child: &mut std::process::Child) {
+    use std::io::Read;
+    let stderr = child.stderr.as_mut().expect("piped stderr");
+    let mut line = Vec::new();
+    let mut byte = [0u8];
+    while stderr
+        .read(&mut byte)
+        .expect("reading a test client's stderr")
+        == 1
+        && byte[0] != b'\n'
+    {
+        line.push(byte[0]);
+    }
+    assert_eq!(
+        String::from_utf8_lossy(&line),
+        "connected",
+        "a test client did not connect"
+    );
+}
+
+/// Closes a test client's standard input (which ends a `stream` without `--seconds`), waits for
+/// it and parses its JSON report; panics with its stderr on failure.
 pub fn test_client_report(child: std::process::Child) -> serde_json::Value {
     let output = child.wait_with_output().expect("waiting for a test client");
     assert!(
@@ -216,6 +243,13 @@ pub fn raw_client(
     Ok((node, factory, client))
 }
 
+/// The state letter of process `pid` in `/proc/<pid>/stat` (`T`: stopped), if it can be read.
+pub fn process_state(pid: u32) -> Option<char> {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
+    // The state follows the command name, which is in parentheses and may hold spaces.
+    stat.rsplit_once(") ")?.1.chars().next()
+}
+
 /// A running `hexacomp-service` child process, killed when dropped.
 pub struct ServiceProcess {
     child: std::process::Child,
@@ -234,7 +268,14 @@ impl ServiceProcess {
             .args(["--instance", instance])
             .args(args)
             .stdout(std::process::Stdio::null())
-            .stderr(std::fs::File::create(&log).expect("service log file"))
+            // Appended to: a restarted service of the same instance adds to the same log.
+            .stderr(
+                std::fs::OpenOptions::new()
+                    .create(true)
+                    .append(true)
+                    .open(&log)
+                    .expect("service log file"),
+            )
             .spawn()
             .expect("starting hexacomp-service");
         let service = Self {
@@ -284,6 +325,60 @@ impl ServiceProcess {
     /// The child's process id.
     pub fn pid(&self) -> u32 {
         self.child.id()
+    }
+
+    /// What the service wrote to its standard error so far.
+    pub fn log(&self) -> String {
+        std::fs::read_to_string(&self.log).unwrap_or_default()
+    }
+
+    /// Stops the service with SIGSTOP and returns once the kernel reports it stopped (the signal
+    /// is delivered asynchronously): requests sent until [`ServiceProcess::resume`] wait for it.
+    pub fn pause(&self) {
+        self.signal(libc::SIGSTOP);
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(10);
+        while process_state(self.child.id()) != Some('T') {
+            assert!(
+                std::time::Instant::now() < deadline,
+                "the service did not stop"
+            );
+            std::thread::sleep(std::time::Duration::from_millis(1));
+        }
+    }
+
+    /// Continues a service stopped by [`ServiceProcess::pause`].
+    pub fn resume(&self) {
+        self.signal(libc::SIGCONT);
+    }
+
+    fn signal(&self, signal: i32) {
+        let pid = libc::pid_t::try_from(self.child.id()).expect("a pid fits pid_t");
+        // SAFETY: kill(2) on our own child's pid; it has not been reaped (we own `child`), so
+        // the pid cannot have been reused.
+        assert_eq!(
+            unsafe { libc::kill(pid, signal) },
+            0,
+            "sending signal {signal}"
+        );
+    }
+
+    /// Sends `signal` (e.g. `libc::SIGTERM`) and waits for the service to exit (30 s at most);
+    /// returns its exit status and its log.
+    pub fn stop_with(mut self, signal: i32) -> (std::process::ExitStatus, String) {
+        self.signal(signal);
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(30);
+        let status = loop {
+            if let Some(status) = self.child.try_wait().expect("waiting for the service") {
+                break status;
+            }
+            assert!(
+                std::time::Instant::now() < deadline,
+                "the service did not stop on signal {signal}:\n{}",
+                self.log()
+            );
+            std::thread::sleep(std::time::Duration::from_millis(10));
+        };
+        (status, self.log())
     }
 
     /// Kills the service with SIGKILL and reaps it.

@@ -5,6 +5,7 @@
 use std::os::unix::fs::{MetadataExt, PermissionsExt};
 use std::path::{Path, PathBuf};
 
+use hexacomp_client::DeployOutcome;
 use hexacomp_tests::{ServiceProcess, save_smooth_model, unique_instance};
 
 /// Files and directories under `dir` (recursively) owned by `uid`, with their modes.
@@ -40,7 +41,11 @@ fn state_directory_and_shared_memory_are_not_writable_by_other_users() {
     let instance = unique_instance("access");
     let service = ServiceProcess::with_model(&instance, &state, &model);
     let mut client = service.client().unwrap();
-    client.deploy(&std::fs::read(&model).unwrap()).unwrap();
+    let outcome = client.deploy(&std::fs::read(&model).unwrap()).unwrap();
+    assert!(
+        matches!(outcome, DeployOutcome::Accepted { generation: 2, .. }),
+        "{outcome:?}"
+    );
 
     let state_mode = std::fs::metadata(&state).unwrap().mode() & 0o777;
     assert_eq!(state_mode, 0o700, "state directory mode {state_mode:o}");

@@ -1,6 +1,7 @@
 //! The C library (`libhexacomp_client.a` and `.so`, `client/include/hexacomp.h`) used by a C
 //! program compiled here with the system's C compiler, against a running service: every point
-//! it prints equals the compensator's answer bit for bit, and its error paths give codes.
+//! it prints equals the compensator's answer bit for bit, its error paths give codes, and a call
+//! to a stopped service gives the timeout code after the deadline `hexacomp_set_timeout` set.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -58,12 +59,18 @@ fn numbers(fields: &[&str]) -> [f64; 6] {
 fn a_c_program_linked_statically_and_dynamically_gets_the_compensators_answers() {
     let dir = tempfile::tempdir().unwrap();
     let (model, path) = save_smooth_model(dir.path(), 51);
-    let instance = unique_instance("cabi");
-    let _service = ServiceProcess::with_model(&instance, &dir.path().join("s"), &path);
     let g = Geometry::prototype();
     for shared in [false, true] {
         let exe = compile(dir.path(), shared);
-        let output = Command::new(&exe).arg(&instance).output().unwrap();
+        // A service of its own per program: the status counters it prints are this run's.
+        let instance = unique_instance("cabi");
+        let service =
+            ServiceProcess::with_model(&instance, &dir.path().join(format!("s{shared}")), &path);
+        let output = Command::new(&exe)
+            .arg(&instance)
+            .arg(service.pid().to_string())
+            .output()
+            .unwrap();
         let stdout = String::from_utf8_lossy(&output.stdout);
         assert!(
             output.status.success(),
@@ -71,14 +78,15 @@ fn a_c_program_linked_statically_and_dynamically_gets_the_compensators_answers()
             exe.display(),
             String::from_utf8_lossy(&output.stderr)
         );
-        let mut checked = 0;
+        let mut checked = std::collections::BTreeMap::new();
+        let mut deadlines = Vec::new();
         for line in stdout.lines() {
             let fields: Vec<&str> = line.split(' ').collect();
             match fields[0] {
                 "S" => assert_eq!(fields[1], "1"),
-                "P" | "J" | "B" => {
+                "P" | "J" | "B" | "K" | "A" => {
                     let input = numbers(&fields[2..8]);
-                    let expected = if fields[0] == "J" {
+                    let expected = if matches!(fields[0], "J" | "K") {
                         compensate_legs(&g, Some(&model), &input)
                     } else {
                         compensate_pose(&g, Some(&model), &Pose::from_mm_deg(input))
@@ -95,13 +103,23 @@ fn a_c_program_linked_statically_and_dynamically_gets_the_compensators_answers()
                             "{line}"
                         );
                     }
-                    checked += 1;
+                    *checked.entry(fields[0]).or_insert(0) += 1;
                 }
+                // Requests and points the service counted: 64 poses, 64 joints, three batches
+                // (64 poses, 64 joints, 0 points).
+                "R" => assert_eq!(fields[1..], ["131", "256"], "{line}"),
+                "T" => deadlines.push((fields[1].to_string(), fields[2].to_string())),
                 "OK" => {}
                 other => panic!("unexpected line {other:?}"),
             }
         }
-        assert_eq!(checked, 3 * 64);
+        let expected_counts = [("A", 1), ("B", 64), ("J", 64), ("K", 64), ("P", 64)];
+        assert_eq!(checked, expected_counts.into_iter().collect());
+        let timeouts: Vec<&str> = deadlines.iter().map(|(d, _)| d.as_str()).collect();
+        assert_eq!(timeouts, ["50000", "300000"], "{stdout}");
+        // The short deadline was the one set, not the 10 s the program connected with.
+        let waited: u64 = deadlines[0].1.parse().unwrap();
+        assert!(waited < 5_000_000, "a 50 ms deadline waited {waited} µs");
         assert_eq!(stdout.lines().last(), Some("OK"));
     }
 }

@@ -12,6 +12,7 @@ use hexacomp_core::compensator::compensate_pose;
 use hexacomp_core::pose::Pose;
 use hexacomp_tests::{
     ServiceProcess, save_smooth_model, spawn_test_client, test_client_report, unique_instance,
+    wait_until_connected,
 };
 use iceoryx2::node::NodeView;
 use iceoryx2::prelude::*;
@@ -54,6 +55,10 @@ fn eventually(within: Duration, mut condition: impl FnMut() -> bool) -> bool {
 
 const KILLS: usize = 5;
 
+/// How long a test waits for an event before it fails: far longer than any event takes on a
+/// loaded machine, so that only a missing event fails it.
+const PATIENCE: Duration = Duration::from_secs(60);
+
 #[test]
 fn the_service_sigkilled_mid_stream_five_times_restarts_without_cleanup_and_clients_recover() {
     let dir = tempfile::tempdir().unwrap();
@@ -61,29 +66,24 @@ fn the_service_sigkilled_mid_stream_five_times_restarts_without_cleanup_and_clie
     let (model, path) = save_smooth_model(dir.path(), 1);
     let instance = unique_instance("killloop");
     let mut service = ServiceProcess::with_model(&instance, &state, &path);
-    // Three NC-like clients stream through every kill (1 kHz, 200 ms deadline).
-    let streams: Vec<_> = (0..3)
+    // Three NC-like clients stream through every kill (1 kHz, 200 ms deadline), until the
+    // scenario is over.
+    let mut streams: Vec<_> = (0..3)
         .map(|_| {
             spawn_test_client(
                 &instance,
-                &[
-                    "stream",
-                    "--seconds",
-                    "12",
-                    "--period-us",
-                    "1000",
-                    "--timeout-ms",
-                    "200",
-                ],
+                &["stream", "--period-us", "1000", "--timeout-ms", "200"],
             )
         })
         .collect();
+    streams.iter_mut().for_each(wait_until_connected);
     let mut killed = HashSet::new();
     for _ in 0..KILLS {
+        // Each kill comes while the clients stream: the service has just answered 100 requests.
         let mut status = service.client().unwrap();
         let before = status.status().unwrap().requests;
         assert!(
-            eventually(Duration::from_secs(5), || status
+            eventually(PATIENCE, || status
                 .status()
                 .is_ok_and(|s| s.requests >= before + 100)),
             "the streaming clients did not reach the service"
@@ -97,17 +97,22 @@ fn the_service_sigkilled_mid_stream_five_times_restarts_without_cleanup_and_clie
     assert_eq!(status.status().unwrap().generation, 1);
     let before = status.status().unwrap().requests;
     assert!(
-        eventually(Duration::from_secs(5), || status
+        eventually(PATIENCE, || status
             .status()
             .is_ok_and(|s| s.requests >= before + 300)),
-        "the clients did not all come back after the last restart"
+        "the clients did not come back after the last restart"
     );
     for stream in streams {
         let report = test_client_report(stream);
-        // While the service was down, requests timed out; nothing else went wrong.
+        // While the service was down, requests timed out; nothing else went wrong, and every
+        // client was served again after its last timeout.
         assert_eq!(report["other_errors"], 0, "{report}");
         assert_eq!(report["bad_points"], 0, "{report}");
         assert!(report["timeouts"].as_u64().unwrap() >= 1, "{report}");
+        assert!(
+            report["served_since_timeout"].as_u64().unwrap() >= 1,
+            "{report}"
+        );
     }
     // Every killed service's iceoryx2 nodes were reclaimed by the processes that came after.
     assert_eq!(
@@ -132,14 +137,11 @@ fn clients_sigkilled_mid_request_do_not_disturb_the_others_and_their_slots_are_r
     let (_, path) = save_smooth_model(dir.path(), 2);
     let instance = unique_instance("killclients");
     let service = ServiceProcess::with_model(&instance, &dir.path().join("s"), &path);
-    let survivors: Vec<_> = (0..2)
-        .map(|_| {
-            spawn_test_client(
-                &instance,
-                &["stream", "--seconds", "6", "--period-us", "200"],
-            )
-        })
+    // Two clients stream from before the first victim starts until after the last is killed.
+    let mut survivors: Vec<_> = (0..2)
+        .map(|_| spawn_test_client(&instance, &["stream", "--period-us", "200"]))
         .collect();
+    survivors.iter_mut().for_each(wait_until_connected);
     // More victims than the service admits clients at once (32): only works if the slots of
     // killed clients are reclaimed.
     let mut victims = Vec::new();
@@ -151,12 +153,7 @@ fn clients_sigkilled_mid_request_do_not_disturb_the_others_and_their_slots_are_r
             })
             .collect();
         // Killed once connected (their node created and set up), mid-stream.
-        for victim in &mut batch {
-            let stderr = victim.stderr.take().expect("piped stderr");
-            let mut line = String::new();
-            std::io::BufRead::read_line(&mut std::io::BufReader::new(stderr), &mut line).unwrap();
-            assert_eq!(line.trim(), "connected", "a victim did not connect");
-        }
+        batch.iter_mut().for_each(wait_until_connected);
         for mut victim in batch {
             victim.kill().unwrap();
             victim.wait().unwrap();
@@ -168,7 +165,7 @@ fn clients_sigkilled_mid_request_do_not_disturb_the_others_and_their_slots_are_r
         assert_eq!(report["timeouts"], 0, "{report}");
         assert_eq!(report["other_errors"], 0, "{report}");
         assert_eq!(report["overloaded"], 0, "{report}");
-        assert!(report["requests"].as_u64().unwrap() > 1000, "{report}");
+        assert!(report["requests"].as_u64().unwrap() >= 100, "{report}");
     }
     // A new client still connects and is served after 48 killed ones.
     let mut client = service.client().unwrap();
@@ -196,14 +193,36 @@ fn a_deployer_killed_mid_deploy_leaves_the_old_model_serving() {
     let state = dir.path().join("state");
     let instance = unique_instance("deploydie");
     let service = ServiceProcess::with_model(&instance, &state, &old_path);
-    for _ in 0..5 {
+    // A deployer's request may be dropped with its dead client before the service takes it, or
+    // taken, validated and refused: deployers die until the service has refused at least one
+    // (five at least, a hundred at most).
+    let refusals = || {
+        service
+            .log()
+            .matches("refused a deployed model: the deployer disconnected")
+            .count()
+    };
+    let deadline = Instant::now() + PATIENCE;
+    let mut deployers = 0;
+    while deployers < 5 || refusals() == 0 {
+        assert!(
+            deployers < 100 && Instant::now() < deadline,
+            "no dead deployer's model reached the service in {deployers} tries"
+        );
         let child = spawn_test_client(&instance, &["deploy-and-die", "--model", p(&new_path)]);
         let output = child.wait_with_output().unwrap();
         use std::os::unix::process::ExitStatusExt;
         assert_eq!(output.status.signal(), Some(libc::SIGKILL));
+        deployers += 1;
+        if deployers >= 5 {
+            // The refusal of the last one may still be on its way: look again for a while.
+            eventually(Duration::from_millis(500), || refusals() > 0);
+        }
     }
-    // Give the service time to validate what it received.
-    std::thread::sleep(Duration::from_millis(500));
+    eprintln!(
+        "{} of {deployers} dead deployers' models refused",
+        refusals()
+    );
     let mut client = service.client().unwrap();
     let status = client.status().unwrap();
     assert_eq!(status.generation, 1);

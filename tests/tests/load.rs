@@ -6,6 +6,7 @@
 
 use std::time::{Duration, Instant};
 
+use hexacomp_client::DeployOutcome;
 use hexacomp_tests::{
     ServiceProcess, memory_kib, save_smooth_model, spawn_test_client, test_client_report,
     unique_instance,
@@ -197,7 +198,6 @@ fn soak_memory_stays_flat_through_streams_batches_swaps_and_client_churn() {
         .collect();
     let instance = unique_instance("soak");
     let service = ServiceProcess::with_model(&instance, &dir.path().join("s"), &models[0]);
-    let total = seconds.to_string();
     let streams: Vec<_> = [
         ("1", "1000"),
         ("64", "2000"),
@@ -208,15 +208,7 @@ fn soak_memory_stays_flat_through_streams_batches_swaps_and_client_churn() {
     .map(|(batch, period)| {
         spawn_test_client(
             &instance,
-            &[
-                "stream",
-                "--seconds",
-                &total,
-                "--batch",
-                batch,
-                "--period-us",
-                period,
-            ],
+            &["stream", "--batch", batch, "--period-us", period],
         )
     })
     .collect();
@@ -228,8 +220,13 @@ fn soak_memory_stays_flat_through_streams_batches_swaps_and_client_churn() {
     let mut churned = 0usize;
     while start.elapsed() < Duration::from_secs(seconds) {
         // Every second: a hot swap, a short-lived client that connects and leaves, a sample.
-        deployer.deploy(&bytes[deploys % 2]).unwrap();
+        let outcome = deployer.deploy(&bytes[deploys % 2]).unwrap();
         deploys += 1;
+        assert!(
+            matches!(outcome, DeployOutcome::Accepted { generation, .. }
+                if generation == 1 + deploys as u64),
+            "hot swap {deploys}: {outcome:?}"
+        );
         let mut passing = service.client().unwrap();
         passing
             .compensate_pose([0.0, 0.0, 280.0, 0.0, 0.0, 0.0])

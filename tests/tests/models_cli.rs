@@ -98,6 +98,9 @@ fn predict_returns_exactly_the_library_compensation() {
         lines.next().unwrap(),
         "id,q1,q2,q3,q4,q5,q6,dq1,dq2,dq3,dq4,dq5,dq6,status"
     );
+    // One row per pose, no more, no less.
+    assert_eq!(written.lines().count(), 1 + poses.len());
+    assert!(!poses.is_empty());
     let mut joints = String::from("id,q1,q2,q3,q4,q5,q6\n");
     for (line, row) in lines.zip(&poses) {
         let expected = compensate_pose(&g, Some(&model), &row.pose());
@@ -127,15 +130,15 @@ fn predict_returns_exactly_the_library_compensation() {
         p(&out2),
     ]);
     let legs = hexacomp_core::formats::read_joints(&d.join("joints.csv")).unwrap();
-    for (line, row) in std::fs::read_to_string(&out2)
-        .unwrap()
-        .lines()
-        .skip(1)
-        .zip(&legs)
-    {
+    let written = std::fs::read_to_string(&out2).unwrap();
+    assert_eq!(written.lines().count(), 1 + legs.len());
+    for (line, row) in written.lines().skip(1).zip(&legs) {
         let expected = compensate_legs(&g, Some(&model), &row.legs);
-        let q1: f64 = line.split(',').nth(1).unwrap().parse().unwrap();
-        assert_eq!(q1, expected.legs[0]);
+        let cells: Vec<&str> = line.split(',').collect();
+        assert_eq!(cells[0], row.id);
+        for i in 0..6 {
+            assert_eq!(cells[1 + i].parse::<f64>().unwrap(), expected.legs[i]);
+        }
     }
 }
 

@@ -10,6 +10,7 @@ use hexacomp_core::compensator::{PointStatus, compensate_legs, compensate_pose};
 use hexacomp_core::formats::CorrectionRow;
 use hexacomp_core::model::Model;
 use hexacomp_core::sampling::{SamplerOptions, WorkspaceSampler};
+use hexacomp_core::stats::PoseErrorNorm;
 use hexacomp_core::virtual_platform::{DEFAULT_MACHINE_SEED, ErrorModel, VirtualPlatform};
 use hexacomp_core::{Geometry, Pose, inverse_kinematics};
 use hexacomp_tests::{ServiceProcess, unique_instance};
@@ -139,7 +140,7 @@ fn client_results_equal_predict_for_10000_poses_single_and_batched() {
 }
 
 #[test]
-fn hot_swap_in_a_stream_of_100000_requests_loses_nothing_and_never_mixes_a_batch() {
+fn hot_swap_in_a_stream_of_requests_loses_nothing_and_never_mixes_a_batch() {
     let dir = tempfile::tempdir().unwrap();
     let (_, first) = small_model(dir.path(), 1);
     let (_, second) = small_model(dir.path(), 2);
@@ -152,22 +153,11 @@ fn hot_swap_in_a_stream_of_100000_requests_loses_nothing_and_never_mixes_a_batch
             p(&first),
         ],
     );
-    let instance = service.instance.clone();
-    let deployer = std::thread::spawn(move || {
-        std::thread::sleep(Duration::from_millis(300));
-        let output = hexacomp_tests::run(
-            "hexacomp-trainer",
-            &["deploy", "--instance", &instance, "--model", p(&second)],
-        );
-        String::from_utf8_lossy(&output.stdout).into_owned()
-            + &String::from_utf8_lossy(&output.stderr)
-    });
     let mut client = service.client().unwrap();
     let points: Vec<[f64; 6]> = poses(8, 5).iter().map(|p| p.to_mm_deg()).collect();
     let mut out = [CompensatedPoint::empty(); 8];
-    let mut generations = Vec::with_capacity(100_000);
-    let start = Instant::now();
-    for _ in 0..100_000 {
+    let mut generations = Vec::new();
+    let mut stream = |generations: &mut Vec<u64>| {
         client
             .compensate_batch(RequestKind::Poses, &points, &mut out)
             .unwrap();
@@ -178,19 +168,53 @@ fn hot_swap_in_a_stream_of_100000_requests_loses_nothing_and_never_mixes_a_batch
         );
         assert!(out.iter().all(|p| p.status == PointStatus::Ok));
         generations.push(g);
+    };
+    // The stream runs before, during and after the deploy, however fast the machine: the deploy
+    // starts once 1000 requests were answered, and the stream goes on for 1000 requests after the
+    // deploy command has finished.
+    const AROUND: usize = 1000;
+    for _ in 0..AROUND {
+        stream(&mut generations);
     }
-    let elapsed = start.elapsed();
+    let instance = service.instance.clone();
+    let deployer = std::thread::spawn(move || {
+        let output = hexacomp_tests::run(
+            "hexacomp-trainer",
+            &["deploy", "--instance", &instance, "--model", p(&second)],
+        );
+        String::from_utf8_lossy(&output.stdout).into_owned()
+            + &String::from_utf8_lossy(&output.stderr)
+    });
+    let deadline = Instant::now() + Duration::from_secs(120);
+    while !deployer.is_finished() {
+        assert!(Instant::now() < deadline, "the deploy did not finish");
+        stream(&mut generations);
+    }
+    let during = generations.len() - AROUND;
+    for _ in 0..AROUND {
+        stream(&mut generations);
+    }
     let said = deployer.join().unwrap();
     assert!(said.contains("accepted as generation 2"), "{said}");
-    // Generation 1 then generation 2, switched once, never back.
+    // Generation 1 then generation 2, switched once, never back; the switch came after the
+    // deploy started and at the latest with the first request after it was reported done (the
+    // serving thread takes a new model in between two requests: one that was already being
+    // waited for when the model was handed over is still answered by the old one).
     let switch = generations
         .iter()
         .position(|g| *g == 2)
         .expect("the new model must have served");
-    assert!(switch > 0, "the swap must happen mid-stream");
+    assert!(
+        (AROUND..=AROUND + during + 1).contains(&switch),
+        "switched at request {switch}, the deploy ran during requests {AROUND}..{}",
+        AROUND + during
+    );
     assert!(generations[..switch].iter().all(|g| *g == 1));
     assert!(generations[switch..].iter().all(|g| *g == 2));
-    eprintln!("100000 requests of 8 points in {elapsed:?}, switched at request {switch}");
+    eprintln!(
+        "{} requests of 8 points, {during} during the deploy, switched at request {switch}",
+        generations.len()
+    );
 }
 
 #[test]
@@ -428,5 +452,129 @@ fn event_mode_serves_the_same_numbers_swaps_and_leaves_the_core_free_when_idle()
     assert!(
         used < 0.2,
         "an idle event-mode service used {used:.2} s of CPU in 1 s"
+    );
+}
+
+/// A model whose answers are known by hand: for each leg `k` one tanh node on that leg's own
+/// normalised length, `Δq_k = b2_k + w2_k · tanh(b1 + (q_k − mean) / span)` (Eqs. 10–11).
+struct HandModel {
+    model: Model,
+    mean: f64,
+    span: f64,
+    b1: f64,
+    w2: [f64; 6],
+    b2: [f64; 6],
+}
+
+impl HandModel {
+    fn new() -> Self {
+        use hexacomp_core::model::{NetworkInput, Networks, Provenance};
+        use hexacomp_core::network::{Network, Normalisation};
+        let g = Geometry::prototype();
+        let [min, max] = g.leg_range;
+        let (mean, span, b1) = ((min + max) / 2.0, (max - min) / 2.0, 0.1);
+        let w2: [f64; 6] = std::array::from_fn(|k| 0.2 + 0.05 * k as f64);
+        let b2: [f64; 6] = std::array::from_fn(|k| 0.01 * (k as f64 - 2.5));
+        // Weight order: input weights (6 per hidden node), hidden biases, output weights,
+        // output biases.
+        let network = |k: usize| {
+            let mut weights = vec![0.0; Network::weight_count(1, 1)];
+            weights[k] = 1.0;
+            weights[6] = b1;
+            weights[7] = w2[k];
+            weights[8] = b2[k];
+            Network::from_weights(1, 1, weights).unwrap()
+        };
+        let model = Model {
+            networks: Networks::Decoupled((0..6).map(network).collect()),
+            input: NetworkInput::Commanded,
+            normalisation: Normalisation {
+                mean: [mean; 6],
+                span: [span; 6],
+            },
+            training_range: [g.leg_range; 6],
+            correction_bounds: [[-1.0, 1.0]; 6],
+            geometry: g.fingerprint(),
+            provenance: Provenance {
+                source: "hand-made known-answer model".into(),
+                ..Provenance::default()
+            },
+        };
+        Self {
+            model,
+            mean,
+            span,
+            b1,
+            w2,
+            b2,
+        }
+    }
+
+    /// The correction of leg `k` at nominal length `q` (mm), by the formula.
+    fn correction(&self, k: usize, q: f64) -> f64 {
+        self.b2[k] + self.w2[k] * (self.b1 + (q - self.mean) / self.span).tanh()
+    }
+}
+
+#[test]
+fn served_corrections_equal_a_network_computed_by_hand() {
+    let dir = tempfile::tempdir().unwrap();
+    let hand = HandModel::new();
+    let path = dir.path().join("hand.hxm");
+    hand.model.save(&path).unwrap();
+    let service =
+        ServiceProcess::with_model(&unique_instance("hand"), &dir.path().join("state"), &path);
+    let mut client = service.client().unwrap();
+    let g = Geometry::prototype();
+    let [min, max] = g.leg_range;
+    let mut checked = 0;
+    for i in 0..50 {
+        let t = i as f64 / 49.0;
+        // Leg lengths across the stroke (kept 2 mm inside it, so that the corrected legs stay in
+        // it), each leg at another place.
+        let legs: [f64; 6] =
+            std::array::from_fn(|k| min + 2.0 + (max - min - 4.0) * ((t + k as f64 / 6.0) % 1.0));
+        let point = client.compensate_joints(legs).unwrap();
+        assert_eq!((point.status, point.generation), (PointStatus::Ok, 1));
+        for (k, q) in legs.iter().enumerate() {
+            let expected = hand.correction(k, *q);
+            assert!(
+                (point.corrections[k] - expected).abs() < 1e-12,
+                "leg {k} at {q} mm: served {} mm, by hand {expected} mm",
+                point.corrections[k]
+            );
+            assert!((point.legs[k] - (q + expected)).abs() < 1e-12);
+        }
+        checked += 1;
+    }
+    assert_eq!(checked, 50);
+}
+
+#[test]
+fn served_corrections_bring_the_virtual_machine_closer_to_the_commanded_poses() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_, path) = small_model(dir.path(), 1);
+    let service =
+        ServiceProcess::with_model(&unique_instance("truth"), &dir.path().join("state"), &path);
+    let mut client = service.client().unwrap();
+    let g = Geometry::prototype();
+    // The machine the model was trained on (its repeatability noise from another seed).
+    let mut machine =
+        VirtualPlatform::new(&g, &ErrorModel::default(), DEFAULT_MACHINE_SEED, 77).unwrap();
+    let targets = poses(100, 11);
+    let (mut before, mut after) = (0.0, 0.0);
+    for pose in &targets {
+        let uncompensated = machine.move_to_pose(pose).unwrap();
+        before += PoseErrorNorm::between(pose, &uncompensated).position_mm;
+        let point = client.compensate_pose(pose.to_mm_deg()).unwrap();
+        assert_ne!(point.status, PointStatus::OutOfStroke, "{pose:?}");
+        let compensated = machine.move_legs(&point.legs, pose).unwrap();
+        after += PoseErrorNorm::between(pose, &compensated).position_mm;
+    }
+    let (before, after) = (before / 100.0, after / 100.0);
+    eprintln!("mean position error: {before:.4} mm uncompensated, {after:.4} mm compensated");
+    assert!(
+        after < before / 5.0,
+        "compensation left {after:.4} mm of {before:.4} mm"
     );
 }

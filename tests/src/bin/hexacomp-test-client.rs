@@ -5,6 +5,8 @@
 //! `deploy-and-die` use iceoryx2 directly, to do what the client library never would.
 
 use std::collections::VecDeque;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, anyhow};
@@ -38,9 +40,10 @@ enum Command {
     /// Compensate poses through hexacomp-client, one request at a time, as an NC does. Prints
     /// `connected` on standard error once connected (a test may wait for it).
     Stream {
-        /// How long, seconds.
-        #[arg(long, default_value_t = 2.0)]
-        seconds: f64,
+        /// How long, seconds. Without it: until standard input closes (a test ends the stream
+        /// when its scenario is over, however long that took).
+        #[arg(long)]
+        seconds: Option<f64>,
         /// Points per request.
         #[arg(long, default_value_t = 1)]
         batch: usize,
@@ -96,7 +99,7 @@ fn main() -> anyhow::Result<()> {
             timeout_ms,
         } => stream(
             &args.instance,
-            Duration::from_secs_f64(seconds),
+            seconds.map(Duration::from_secs_f64),
             batch,
             Duration::from_micros(period_us),
             Duration::from_millis(timeout_ms),
@@ -126,22 +129,49 @@ fn pose(i: usize) -> [f64; 6] {
     ]
 }
 
+/// A flag set once standard input reaches its end (or fails).
+fn stdin_closed() -> Arc<AtomicBool> {
+    let closed = Arc::new(AtomicBool::new(false));
+    let flag = closed.clone();
+    std::thread::spawn(move || {
+        let _ = std::io::copy(&mut std::io::stdin().lock(), &mut std::io::sink());
+        flag.store(true, Ordering::Relaxed);
+    });
+    closed
+}
+
+/// Streams for `duration`, or until standard input closes when `None`.
 fn stream(
     instance: &str,
-    duration: Duration,
+    duration: Option<Duration>,
     batch: usize,
     period: Duration,
     timeout: Duration,
 ) -> anyhow::Result<serde_json::Value> {
-    let mut client = Client::connect(instance, &ClientOptions { timeout })?;
+    // Connecting may take long on a loaded machine; the deadline under test is the requests'.
+    let mut client = Client::connect(
+        instance,
+        &ClientOptions {
+            timeout: Duration::from_secs(10),
+        },
+    )?;
+    client.set_timeout(timeout);
     eprintln!("connected");
     let mut latency = Histogram::<u64>::new(3)?;
     let (mut requests, mut overloaded, mut timeouts, mut other_errors) = (0u64, 0u64, 0u64, 0u64);
     let mut bad_points = 0u64;
+    // Requests served since the last timeout: after a restart of the service, proof of recovery.
+    let mut served_since_timeout = 0u64;
     let mut first_error = None;
     let mut out = vec![hexacomp_client::CompensatedPoint::empty(); batch];
     let start = Instant::now();
-    while start.elapsed() < duration {
+    let closed = duration.is_none().then(stdin_closed);
+    let go_on = || match (duration, &closed) {
+        (Some(duration), _) => start.elapsed() < duration,
+        (None, Some(closed)) => !closed.load(Ordering::Relaxed),
+        (None, None) => unreachable!("a flag is made when there is no duration"),
+    };
+    while go_on() {
         let points: Vec<[f64; 6]> = (0..batch).map(|j| pose(requests as usize + j)).collect();
         let sent = Instant::now();
         let result = client.compensate_batch(RequestKind::Poses, &points, &mut out);
@@ -149,13 +179,17 @@ fn stream(
         requests += 1;
         match result {
             Ok(()) => {
+                served_since_timeout += 1;
                 bad_points += out
                     .iter()
                     .filter(|p| !matches!(p.status, PointStatus::Ok | PointStatus::NoModel))
                     .count() as u64;
             }
             Err(Error::Overloaded) => overloaded += 1,
-            Err(Error::Timeout { .. }) => timeouts += 1,
+            Err(Error::Timeout { .. }) => {
+                timeouts += 1;
+                served_since_timeout = 0;
+            }
             Err(e) => {
                 other_errors += 1;
                 first_error.get_or_insert_with(|| e.to_string());
@@ -173,6 +207,7 @@ fn stream(
         "other_errors": other_errors,
         "first_error": first_error,
         "bad_points": bad_points,
+        "served_since_timeout": served_since_timeout,
         "p50_us": latency.value_at_quantile(0.5) as f64 / 1e3,
         "p99_us": latency.value_at_quantile(0.99) as f64 / 1e3,
         "p999_us": latency.value_at_quantile(0.999) as f64 / 1e3,

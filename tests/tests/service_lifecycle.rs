@@ -1,0 +1,210 @@
+//! The service's life outside serving: what it does with a persisted model it cannot use, a
+//! `--model` that validation refuses, SIGTERM and SIGINT, and `--client-budget 0`.
+
+use std::path::Path;
+
+use std::time::{Duration, Instant};
+
+use hexacomp_client::Error;
+use hexacomp_client::wire::{
+    MAX_BATCH, MAX_REQUESTS_IN_FLIGHT, PROTOCOL_VERSION, PointRequest, RequestHeader, RequestKind,
+    RequestOutcome,
+};
+use hexacomp_core::Geometry;
+use hexacomp_core::compensator::PointStatus;
+use hexacomp_tests::{
+    ServiceProcess, binary, raw_client, save_smooth_model, smooth_model, unique_instance,
+};
+
+fn p(path: &Path) -> &str {
+    path.to_str().unwrap()
+}
+
+/// The prototype with its base 1 mm wider: another geometry fingerprint.
+fn other_geometry() -> Geometry {
+    let mut g = Geometry::prototype();
+    g.name = "other".into();
+    for joint in &mut g.base_joints {
+        joint.x *= 1.001;
+    }
+    g
+}
+
+#[test]
+fn a_damaged_or_foreign_persisted_model_is_ignored_with_a_warning_and_not_served() {
+    let dir = tempfile::tempdir().unwrap();
+    let instance = unique_instance("restore");
+    let state = dir.path().join("state");
+    let (_, model) = save_smooth_model(dir.path(), 3);
+    // A first run persists the model as generation 1.
+    let service = ServiceProcess::with_model(&instance, &state, &model);
+    assert_eq!(service.client().unwrap().status().unwrap().generation, 1);
+    service.kill();
+    let persisted = state.join("model.hxm");
+    let good = std::fs::read(&persisted).unwrap();
+
+    let mut damaged = good.clone();
+    damaged[60] ^= 0x01;
+    let mut foreign = smooth_model(3);
+    foreign.geometry = other_geometry().fingerprint();
+    for (bytes, why) in [
+        (damaged, "checksum mismatch"),
+        (foreign.to_bytes(), "trained for geometry"),
+    ] {
+        std::fs::write(&persisted, &bytes).unwrap();
+        let service = ServiceProcess::start(&instance, &["--state-dir", p(&state)]);
+        let mut client = service.client().unwrap();
+        assert_eq!(client.status().unwrap().generation, 0);
+        let point = client
+            .compensate_pose([0.0, 0.0, 280.0, 0.0, 0.0, 0.0])
+            .unwrap();
+        assert_eq!(point.status, PointStatus::NoModel);
+        let log = service.log();
+        assert!(
+            log.contains("ignoring the persisted model") && log.contains(why),
+            "{log}"
+        );
+        service.kill();
+        // The file is left as it was, for the user to look at.
+        assert_eq!(std::fs::read(&persisted).unwrap(), bytes);
+    }
+}
+
+#[test]
+fn a_model_that_validation_refuses_stops_the_start_with_the_reason() {
+    let dir = tempfile::tempdir().unwrap();
+    let state = dir.path().join("state");
+    let mut foreign = smooth_model(4);
+    foreign.geometry = other_geometry().fingerprint();
+    let path = dir.path().join("foreign.hxm");
+    foreign.save(&path).unwrap();
+    let output = std::process::Command::new(binary("hexacomp-service"))
+        .args(["--instance", &unique_instance("badmodel")])
+        .args(["--state-dir", p(&state), "--model", p(&path)])
+        .output()
+        .unwrap();
+    let message = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(1), "{message}");
+    assert!(
+        message.contains(&format!("{}: refused: ", path.display()))
+            && message.contains("trained for geometry"),
+        "{message}"
+    );
+    // Nothing was persisted for a later start to pick up.
+    assert!(!state.join("model.hxm").exists());
+}
+
+#[test]
+fn sigterm_and_sigint_stop_the_service_cleanly_and_the_instance_can_start_again() {
+    let dir = tempfile::tempdir().unwrap();
+    let instance = unique_instance("signal");
+    let state = dir.path().join("state");
+    let (_, model) = save_smooth_model(dir.path(), 5);
+    let mut service = ServiceProcess::with_model(&instance, &state, &model);
+    for signal in [libc::SIGTERM, libc::SIGINT] {
+        let mut client = service.client().unwrap();
+        client
+            .compensate_pose([0.0, 0.0, 280.0, 0.0, 0.0, 0.0])
+            .unwrap();
+        let (status, log) = service.stop_with(signal);
+        assert_eq!(status.code(), Some(0), "signal {signal}: {status}\n{log}");
+        assert!(
+            log.contains("stopped; iceoryx2 resources released"),
+            "signal {signal}:\n{log}"
+        );
+        // The connected client times out; once it is gone, so are the endpoints: a new client
+        // finds no service.
+        client.set_timeout(Duration::from_millis(50));
+        let stale = client.compensate_pose([0.0, 0.0, 280.0, 0.0, 0.0, 0.0]);
+        assert!(matches!(stale, Err(Error::Timeout { .. })), "{stale:?}");
+        drop(client);
+        let absent = hexacomp_client::Client::connect(&instance, &Default::default());
+        assert!(
+            matches!(absent, Err(Error::ServiceAbsent { .. })),
+            "{absent:?}"
+        );
+        // The instance starts again at once, with the persisted model.
+        service = ServiceProcess::start(&instance, &["--state-dir", p(&state)]);
+        assert_eq!(service.client().unwrap().status().unwrap().generation, 1);
+    }
+}
+
+/// Sends four full batches from each of two clients while the service is stopped, then lets it
+/// answer them all at once, `rounds` times; counts the answers `overloaded`. Every request is
+/// answered while the other client's requests wait, the case where a budget applies.
+fn overloaded_while_others_wait(service: &ServiceProcess, rounds: usize) -> usize {
+    let clients = [0, 1].map(|_| raw_client(&service.instance, MAX_BATCH).unwrap());
+    let mut overloaded = 0;
+    for _ in 0..rounds {
+        service.pause();
+        let pending: Vec<_> = clients
+            .iter()
+            .flat_map(|(_, _, client)| {
+                (0..MAX_REQUESTS_IN_FLIGHT).map(|_| {
+                    let mut request = client.loan_slice_uninit(MAX_BATCH).unwrap();
+                    *request.user_header_mut() = RequestHeader {
+                        protocol: PROTOCOL_VERSION,
+                        kind: RequestKind::Poses as u32,
+                    };
+                    let request = request.write_from_fn(|_| PointRequest {
+                        values: [0.0, 0.0, 280.0, 0.0, 0.0, 0.0],
+                    });
+                    request.send().unwrap()
+                })
+            })
+            .collect();
+        service.resume();
+        for pending in pending {
+            let deadline = Instant::now() + Duration::from_secs(10);
+            let response = loop {
+                if let Some(response) = pending.receive().unwrap() {
+                    break response;
+                }
+                assert!(Instant::now() < deadline, "a request got no answer");
+                std::thread::sleep(Duration::from_micros(100));
+            };
+            match response.user_header().outcome {
+                o if o == RequestOutcome::Served as u32 => {
+                    assert_eq!(response.payload().len(), MAX_BATCH)
+                }
+                o if o == RequestOutcome::Overloaded as u32 => overloaded += 1,
+                o => panic!("outcome {o}"),
+            }
+        }
+    }
+    overloaded
+}
+
+#[test]
+fn a_client_budget_of_0_never_answers_overloaded() {
+    let dir = tempfile::tempdir().unwrap();
+    // With a budget of 1 point per second the burst allowance (four full batches) is spent in
+    // the first round: later requests are answered overloaded while the other client's wait.
+    let limited = ServiceProcess::start(
+        &unique_instance("budget1"),
+        &[
+            "--state-dir",
+            p(&dir.path().join("a")),
+            "--client-budget",
+            "1",
+        ],
+    );
+    let refused = overloaded_while_others_wait(&limited, 3);
+    assert!(refused > 0, "budget 1: {refused} overloaded");
+    let unlimited = ServiceProcess::start(
+        &unique_instance("budget0"),
+        &[
+            "--state-dir",
+            p(&dir.path().join("b")),
+            "--client-budget",
+            "0",
+        ],
+    );
+    assert_eq!(overloaded_while_others_wait(&unlimited, 3), 0);
+    let status = unlimited.client().unwrap().status().unwrap();
+    assert_eq!(
+        (status.points, status.overloaded),
+        ((3 * 2 * MAX_REQUESTS_IN_FLIGHT * MAX_BATCH) as u64, 0)
+    );
+    eprintln!("budget 1: {refused} of 24 requests overloaded; budget 0: none");
+}
