@@ -229,7 +229,7 @@ pub enum DeployOutcome {
     Refused {
         /// Why.
         reason: String,
-        /// The generation still serving.
+        /// The latest accepted generation: the one serving, or about to.
         generation: u64,
     },
 }

@@ -102,6 +102,10 @@ pub fn run(setup: ControlSetup, ready: Sender<Result<(), String>>) {
     };
     let start = Instant::now();
     let mut summary = setup.initial_summary.clone();
+    // The last generation number given out. Only this thread numbers models, one deploy at a
+    // time, so numbers are unique and increase in the order the models are handed over (the
+    // serving thread's counter lags until it takes a model in).
+    let mut numbered = setup.counters.generation.load(Ordering::Relaxed);
     while !setup.stop.load(Ordering::Relaxed) {
         let mut busy = false;
         while let Ok(old) = setup.retired.try_recv() {
@@ -136,7 +140,13 @@ pub fn run(setup: ControlSetup, ready: Sender<Result<(), String>>) {
                 node.try_cleanup_dead_nodes();
                 request.is_connected()
             };
-            let reply = handle_deploy(&setup, request.payload(), deployer_alive, &mut summary);
+            let reply = handle_deploy(
+                &setup,
+                request.payload(),
+                deployer_alive,
+                &mut numbered,
+                &mut summary,
+            );
             if let Err(e) = request.send_copy(reply) {
                 tracing::warn!("answering a deploy request failed: {e:?}");
             }
@@ -147,21 +157,23 @@ pub fn run(setup: ControlSetup, ready: Sender<Result<(), String>>) {
     }
 }
 
-/// Validates, persists and hands over a deployed model, unless it is refused or its deployer is
-/// gone by the time it is validated (`deployer_alive`, asked once, just before committing).
+/// Validates, persists and hands over a deployed model as generation `numbered + 1`, unless it is
+/// refused or its deployer is gone by the time it is validated (`deployer_alive`, asked once,
+/// just before committing). `numbered` is the last generation number given out.
 fn handle_deploy(
     setup: &ControlSetup,
     bytes: &[u8],
     deployer_alive: impl FnOnce() -> bool,
+    numbered: &mut u64,
     summary: &mut String,
 ) -> DeployReply {
-    let serving = setup.counters.generation.load(Ordering::Relaxed);
+    let latest = *numbered;
     let refuse = |why: String| {
         tracing::warn!("refused a deployed model: {why}");
         DeployReply {
             accepted: 0,
             reserved: [0; 7],
-            generation: serving,
+            generation: latest,
             message: text_field(&why),
         }
     };
@@ -172,7 +184,7 @@ fn handle_deploy(
     if !deployer_alive() {
         return refuse("the deployer disconnected before the model was committed".into());
     }
-    let number = serving + 1;
+    let number = latest + 1;
     let mut note = String::new();
     if let Err(e) = state::persist(&setup.state_dir, &model, number) {
         tracing::error!("accepted generation {number} but could not persist it: {e}");
@@ -187,6 +199,7 @@ fn handle_deploy(
     if setup.outgoing.send(generation).is_err() {
         return refuse("the serving thread has stopped".into());
     }
+    *numbered = number;
     *summary = line;
     tracing::info!("accepted a model as generation {number}");
     DeployReply {

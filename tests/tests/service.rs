@@ -578,3 +578,52 @@ fn served_corrections_bring_the_virtual_machine_closer_to_the_commanded_poses() 
         "compensation left {after:.4} mm of {before:.4} mm"
     );
 }
+
+#[test]
+fn concurrent_deploys_get_unique_generations_in_the_order_they_take_effect() {
+    let dir = tempfile::tempdir().unwrap();
+    let state = dir.path().join("state");
+    let (_, first) = hexacomp_tests::save_smooth_model(dir.path(), 60);
+    let service = ServiceProcess::with_model(&unique_instance("deploys"), &state, &first);
+    const DEPLOYERS: usize = 3;
+    const ROUNDS: usize = 3;
+    let files: Vec<Vec<u8>> = (0..DEPLOYERS)
+        .map(|k| hexacomp_tests::smooth_model(61 + k as u64).to_bytes())
+        .collect();
+    let mut given = Vec::new();
+    for _ in 0..ROUNDS {
+        // Three deployers, released together, each with its own connection.
+        let start = std::sync::Barrier::new(DEPLOYERS);
+        let replies: Vec<u64> = std::thread::scope(|scope| {
+            let threads: Vec<_> = files
+                .iter()
+                .map(|file| {
+                    let (service, start) = (&service, &start);
+                    scope.spawn(move || {
+                        let mut client = service.client().unwrap();
+                        start.wait();
+                        match client.deploy(file).unwrap() {
+                            DeployOutcome::Accepted { generation, .. } => generation,
+                            refused => panic!("{refused:?}"),
+                        }
+                    })
+                })
+                .collect();
+            threads.into_iter().map(|t| t.join().unwrap()).collect()
+        });
+        given.extend(replies);
+    }
+    given.sort_unstable();
+    let expected: Vec<u64> = (2..2 + (DEPLOYERS * ROUNDS) as u64).collect();
+    assert_eq!(given, expected, "each deploy names its own generation");
+    // The last one given out is the one that serves, and the one persisted.
+    let last = *expected.last().unwrap();
+    let mut client = service.client().unwrap();
+    let deadline = Instant::now() + Duration::from_secs(60);
+    while client.status().unwrap().generation != last {
+        assert!(Instant::now() < deadline, "generation {last} never served");
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    let persisted = std::fs::read_to_string(state.join("generation")).unwrap();
+    assert_eq!(persisted.trim(), last.to_string());
+}
