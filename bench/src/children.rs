@@ -1,7 +1,8 @@
 //! The servers a benchmark starts: the hexacomp service, the echo server and the socket server,
 //! each a child process running this same executable (hidden subcommands), so that one `cargo
-//! run` builds everything the bench needs. Children are stopped with SIGTERM (SIGKILL after 3 s)
-//! when dropped; their standard error goes to a log file in the output folder.
+//! run` builds everything the bench needs. Children are stopped with SIGTERM (SIGKILL after 3 s,
+//! with a warning, as is a child that ends with a failure) when dropped; their standard error goes
+//! to a log file in the output folder.
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -174,11 +175,23 @@ impl Drop for ChildServer {
         }
         let deadline = Instant::now() + Duration::from_secs(3);
         while Instant::now() < deadline {
-            if let Ok(Some(_)) = self.child.try_wait() {
+            if let Ok(Some(status)) = self.child.try_wait() {
+                if !status.success() {
+                    eprintln!(
+                        "warning: the {} ended with {status} after SIGTERM (its log: {})",
+                        self.what,
+                        self.log.display()
+                    );
+                }
                 return;
             }
             std::thread::sleep(Duration::from_millis(10));
         }
+        eprintln!(
+            "warning: the {} did not stop within 3 s of SIGTERM and was killed (its log: {})",
+            self.what,
+            self.log.display()
+        );
         let _ = self.child.kill();
         let _ = self.child.wait();
     }
