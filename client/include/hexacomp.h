@@ -42,7 +42,8 @@
 #define HEXACOMP_STATUS_NO_MODEL 5
 
 /**
- * Outcome of a call. The numeric values are part of the ABI.
+ * Outcome of a call. The numeric values are part of the ABI. [`hexacomp_error_message`] takes
+ * the value as a plain `int`, so that any integer a C caller passes is defined.
  */
 typedef enum HexacompError {
   /**
@@ -92,7 +93,8 @@ typedef enum HexacompError {
 } HexacompError;
 
 /**
- * What a batch's points are.
+ * What a batch's points are. Functions take the value as a plain `int` (a C caller may pass any
+ * integer: unknown values are refused with `HEXACOMP_ERROR_INVALID_ARGUMENT`).
  */
 typedef enum HexacompKind {
   /**
@@ -171,9 +173,10 @@ extern "C" {
 #endif // __cplusplus
 
 /**
- * The name of an error code, as a static NUL-terminated string (never null).
+ * The name of an error code (a `HexacompError` value), as a static NUL-terminated string
+ * (never null; `"unknown error code"` for a value that is none).
  */
-const char *hexacomp_error_message(enum HexacompError code);
+const char *hexacomp_error_message(int code);
 
 /**
  * The calling thread's last error in full (empty before any error), NUL-terminated; valid
@@ -203,16 +206,16 @@ enum HexacompError hexacomp_connect(const char *instance,
 enum HexacompError hexacomp_set_timeout(struct HexacompClient *client, uint64_t timeout_us);
 
 /**
- * Compensates up to `HEXACOMP_MAX_BATCH` points of one kind in one request: `points` holds
- * `count` rows of six values, `out` receives `count` results. Every point of a batch is
- * computed by the same model generation.
+ * Compensates up to `HEXACOMP_MAX_BATCH` points of one kind (`kind`: a `HexacompKind` value) in
+ * one request: `points` holds `count` rows of six values, `out` receives `count` results. Every
+ * point of a batch is computed by the same model generation.
  *
  * # Safety
  * `client` as for [`hexacomp_set_timeout`]; `points` readable and `out` writable for `count`
  * elements (or null with `count` 0).
  */
 enum HexacompError hexacomp_compensate_batch(struct HexacompClient *client,
-                                             enum HexacompKind kind,
+                                             int kind,
                                              const double (*points)[6],
                                              size_t count,
                                              struct HexacompPoint *out);

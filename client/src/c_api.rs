@@ -11,14 +11,15 @@
 //! released with [`hexacomp_close`].
 
 use std::cell::RefCell;
-use std::ffi::{CStr, CString, c_char};
+use std::ffi::{CStr, CString, c_char, c_int};
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::time::Duration;
 
 use crate::wire::{MAX_BATCH, RequestKind};
 use crate::{Client, ClientOptions, CompensatedPoint, Error};
 
-/// Outcome of a call. The numeric values are part of the ABI.
+/// Outcome of a call. The numeric values are part of the ABI. [`hexacomp_error_message`] takes
+/// the value as a plain `int`, so that any integer a C caller passes is defined.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum HexacompError {
@@ -73,7 +74,8 @@ const _: () = {
     assert!(HEXACOMP_STATUS_NO_MODEL == PointStatus::NoModel as u8);
 };
 
-/// What a batch's points are.
+/// What a batch's points are. Functions take the value as a plain `int` (a C caller may pass any
+/// integer: unknown values are refused with `HEXACOMP_ERROR_INVALID_ARGUMENT`).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum HexacompKind {
@@ -169,6 +171,27 @@ fn invalid(detail: &str) -> (HexacompError, String) {
     (HexacompError::HexacompErrorInvalidArgument, detail.into())
 }
 
+impl HexacompError {
+    /// The code with numeric value `value`, if there is one.
+    fn from_int(value: c_int) -> Option<Self> {
+        use HexacompError::*;
+        const ALL: [HexacompError; 11] = [
+            HexacompOk,
+            HexacompErrorInvalidArgument,
+            HexacompErrorInvalidInstance,
+            HexacompErrorServiceAbsent,
+            HexacompErrorTimeout,
+            HexacompErrorProtocolMismatch,
+            HexacompErrorBatchTooLarge,
+            HexacompErrorOverloaded,
+            HexacompErrorRefused,
+            HexacompErrorTransport,
+            HexacompErrorInternal,
+        ];
+        ALL.into_iter().find(|code| *code as c_int == value)
+    }
+}
+
 fn failed(error: Error) -> (HexacompError, String) {
     (code_of(&error), error.to_string())
 }
@@ -189,12 +212,18 @@ fn point(p: &CompensatedPoint) -> HexacompPoint {
 unsafe fn client_mut<'a>(
     client: *mut HexacompClient,
 ) -> Result<&'a mut HexacompClient, (HexacompError, String)> {
+    // SAFETY: the caller guarantees `client` is null (refused here) or a live client from
+    // `hexacomp_connect`, used by this thread only.
     unsafe { client.as_mut() }.ok_or_else(|| invalid("client is null"))
 }
 
-/// The name of an error code, as a static NUL-terminated string (never null).
+/// The name of an error code (a `HexacompError` value), as a static NUL-terminated string
+/// (never null; `"unknown error code"` for a value that is none).
 #[unsafe(no_mangle)]
-pub extern "C" fn hexacomp_error_message(code: HexacompError) -> *const c_char {
+pub extern "C" fn hexacomp_error_message(code: c_int) -> *const c_char {
+    let Some(code) = HexacompError::from_int(code) else {
+        return c"unknown error code".as_ptr();
+    };
     let text: &'static CStr = match code {
         HexacompError::HexacompOk => c"ok",
         HexacompError::HexacompErrorInvalidArgument => c"invalid argument",
@@ -235,6 +264,7 @@ pub unsafe extern "C" fn hexacomp_connect(
         if instance.is_null() || client.is_null() {
             return Err(invalid("instance and client must not be null"));
         }
+        // SAFETY: `instance` is not null, and the caller guarantees it is NUL-terminated.
         let name = unsafe { CStr::from_ptr(instance) }
             .to_str()
             .map_err(|_| invalid("instance is not UTF-8"))?;
@@ -242,6 +272,7 @@ pub unsafe extern "C" fn hexacomp_connect(
             timeout: Duration::from_micros(timeout_us),
         };
         let connected = Client::connect(name, &options).map_err(failed)?;
+        // SAFETY: `client` is not null, and the caller guarantees it is writable.
         unsafe { *client = Box::into_raw(Box::new(HexacompClient { client: connected })) };
         Ok(())
     })
@@ -257,6 +288,7 @@ pub unsafe extern "C" fn hexacomp_set_timeout(
     timeout_us: u64,
 ) -> HexacompError {
     guarded(|| {
+        // SAFETY: the caller's guarantee on `client` is `client_mut`'s.
         unsafe { client_mut(client) }?
             .client
             .set_timeout(Duration::from_micros(timeout_us));
@@ -264,9 +296,9 @@ pub unsafe extern "C" fn hexacomp_set_timeout(
     })
 }
 
-/// Compensates up to `HEXACOMP_MAX_BATCH` points of one kind in one request: `points` holds
-/// `count` rows of six values, `out` receives `count` results. Every point of a batch is
-/// computed by the same model generation.
+/// Compensates up to `HEXACOMP_MAX_BATCH` points of one kind (`kind`: a `HexacompKind` value) in
+/// one request: `points` holds `count` rows of six values, `out` receives `count` results. Every
+/// point of a batch is computed by the same model generation.
 ///
 /// # Safety
 /// `client` as for [`hexacomp_set_timeout`]; `points` readable and `out` writable for `count`
@@ -274,13 +306,19 @@ pub unsafe extern "C" fn hexacomp_set_timeout(
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn hexacomp_compensate_batch(
     client: *mut HexacompClient,
-    kind: HexacompKind,
+    kind: c_int,
     points: *const [f64; 6],
     count: usize,
     out: *mut HexacompPoint,
 ) -> HexacompError {
     guarded(|| {
+        // SAFETY: the caller's guarantee on `client` is `client_mut`'s.
         let client = unsafe { client_mut(client) }?;
+        let kind = match kind {
+            k if k == HexacompKind::HexacompKindPoses as c_int => RequestKind::Poses,
+            k if k == HexacompKind::HexacompKindJoints as c_int => RequestKind::Joints,
+            unknown => return Err(invalid(&format!("unknown point kind {unknown}"))),
+        };
         if count > MAX_BATCH {
             return Err(failed(Error::BatchTooLarge { points: count }));
         }
@@ -290,16 +328,14 @@ pub unsafe extern "C" fn hexacomp_compensate_batch(
         let (points, out) = if count == 0 {
             (&[][..], &mut [][..])
         } else {
+            // SAFETY: both pointers are not null, and the caller guarantees `points` readable and
+            // `out` writable for `count` elements, not overlapping.
             unsafe {
                 (
                     std::slice::from_raw_parts(points, count),
                     std::slice::from_raw_parts_mut(out, count),
                 )
             }
-        };
-        let kind = match kind {
-            HexacompKind::HexacompKindPoses => RequestKind::Poses,
-            HexacompKind::HexacompKindJoints => RequestKind::Joints,
         };
         client
             .client
@@ -318,10 +354,11 @@ pub unsafe extern "C" fn hexacomp_compensate_joints(
     legs: *const f64,
     out: *mut HexacompPoint,
 ) -> HexacompError {
+    // SAFETY: the caller's guarantees are the batch's with `count` 1 (`legs` holds 6 values).
     unsafe {
         hexacomp_compensate_batch(
             client,
-            HexacompKind::HexacompKindJoints,
+            HexacompKind::HexacompKindJoints as c_int,
             legs.cast(),
             1,
             out,
@@ -339,8 +376,15 @@ pub unsafe extern "C" fn hexacomp_compensate_pose(
     pose: *const f64,
     out: *mut HexacompPoint,
 ) -> HexacompError {
+    // SAFETY: the caller's guarantees are the batch's with `count` 1 (`pose` holds 6 values).
     unsafe {
-        hexacomp_compensate_batch(client, HexacompKind::HexacompKindPoses, pose.cast(), 1, out)
+        hexacomp_compensate_batch(
+            client,
+            HexacompKind::HexacompKindPoses as c_int,
+            pose.cast(),
+            1,
+            out,
+        )
     }
 }
 
@@ -354,7 +398,9 @@ pub unsafe extern "C" fn hexacomp_status(
     out: *mut HexacompStatus,
 ) -> HexacompError {
     guarded(|| {
+        // SAFETY: the caller's guarantee on `client` is `client_mut`'s.
         let client = unsafe { client_mut(client) }?;
+        // SAFETY: the caller guarantees `out` is null (refused here) or writable.
         let out = unsafe { out.as_mut() }.ok_or_else(|| invalid("out is null"))?;
         let s = client.client.status().map_err(failed)?;
         *out = HexacompStatus {
@@ -377,6 +423,8 @@ pub unsafe extern "C" fn hexacomp_status(
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn hexacomp_close(client: *mut HexacompClient) {
     if !client.is_null() {
+        // SAFETY: `client` came from `Box::into_raw` in `hexacomp_connect`, and the caller
+        // guarantees it is not closed twice nor used afterwards.
         let _ = catch_unwind(AssertUnwindSafe(|| drop(unsafe { Box::from_raw(client) })));
     }
 }
@@ -386,6 +434,8 @@ mod tests {
     use super::*;
 
     fn detail() -> String {
+        // SAFETY: the detail is a NUL-terminated string that lives until this thread's next
+        // failing call.
         unsafe { CStr::from_ptr(hexacomp_last_error_detail()) }
             .to_string_lossy()
             .into_owned()
@@ -400,19 +450,30 @@ mod tests {
 
     #[test]
     fn every_code_has_a_message_and_bad_arguments_are_refused_without_touching_them() {
-        for code in 0..=10 {
-            // The codes are dense from 0 to 10.
-            let code: HexacompError = unsafe { std::mem::transmute(code as u32) };
-            let text = unsafe { CStr::from_ptr(hexacomp_error_message(code)) };
-            assert!(!text.to_bytes().is_empty());
+        let message = |code| {
+            // SAFETY: the message is a static NUL-terminated string.
+            unsafe { CStr::from_ptr(hexacomp_error_message(code)) }
+                .to_str()
+                .unwrap()
+        };
+        // The codes are dense from 0 to 10, each with its own message; any other integer is
+        // named as unknown.
+        let messages: std::collections::HashSet<&str> = (0..=10).map(message).collect();
+        assert_eq!(messages.len(), 11);
+        assert!(!messages.contains("unknown error code"));
+        for outside in [-1, 11, c_int::MAX, c_int::MIN] {
+            assert_eq!(message(outside), "unknown error code");
         }
         let mut client = std::ptr::null_mut();
+        // SAFETY: a NUL-terminated name and a writable out-pointer.
         let code = unsafe { hexacomp_connect(c"bad/name".as_ptr(), 1000, &mut client) };
         assert_eq!(code, HexacompError::HexacompErrorInvalidInstance);
         assert!(client.is_null());
         assert!(detail().contains("bad/name"));
+        // SAFETY: null pointers are refused without being touched.
         let code = unsafe { hexacomp_status(std::ptr::null_mut(), std::ptr::null_mut()) };
         assert_eq!(code, HexacompError::HexacompErrorInvalidArgument);
+        // SAFETY: null is ignored.
         unsafe { hexacomp_close(std::ptr::null_mut()) };
     }
 }

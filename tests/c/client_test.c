@@ -143,6 +143,13 @@ int main(int argc, char **argv) {
                                      batch) == HEXACOMP_ERROR_BATCH_TOO_LARGE, "too large");
     expect(hexacomp_compensate_batch(client, HEXACOMP_KIND_POSES, NULL, 3, batch) ==
                HEXACOMP_ERROR_INVALID_ARGUMENT, "null points");
+    /* Any integer is a defined argument: unknown kinds and codes are named, not undefined. */
+    expect(hexacomp_compensate_batch(client, 7, poses, 3, batch) ==
+               HEXACOMP_ERROR_INVALID_ARGUMENT, "unknown kind");
+    expect(strstr(hexacomp_last_error_detail(), "unknown point kind 7") != NULL, "kind detail");
+    expect(strcmp(hexacomp_error_message(99), "unknown error code") == 0, "unknown code");
+    expect(strcmp(hexacomp_error_message(HEXACOMP_ERROR_TIMEOUT),
+                  "the service did not answer within the timeout") == 0, "timeout message");
     expect(hexacomp_compensate_pose(NULL, poses[0], batch) == HEXACOMP_ERROR_INVALID_ARGUMENT,
            "null client");
     expect(hexacomp_status(client, &status) == HEXACOMP_OK, "status after the requests");
