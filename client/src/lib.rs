@@ -217,7 +217,8 @@ pub struct Status {
 /// What the service said to a deployed model.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum DeployOutcome {
-    /// Accepted; it serves as this generation.
+    /// Accepted; it serves as this generation from the reply on (unless `warning` says it is
+    /// not serving yet).
     Accepted {
         /// The new generation.
         generation: u64,

@@ -16,6 +16,19 @@ use iceoryx2::prelude::*;
 
 use crate::{Counters, Generation, state, validate};
 
+/// How long a deploy waits for the serving thread to take the accepted model in before it
+/// answers anyway (saying so).
+const TAKE_IN_PATIENCE: Duration = Duration::from_secs(1);
+
+/// `first` and `second` joined with "; ", either may be empty.
+fn join(first: String, second: &str) -> String {
+    if first.is_empty() {
+        second.to_string()
+    } else {
+        format!("{first}; {second}")
+    }
+}
+
 /// How often the control thread polls its endpoints while idle. Every wake-up of this thread may
 /// land on the serving thread's core and preempt it (about 35 µs on a virtual machine here, at
 /// a 1 ms interval a visible p99.9 bump); status and deploy answers wait up to this long.
@@ -200,6 +213,20 @@ fn handle_deploy(
         return refuse("the serving thread has stopped".into());
     }
     *numbered = number;
+    // The reply says the model serves: wait until the serving thread has taken it in (between
+    // two requests; within its 10 ms tick when it sleeps in event mode).
+    let deadline = Instant::now() + TAKE_IN_PATIENCE;
+    while setup.counters.generation.load(Ordering::Relaxed) < number {
+        if Instant::now() >= deadline {
+            tracing::warn!("generation {number} was not taken in within {TAKE_IN_PATIENCE:?}");
+            note = join(
+                note,
+                "accepted, not serving yet: the serving thread has not taken it in",
+            );
+            break;
+        }
+        std::thread::sleep(Duration::from_micros(100));
+    }
     *summary = line;
     tracing::info!("accepted a model as generation {number}");
     DeployReply {
