@@ -13,7 +13,8 @@
 //!   point-measuring device;
 //! - [`network`], [`model`]: the trained networks, their normalisation and the model file;
 //! - [`compensator`]: run-time compensation with a status per point (Eq. 19–20);
-//! - [`stats`]: max/mean/std summaries of pose errors (the paper's Table 2 layout).
+//! - [`stats`]: max/mean/std summaries of pose errors (the paper's Table 2 layout);
+//! - [`durable`]: files replaced whole or not at all, durable across a power loss.
 //!
 //! Units everywhere: millimetres; radians in code, degrees only in files and on the command line.
 //! This crate does no inter-process communication and starts no threads.
@@ -21,6 +22,7 @@
 #![warn(missing_docs)]
 
 pub mod compensator;
+pub mod durable;
 pub mod error;
 pub mod formats;
 pub mod geometry;

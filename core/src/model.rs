@@ -240,19 +240,13 @@ impl Model {
         Ok(model)
     }
 
-    /// Writes the model file atomically: to a temporary file beside `path`, flushed to disk,
-    /// then renamed over it, so a crash never leaves a half-written model.
+    /// Writes the model file whole or not at all, durable once this returns
+    /// ([`crate::durable::replace_file`]), so a crash or power loss never leaves a half-written
+    /// model nor brings the previous one back.
     pub fn save(&self, path: &Path) -> Result<()> {
-        use std::io::Write;
-        let io = |e: std::io::Error| Error::ModelFile {
+        crate::durable::replace_file(path, &self.to_bytes()).map_err(|e| Error::ModelFile {
             path: path.display().to_string(),
             problem: ModelFileProblem::Io(e.to_string()),
-        };
-        let name = path.file_name().map(|n| n.to_string_lossy().into_owned());
-        let temporary = path.with_file_name(format!(".{}.tmp", name.unwrap_or_default()));
-        let mut file = std::fs::File::create(&temporary).map_err(io)?;
-        file.write_all(&self.to_bytes()).map_err(io)?;
-        file.sync_all().map_err(io)?;
-        std::fs::rename(&temporary, path).map_err(io)
+        })
     }
 }

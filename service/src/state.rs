@@ -1,10 +1,10 @@
 //! The state directory: the last accepted model and its generation, written atomically so that a
 //! crash mid-write never leaves a broken file.
 
-use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use hexacomp_core::Geometry;
+use hexacomp_core::durable::replace_file;
 use hexacomp_core::model::Model;
 
 /// The accepted model's file in a state directory.
@@ -23,18 +23,13 @@ pub fn prepare(dir: &Path) -> std::io::Result<()> {
     std::fs::set_permissions(dir, std::fs::Permissions::from_mode(0o700))
 }
 
-/// Persists an accepted model and its generation (each file written to a temporary, synced, and
-/// renamed into place).
+/// Persists an accepted model and its generation, each file replaced whole and durably
+/// ([`hexacomp_core::durable::replace_file`]).
 pub fn persist(dir: &Path, model: &Model, generation: u64) -> Result<(), String> {
     model.save(&model_path(dir)).map_err(|e| e.to_string())?;
-    let temporary = dir.join(".generation.tmp");
-    let write = || -> std::io::Result<()> {
-        let mut file = std::fs::File::create(&temporary)?;
-        file.write_all(generation.to_string().as_bytes())?;
-        file.sync_all()?;
-        std::fs::rename(&temporary, generation_path(dir))
-    };
-    write().map_err(|e| format!("writing {}: {e}", generation_path(dir).display()))
+    let path = generation_path(dir);
+    replace_file(&path, generation.to_string().as_bytes())
+        .map_err(|e| format!("writing {}: {e}", path.display()))
 }
 
 /// The persisted model and generation, if any, for `geometry`. A file for another geometry or a
