@@ -168,6 +168,17 @@ impl ChildServer {
 
 impl Drop for ChildServer {
     fn drop(&mut self) {
+        // Already ended (and reaped): its pid may belong to another process by now.
+        if let Ok(Some(status)) = self.child.try_wait() {
+            if !status.success() {
+                eprintln!(
+                    "warning: the {} had ended with {status} (its log: {})",
+                    self.what,
+                    self.log.display()
+                );
+            }
+            return;
+        }
         // SIGTERM lets the servers release their iceoryx2 resources.
         // SAFETY: kill(2) on our own child's pid; no memory is touched.
         unsafe {

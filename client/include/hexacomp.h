@@ -212,7 +212,7 @@ enum HexacompError hexacomp_set_timeout(struct HexacompClient *client, uint64_t 
  *
  * # Safety
  * `client` as for [`hexacomp_set_timeout`]; `points` readable and `out` writable for `count`
- * elements (or null with `count` 0).
+ * elements, not overlapping (or null with `count` 0).
  */
 enum HexacompError hexacomp_compensate_batch(struct HexacompClient *client,
                                              int kind,

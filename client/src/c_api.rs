@@ -302,7 +302,7 @@ pub unsafe extern "C" fn hexacomp_set_timeout(
 ///
 /// # Safety
 /// `client` as for [`hexacomp_set_timeout`]; `points` readable and `out` writable for `count`
-/// elements (or null with `count` 0).
+/// elements, not overlapping (or null with `count` 0).
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn hexacomp_compensate_batch(
     client: *mut HexacompClient,

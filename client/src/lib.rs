@@ -158,11 +158,16 @@ pub fn iceoryx_name(instance: &str, endpoint: Endpoint) -> Result<ServiceName, E
 /// client's timeout: the service's control thread answers them within 10 ms.
 pub const MIN_CONTROL_DEADLINE: Duration = Duration::from_millis(100);
 
+/// The shortest deadline of a deploy, whatever the client's timeout: the service validates the
+/// model over its whole training range, which takes seconds on a loaded machine, and a deployer
+/// that gave up early would report a failure for a model the service then accepts.
+pub const MIN_DEPLOY_DEADLINE: Duration = Duration::from_secs(60);
+
 /// Settings of a client.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ClientOptions {
     /// Deadline of every compensation call (status requests and connecting wait at least
-    /// [`MIN_CONTROL_DEADLINE`], deploys ten times this).
+    /// [`MIN_CONTROL_DEADLINE`], deploys ten times this and at least [`MIN_DEPLOY_DEADLINE`]).
     pub timeout: Duration,
 }
 
@@ -496,8 +501,9 @@ impl Client {
         })
     }
 
-    /// Hands a model file's bytes to the service, which validates it off its serving thread.
-    /// Waits up to ten times the call deadline (validation samples the whole training range).
+    /// Hands a model file's bytes to the service, which validates it off its serving thread and
+    /// answers once it serves. Waits up to ten times the call deadline, and at least
+    /// [`MIN_DEPLOY_DEADLINE`].
     pub fn deploy(&mut self, model_file: &[u8]) -> Result<DeployOutcome, Error> {
         if model_file.len() > MAX_MODEL_BYTES {
             return Err(Error::ModelTooLarge {
@@ -510,7 +516,8 @@ impl Client {
             .map_err(transport)?
             .write_from_fn(|i| model_file[i]);
         let pending = request.send().map_err(transport)?;
-        let reply = Waiter::default().wait_for(self.timeout * 10, || {
+        let deadline = (self.timeout * 10).max(MIN_DEPLOY_DEADLINE);
+        let reply = Waiter::default().wait_for(deadline, || {
             pending.receive().map(|r| r.map(|r| *r.payload()))
         })?;
         Ok(if reply.accepted == 1 {

@@ -101,7 +101,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
             let model = crate::validate::validate(&bytes, &geometry)
                 .map_err(|why| anyhow::anyhow!("{}: refused: {why}", path.display()))?;
-            state::persist(&state_dir, &model, 1).map_err(anyhow::Error::msg)?;
+            state::persist(&state_dir, &model.to_bytes(), 1).map_err(anyhow::Error::msg)?;
             Some((model, 1))
         }
         None => state::restore(&state_dir, &geometry),
@@ -110,6 +110,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .as_ref()
         .map(|(model, _)| summarise(model))
         .unwrap_or_default();
+    let initial_generation = initial.as_ref().map_or(0, |(_, number)| *number);
     let initial = initial.map(|(model, number)| Box::new(Generation { model, number }));
     tracing::info!(
         "instance {} geometry {} ({}), model generation {}, state {}",
@@ -178,6 +179,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             counters,
             stop: stop.clone(),
             initial_summary,
+            initial_generation,
             wait_mode: wait_mode.wire_value(),
         };
         std::thread::Builder::new()

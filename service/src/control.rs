@@ -6,7 +6,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use crossbeam_channel::{Receiver, Sender};
+use crossbeam_channel::{Receiver, Sender, TrySendError};
 use hexacomp_client::wire::{
     DeployReply, MAX_CLIENTS, MAX_NODES, PROTOCOL_VERSION, StatusReport, text_field,
 };
@@ -52,6 +52,8 @@ pub struct ControlSetup {
     pub stop: Arc<AtomicBool>,
     /// Provenance of the model serving at start.
     pub initial_summary: String,
+    /// Generation of the model serving at start (0: none): deploys are numbered from it.
+    pub initial_generation: u64,
     /// How the serving thread waits (status report value).
     pub wait_mode: u32,
 }
@@ -118,7 +120,7 @@ pub fn run(setup: ControlSetup, ready: Sender<Result<(), String>>) {
     // The last generation number given out. Only this thread numbers models, one deploy at a
     // time, so numbers are unique and increase in the order the models are handed over (the
     // serving thread's counter lags until it takes a model in).
-    let mut numbered = setup.counters.generation.load(Ordering::Relaxed);
+    let mut numbered = setup.initial_generation;
     while !setup.stop.load(Ordering::Relaxed) {
         let mut busy = false;
         while let Ok(old) = setup.retired.try_recv() {
@@ -170,9 +172,11 @@ pub fn run(setup: ControlSetup, ready: Sender<Result<(), String>>) {
     }
 }
 
-/// Validates, persists and hands over a deployed model as generation `numbered + 1`, unless it is
-/// refused or its deployer is gone by the time it is validated (`deployer_alive`, asked once,
-/// just before committing). `numbered` is the last generation number given out.
+/// Validates a deployed model, hands it to the serving thread as generation `numbered + 1`,
+/// persists it and answers once it serves; refuses it when it is invalid, when its deployer is
+/// gone by the time it is validated (`deployer_alive`, asked once, just before committing) or
+/// when the serving thread cannot take it (nothing is persisted then). `numbered` is the last
+/// generation number given out.
 fn handle_deploy(
     setup: &ControlSetup,
     bytes: &[u8],
@@ -198,8 +202,24 @@ fn handle_deploy(
         return refuse("the deployer disconnected before the model was committed".into());
     }
     let number = latest + 1;
+    let line = summarise(&model);
+    let file = model.to_bytes();
+    match setup
+        .outgoing
+        .try_send(Box::new(Generation { model, number }))
+    {
+        Ok(()) => *numbered = number,
+        Err(TrySendError::Full(_)) => {
+            return refuse(format!(
+                "the serving thread has not taken in generation {latest} yet: deploy again"
+            ));
+        }
+        Err(TrySendError::Disconnected(_)) => {
+            return refuse("the serving thread has stopped".into());
+        }
+    }
     let mut note = String::new();
-    if let Err(e) = state::persist(&setup.state_dir, &model, number) {
+    if let Err(e) = state::persist(&setup.state_dir, &file, number) {
         tracing::error!("accepted generation {number} but could not persist it: {e}");
         setup
             .counters
@@ -207,12 +227,6 @@ fn handle_deploy(
             .fetch_add(1, Ordering::Relaxed);
         note = format!("accepted but not persisted: {e}");
     }
-    let line = summarise(&model);
-    let generation = Box::new(Generation { model, number });
-    if setup.outgoing.send(generation).is_err() {
-        return refuse("the serving thread has stopped".into());
-    }
-    *numbered = number;
     // The reply says the model serves: wait until the serving thread has taken it in (between
     // two requests; within its 10 ms tick when it sleeps in event mode).
     let deadline = Instant::now() + TAKE_IN_PATIENCE;
@@ -234,5 +248,149 @@ fn handle_deploy(
         reserved: [0; 7],
         generation: number,
         message: text_field(&note),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use hexacomp_core::model::{Model, NetworkInput, Networks, Provenance};
+    use hexacomp_core::network::{Network, Normalisation};
+
+    /// A valid model for the prototype: every leg corrected by `offset_mm`, everywhere.
+    fn constant_model(offset_mm: f64) -> Model {
+        let g = Geometry::prototype();
+        let [min, max] = g.leg_range;
+        let mut weights = vec![0.0; Network::weight_count(1, 1)];
+        *weights.last_mut().unwrap() = offset_mm;
+        let network = Network::from_weights(1, 1, weights).unwrap();
+        Model {
+            networks: Networks::Decoupled(vec![network; 6]),
+            input: NetworkInput::Commanded,
+            normalisation: Normalisation {
+                mean: [(min + max) / 2.0; 6],
+                span: [max - min; 6],
+            },
+            training_range: [g.leg_range; 6],
+            correction_bounds: [[-0.5, 0.5]; 6],
+            geometry: g.fingerprint(),
+            provenance: Provenance::default(),
+        }
+    }
+
+    /// A control setup whose serving side is `incoming`, with its state in `dir`.
+    fn setup(
+        dir: &std::path::Path,
+        initial_generation: u64,
+    ) -> (ControlSetup, Receiver<Box<Generation>>) {
+        let (outgoing, incoming) = crossbeam_channel::bounded(1);
+        let (_, retired) = crossbeam_channel::bounded(1);
+        let setup = ControlSetup {
+            instance: "unit".into(),
+            geometry: Geometry::prototype(),
+            state_dir: dir.to_path_buf(),
+            outgoing,
+            retired,
+            counters: Arc::new(Counters::default()),
+            stop: Arc::new(AtomicBool::new(false)),
+            initial_summary: String::new(),
+            initial_generation,
+            wait_mode: 0,
+        };
+        (setup, incoming)
+    }
+
+    fn deploy(setup: &ControlSetup, offset_mm: f64, numbered: &mut u64) -> DeployReply {
+        let bytes = constant_model(offset_mm).to_bytes();
+        handle_deploy(setup, &bytes, || true, numbered, &mut String::new())
+    }
+
+    fn persisted_generation(dir: &std::path::Path) -> String {
+        std::fs::read_to_string(dir.join("generation")).unwrap()
+    }
+
+    #[test]
+    fn a_deploy_is_answered_only_once_the_serving_thread_has_taken_the_model_in() {
+        let dir = tempfile::tempdir().unwrap();
+        let (setup, incoming) = setup(dir.path(), 1);
+        let counters = setup.counters.clone();
+        // A serving thread that is slow to take the model in.
+        let taker = std::thread::spawn(move || {
+            let generation = incoming.recv().unwrap();
+            std::thread::sleep(Duration::from_millis(50));
+            counters
+                .generation
+                .store(generation.number, Ordering::Relaxed);
+        });
+        let mut numbered = 1;
+        let reply = deploy(&setup, 0.1, &mut numbered);
+        assert_eq!((reply.accepted, reply.generation), (1, 2));
+        assert_eq!(setup.counters.generation.load(Ordering::Relaxed), 2);
+        assert_eq!(text(&reply.message), "");
+        taker.join().unwrap();
+    }
+
+    #[test]
+    fn deploys_are_numbered_from_the_initial_generation_whatever_the_counter_says() {
+        let dir = tempfile::tempdir().unwrap();
+        // The serving thread's counter still 0 (it has not stored the initial generation yet).
+        let (setup, incoming) = setup(dir.path(), 5);
+        let counters = setup.counters.clone();
+        let taker = std::thread::spawn(move || {
+            for generation in incoming.iter() {
+                counters
+                    .generation
+                    .store(generation.number, Ordering::Relaxed);
+            }
+        });
+        let mut numbered = setup.initial_generation;
+        let given: Vec<u64> = [0.1, 0.2, 0.3]
+            .iter()
+            .map(|offset| deploy(&setup, *offset, &mut numbered).generation)
+            .collect();
+        assert_eq!(given, [6, 7, 8]);
+        assert_eq!(persisted_generation(dir.path()), "8");
+        drop(setup);
+        taker.join().unwrap();
+    }
+
+    #[test]
+    fn with_no_serving_thread_taking_models_in_the_reply_says_so_and_the_next_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let (setup, _incoming) = setup(dir.path(), 1);
+        let mut numbered = 1;
+        let first = deploy(&setup, 0.1, &mut numbered);
+        assert_eq!((first.accepted, first.generation), (1, 2));
+        assert!(
+            text(&first.message).contains("not serving yet"),
+            "{}",
+            text(&first.message)
+        );
+        let second = deploy(&setup, 0.2, &mut numbered);
+        assert_eq!((second.accepted, second.generation), (0, 2));
+        assert!(
+            text(&second.message).contains("has not taken in generation 2 yet"),
+            "{}",
+            text(&second.message)
+        );
+        // The refused model was not persisted, and its number was not given out.
+        assert_eq!(persisted_generation(dir.path()), "2");
+        assert_eq!(numbered, 2);
+    }
+
+    #[test]
+    fn a_model_for_a_stopped_serving_thread_is_refused_and_not_persisted() {
+        let dir = tempfile::tempdir().unwrap();
+        let (setup, incoming) = setup(dir.path(), 1);
+        drop(incoming);
+        let mut numbered = 1;
+        let reply = deploy(&setup, 0.1, &mut numbered);
+        assert_eq!((reply.accepted, reply.generation), (0, 1));
+        assert!(text(&reply.message).contains("has stopped"));
+        assert!(!dir.path().join("model.hxm").exists());
+    }
+
+    fn text(field: &[u8; hexacomp_client::wire::TEXT_BYTES]) -> String {
+        hexacomp_client::wire::field_text(field)
     }
 }

@@ -172,6 +172,11 @@ pub fn serve(setup: ServingSetup, ready: Sender<Result<(), String>>) {
         let (service, server) = compensation_endpoint(&node, &instance)?;
         Ok((node, service, server))
     })();
+    let mut current = initial;
+    // Stored before "ready": the status answered from then on names the serving generation.
+    counters
+        .generation
+        .store(current.as_ref().map_or(0, |g| g.number), Ordering::Relaxed);
     let (node, _service, server) = match started {
         Ok(parts) => {
             let _ = ready.send(Ok(()));
@@ -182,10 +187,6 @@ pub fn serve(setup: ServingSetup, ready: Sender<Result<(), String>>) {
             return;
         }
     };
-    let mut current = initial;
-    counters
-        .generation
-        .store(current.as_ref().map_or(0, |g| g.number), Ordering::Relaxed);
     // Event mode: a listener on the wake endpoint, attached to a WaitSet together with a 10 ms
     // tick that keeps stop requests and model switches prompt while no request comes.
     let wake = match wait {

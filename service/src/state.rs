@@ -23,10 +23,11 @@ pub fn prepare(dir: &Path) -> std::io::Result<()> {
     std::fs::set_permissions(dir, std::fs::Permissions::from_mode(0o700))
 }
 
-/// Persists an accepted model and its generation, each file replaced whole and durably
-/// ([`hexacomp_core::durable::replace_file`]).
-pub fn persist(dir: &Path, model: &Model, generation: u64) -> Result<(), String> {
-    model.save(&model_path(dir)).map_err(|e| e.to_string())?;
+/// Persists an accepted model file (its bytes) and its generation, each file replaced whole and
+/// durably ([`hexacomp_core::durable::replace_file`]).
+pub fn persist(dir: &Path, model_file: &[u8], generation: u64) -> Result<(), String> {
+    let path = model_path(dir);
+    replace_file(&path, model_file).map_err(|e| format!("writing {}: {e}", path.display()))?;
     let path = generation_path(dir);
     replace_file(&path, generation.to_string().as_bytes())
         .map_err(|e| format!("writing {}: {e}", path.display()))

@@ -123,6 +123,7 @@ fn serving_thread_allocates_only_iceoryx2s_two_objects_per_request_and_nothing_o
         counters: Arc::new(Counters::default()),
         stop: stop.clone(),
         initial_summary: String::new(),
+        initial_generation: 0,
         wait_mode: WaitMode::Sleep.wire_value(),
     };
     let control = std::thread::spawn(move || run_control(control_setup, control_ready_tx));

@@ -135,27 +135,39 @@ pub fn spawn_test_client(instance: &str, args: &[&str]) -> std::process::Child {
         .expect("starting hexacomp-test-client")
 }
 
-/// Waits until a `stream` test client reports on its standard error that it is connected; panics
-/// with what it said instead. Reads byte by byte, so the rest of its standard error stays in
-/// the pipe for [`test_client_report`].
+/// Waits until a `stream` test client reports on its standard error that it is connected (lines
+/// before it, such as iceoryx2's warnings, are skipped); panics if it ends first or says nothing
+/// within a minute. The rest of its standard error stays for [`test_client_report`].
 pub fn wait_until_connected(child: &mut std::process::Child) {
     use std::io::Read;
-    let stderr = child.stderr.as_mut().expect("piped stderr");
-    let mut line = Vec::new();
-    let mut byte = [0u8];
-    while stderr
-        .read(&mut byte)
-        .expect("reading a test client's stderr")
-        == 1
-        && byte[0] != b'\n'
-    {
-        line.push(byte[0]);
+    let mut stderr = child.stderr.take().expect("piped stderr");
+    let (tx, rx) = std::sync::mpsc::channel();
+    // Read on a thread, byte by byte (no read-ahead), so that the wait can have a deadline.
+    std::thread::spawn(move || {
+        let mut before = String::new();
+        let mut line = Vec::new();
+        let mut byte = [0u8];
+        let connected = loop {
+            match stderr.read(&mut byte) {
+                Ok(1) if byte[0] == b'\n' => {
+                    if line == b"connected" {
+                        break true;
+                    }
+                    before += &String::from_utf8_lossy(&line);
+                    before.push('\n');
+                    line.clear();
+                }
+                Ok(1) => line.push(byte[0]),
+                _ => break false,
+            }
+        };
+        let _ = tx.send((connected, before, stderr));
+    });
+    match rx.recv_timeout(std::time::Duration::from_secs(60)) {
+        Ok((true, _, stderr)) => child.stderr = Some(stderr),
+        Ok((false, before, _)) => panic!("a test client ended before connecting:\n{before}"),
+        Err(_) => panic!("a test client did not connect within a minute"),
     }
-    assert_eq!(
-        String::from_utf8_lossy(&line),
-        "connected",
-        "a test client did not connect"
-    );
 }
 
 /// Closes a test client's standard input (which ends a `stream` without `--seconds`), waits for
@@ -255,8 +267,10 @@ pub struct ServiceProcess {
     child: std::process::Child,
     /// The instance it serves.
     pub instance: String,
-    /// Its standard error, for failure messages.
+    /// The log file its standard error is appended to (shared by the starts of one instance).
     log: PathBuf,
+    /// Where this start's part of the log begins, bytes.
+    log_start: u64,
 }
 
 impl ServiceProcess {
@@ -264,6 +278,9 @@ impl ServiceProcess {
     /// waits until a client can connect (10 s at most).
     pub fn start(instance: &str, args: &[&str]) -> Self {
         let log = std::env::temp_dir().join(format!("hexacomp-{instance}.log"));
+        // An earlier start of this instance, or of another run that had the same process id,
+        // may have written to the file: this start's log is what follows.
+        let log_start = std::fs::metadata(&log).map_or(0, |m| m.len());
         let child = Command::new(binary("hexacomp-service"))
             .args(["--instance", instance])
             .args(args)
@@ -282,6 +299,7 @@ impl ServiceProcess {
             child,
             instance: instance.to_string(),
             log,
+            log_start,
         };
         service.wait_until_serving();
         service
@@ -308,7 +326,7 @@ impl ServiceProcess {
                 std::time::Instant::now() < deadline,
                 "service {} did not come up:\n{}",
                 self.instance,
-                std::fs::read_to_string(&self.log).unwrap_or_default()
+                self.log()
             );
             std::thread::sleep(std::time::Duration::from_millis(20));
         }
@@ -327,9 +345,11 @@ impl ServiceProcess {
         self.child.id()
     }
 
-    /// What the service wrote to its standard error so far.
+    /// What this service (this start of it) wrote to its standard error so far.
     pub fn log(&self) -> String {
-        std::fs::read_to_string(&self.log).unwrap_or_default()
+        let whole = std::fs::read(&self.log).unwrap_or_default();
+        let start = usize::try_from(self.log_start).map_or(whole.len(), |s| s.min(whole.len()));
+        String::from_utf8_lossy(&whole[start..]).into_owned()
     }
 
     /// Stops the service with SIGSTOP and returns once the kernel reports it stopped (the signal

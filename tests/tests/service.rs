@@ -599,13 +599,7 @@ fn concurrent_deploys_get_unique_generations_in_the_order_they_take_effect() {
                 .map(|file| {
                     let (service, start) = (&service, &start);
                     scope.spawn(move || {
-                        // Validation takes seconds on a loaded machine, one deploy after another:
-                        // a deploy here waits up to ten times 30 s.
-                        let options = hexacomp_client::ClientOptions {
-                            timeout: Duration::from_secs(30),
-                        };
-                        let mut client =
-                            hexacomp_client::Client::connect(&service.instance, &options).unwrap();
+                        let mut client = service.client().unwrap();
                         start.wait();
                         match client.deploy(file).unwrap() {
                             DeployOutcome::Accepted { generation, .. } => generation,

@@ -79,7 +79,8 @@ pub fn run(command: &SwapCommand) -> anyhow::Result<()> {
                 let start = Instant::now();
                 let outcome = client.deploy(&model_bytes);
                 deploys.slowest = deploys.slowest.max(start.elapsed());
-                // The serving thread switches at its next request: keep the window open a little.
+                // The model serves once the reply comes; the old one is freed on the control
+                // thread just after: keep the window open a little.
                 std::thread::sleep(Duration::from_millis(2));
                 swapping.store(false, Ordering::Relaxed);
                 match outcome? {
