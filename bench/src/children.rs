@@ -166,21 +166,29 @@ impl ChildServer {
     }
 }
 
+impl ChildServer {
+    /// Warns, naming the child and its log, that it `happened`.
+    fn warn(&self, happened: &str) {
+        eprintln!(
+            "warning: the {} {happened} (its log: {})",
+            self.what,
+            self.log.display()
+        );
+    }
+}
+
 impl Drop for ChildServer {
     fn drop(&mut self) {
         // Already ended (and reaped): its pid may belong to another process by now.
         if let Ok(Some(status)) = self.child.try_wait() {
             if !status.success() {
-                eprintln!(
-                    "warning: the {} had ended with {status} (its log: {})",
-                    self.what,
-                    self.log.display()
-                );
+                self.warn(&format!("had ended with {status}"));
             }
             return;
         }
         // SIGTERM lets the servers release their iceoryx2 resources.
-        // SAFETY: kill(2) on our own child's pid; no memory is touched.
+        // SAFETY: kill(2) on our own child's pid, not yet reaped (try_wait said it runs), so the
+        // pid is still the child's; no memory is touched.
         unsafe {
             libc::kill(self.child.id() as libc::pid_t, libc::SIGTERM);
         }
@@ -188,21 +196,13 @@ impl Drop for ChildServer {
         while Instant::now() < deadline {
             if let Ok(Some(status)) = self.child.try_wait() {
                 if !status.success() {
-                    eprintln!(
-                        "warning: the {} ended with {status} after SIGTERM (its log: {})",
-                        self.what,
-                        self.log.display()
-                    );
+                    self.warn(&format!("ended with {status} after SIGTERM"));
                 }
                 return;
             }
             std::thread::sleep(Duration::from_millis(10));
         }
-        eprintln!(
-            "warning: the {} did not stop within 3 s of SIGTERM and was killed (its log: {})",
-            self.what,
-            self.log.display()
-        );
+        self.warn("did not stop within 3 s of SIGTERM and was killed");
         let _ = self.child.kill();
         let _ = self.child.wait();
     }
