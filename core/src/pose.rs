@@ -156,19 +156,94 @@ pub fn rotation_vector(r: &DMat3) -> DVec3 {
 mod tests {
     use super::*;
 
+    /// The rotation of a pose with angles `[a, b, c]` in degrees.
+    fn rotation_deg(a: f64, b: f64, c: f64) -> DMat3 {
+        Pose::from_mm_deg([0.0, 0.0, 0.0, a, b, c]).rotation()
+    }
+
+    fn assert_turns(r: DMat3, from: DVec3, to: DVec3, what: &str) {
+        let got = r * from;
+        assert!(
+            (got - to).length() < 1e-15,
+            "{what}: {from} turned to {got}, expected {to}"
+        );
+    }
+
     #[test]
-    fn rotation_follows_rz_ry_rx() {
-        // A pure yaw of 90° turns x into y; a pure roll of 90° turns y into z.
-        let yaw = Pose::from_mm_deg([0.0, 0.0, 0.0, 0.0, 0.0, 90.0]).rotation();
-        assert!((yaw * DVec3::X - DVec3::Y).length() < 1e-15);
-        let roll = Pose::from_mm_deg([0.0, 0.0, 0.0, 90.0, 0.0, 0.0]).rotation();
-        assert!((roll * DVec3::Y - DVec3::Z).length() < 1e-15);
-        // Order: roll first (innermost), then pitch, then yaw.
-        let p = Pose::from_mm_deg([0.0, 0.0, 0.0, 10.0, 20.0, 30.0]);
-        let expected = DMat3::from_rotation_z(30f64.to_radians())
-            * DMat3::from_rotation_y(20f64.to_radians())
-            * DMat3::from_rotation_x(10f64.to_radians());
-        assert!(p.rotation().abs_diff_eq(expected, 1e-15));
+    fn each_angle_turns_the_unit_vectors_right_handed_about_its_own_axis() {
+        // Right-handed quarter turns: about x, y → z and z → −y; about y, z → x and x → −z;
+        // about z, x → y and y → −x. The rotation axis itself stays put.
+        let roll = rotation_deg(90.0, 0.0, 0.0);
+        assert_turns(roll, DVec3::X, DVec3::X, "roll");
+        assert_turns(roll, DVec3::Y, DVec3::Z, "roll");
+        assert_turns(roll, DVec3::Z, -DVec3::Y, "roll");
+        let pitch = rotation_deg(0.0, 90.0, 0.0);
+        assert_turns(pitch, DVec3::Y, DVec3::Y, "pitch");
+        assert_turns(pitch, DVec3::Z, DVec3::X, "pitch");
+        assert_turns(pitch, DVec3::X, -DVec3::Z, "pitch");
+        let yaw = rotation_deg(0.0, 0.0, 90.0);
+        assert_turns(yaw, DVec3::Z, DVec3::Z, "yaw");
+        assert_turns(yaw, DVec3::X, DVec3::Y, "yaw");
+        assert_turns(yaw, DVec3::Y, -DVec3::X, "yaw");
+        // A small angle: sin and cos, not only their values at 90°.
+        let (s, c) = 30f64.to_radians().sin_cos();
+        assert_turns(
+            rotation_deg(30.0, 0.0, 0.0),
+            DVec3::Y,
+            DVec3::new(0.0, c, s),
+            "roll 30°",
+        );
+        assert_turns(
+            rotation_deg(0.0, -30.0, 0.0),
+            DVec3::Z,
+            DVec3::new(-s, 0.0, c),
+            "pitch −30°",
+        );
+        assert_turns(
+            rotation_deg(0.0, 0.0, 30.0),
+            DVec3::X,
+            DVec3::new(c, s, 0.0),
+            "yaw 30°",
+        );
+    }
+
+    #[test]
+    fn roll_acts_first_then_pitch_then_yaw() {
+        // R = Rz(c)·Ry(b)·Rx(a): a vector is rolled first, then pitched, then yawed, all about the
+        // base axes. Each pair of quarter turns gives a different image in the other order.
+        // Roll then yaw: y → z → z (yaw first: y → −x → −x).
+        assert_turns(
+            rotation_deg(90.0, 0.0, 90.0),
+            DVec3::Y,
+            DVec3::Z,
+            "roll, yaw",
+        );
+        // Roll then pitch: y → z → x (pitch first: y → y → z).
+        assert_turns(
+            rotation_deg(90.0, 90.0, 0.0),
+            DVec3::Y,
+            DVec3::X,
+            "roll, pitch",
+        );
+        // Pitch then yaw: z → x → y (yaw first: z → z → x).
+        assert_turns(
+            rotation_deg(0.0, 90.0, 90.0),
+            DVec3::Z,
+            DVec3::Y,
+            "pitch, yaw",
+        );
+        // All three: x → x → −z → −z, and y → z → x → y.
+        let all = rotation_deg(90.0, 90.0, 90.0);
+        assert_turns(all, DVec3::X, -DVec3::Z, "roll, pitch, yaw");
+        assert_turns(all, DVec3::Y, DVec3::Y, "roll, pitch, yaw");
+        // And the platform frame's axes are the columns: a point on the platform's x axis
+        // lands on R's first column, translated by the position.
+        let pose = Pose::from_mm_deg([1.0, 2.0, 3.0, 90.0, 90.0, 90.0]);
+        let moved = pose.transform_point(DVec3::new(10.0, 0.0, 0.0));
+        assert!(
+            (moved - DVec3::new(1.0, 2.0, -7.0)).length() < 1e-14,
+            "{moved}"
+        );
     }
 
     #[test]

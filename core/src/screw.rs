@@ -58,23 +58,34 @@ impl ActuationScrews {
         self.force_jacobian().transpose().try_inverse()
     }
 
-    /// σ_min/σ_max of `W`: 0 at a singular configuration, at most 1.
+    /// σ_min/σ_max of `W`: 0 at a singular configuration, at most 1; 0 also when `W` has a
+    /// non-finite entry.
     pub fn singular_value_ratio(&self) -> f64 {
-        let sv = self.force_jacobian().singular_values();
+        let w = self.force_jacobian();
+        // nalgebra's SVD never returns for a matrix with a NaN or infinite entry.
+        if !w.iter().all(|v| v.is_finite()) {
+            return 0.0;
+        }
+        let sv = w.singular_values();
         sv.min() / sv.max()
     }
 
     /// Solves `Wᵀ·ξ = ρ` for the twist `ξ` that changes the leg lengths by `ρ` (mm), to first
     /// order. Fails with σ_min/σ_max when that ratio is below `singular_ratio`.
     pub fn solve_twist(&self, rho: &[f64; LEGS], singular_ratio: f64) -> Result<Twist, f64> {
-        let svd = self.force_jacobian().transpose().svd(true, true);
-        let ratio = svd.singular_values.min() / svd.singular_values.max();
+        let ratio = self.singular_value_ratio();
         if ratio.is_nan() || ratio < singular_ratio {
             return Err(if ratio.is_nan() { 0.0 } else { ratio });
         }
-        let xi = svd
-            .solve(&Vector6::from_column_slice(rho), 0.0)
-            .map_err(|_| ratio)?;
+        // LU, not nalgebra's SVD with singular vectors: at about 1 % of workspace poses that SVD
+        // is inaccurate (residuals |Wᵀ·ξ − ρ| up to 1e-2 mm for |ρ| ≈ 1 mm, nalgebra issue
+        // #1172); partial-pivoting LU leaves them at rounding level (below 1e-15 mm measured).
+        let xi = self
+            .force_jacobian()
+            .transpose()
+            .lu()
+            .solve(&Vector6::from_column_slice(rho))
+            .ok_or(ratio)?;
         Ok(Twist::from_array([
             xi[0], xi[1], xi[2], xi[3], xi[4], xi[5],
         ]))
@@ -105,9 +116,13 @@ pub fn point_matrix(geometry: &Geometry, pose: &Pose) -> PointMatrix {
 }
 
 /// The condition number σ_max/σ_min of a 9 × 6 matrix such as `PT` from its singular values (∞
-/// when rank-deficient). The paper applies it to the dimensionless `PT` (Sec. 3.1) to decide on
-/// regularisation.
+/// when rank-deficient or when an entry is not finite). The paper applies it to the
+/// dimensionless `PT` (Sec. 3.1) to decide on regularisation.
 pub fn condition_number(m: &PointMatrix) -> f64 {
+    // nalgebra's SVD never returns for a matrix with a NaN or infinite entry.
+    if !m.iter().all(|v| v.is_finite()) {
+        return f64::INFINITY;
+    }
     let sv = m.singular_values();
     let min = sv.min();
     if min > 0.0 {

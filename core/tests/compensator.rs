@@ -1,6 +1,8 @@
-//! Run-time compensation: known answers and a status for every kind of point.
+//! Run-time compensation: known answers, a status for every kind of point, which status wins
+//! when several apply, and the exact meaning of the model's trained range, its correction bounds
+//! and the stroke ends (inclusive, per leg).
 
-use hexacomp_core::compensator::{PointStatus, compensate_legs, compensate_pose};
+use hexacomp_core::compensator::{Compensated, PointStatus, compensate_legs, compensate_pose};
 use hexacomp_core::model::{Model, NetworkInput, Networks, Provenance};
 use hexacomp_core::network::{Network, Normalisation};
 use hexacomp_core::{Geometry, Pose, inverse_kinematics};
@@ -98,4 +100,244 @@ fn statuses_round_trip_through_their_wire_values() {
         assert_eq!(PointStatus::from_u8(status as u8), Some(status));
     }
     assert_eq!(PointStatus::from_u8(6), None);
+}
+
+/// A coupled network with `hidden` nodes, input weights 0 and hidden biases 50: every hidden
+/// activation is tanh(50) = 1 exactly, whatever the legs, so output `k` is
+/// `b2[k] + hidden · w2[k]` (summed in floating point, so it can overflow).
+fn saturated_model(geometry: &Geometry, hidden: usize, w2: [f64; 6], b2: [f64; 6]) -> Model {
+    let mut weights = vec![0.0; Network::weight_count(hidden, 6)];
+    let b1 = hidden * 6;
+    weights[b1..b1 + hidden].fill(50.0);
+    for k in 0..6 {
+        for j in 0..hidden {
+            weights[b1 + hidden + k * hidden + j] = w2[k];
+        }
+    }
+    weights[b1 + hidden + 6 * hidden..].copy_from_slice(&b2);
+    Model {
+        networks: Networks::Coupled(Network::from_weights(hidden, 6, weights).unwrap()),
+        ..constant_model(geometry, [0.0; 6], [-1.0, 1.0])
+    }
+}
+
+fn assert_unchanged(c: &Compensated, q: &[f64; 6], status: PointStatus) {
+    assert_eq!(c.status, status);
+    assert_eq!(c.corrections, [0.0; 6]);
+    assert_eq!(c.legs, *q);
+}
+
+#[test]
+fn a_model_output_that_is_not_finite_makes_the_point_invalid_input() {
+    let g = Geometry::prototype();
+    let home = inverse_kinematics(&g, &g.home_pose()).lengths;
+    for leg in 0..6 {
+        for sign in [1.0, -1.0] {
+            // Two saturated hidden nodes of weight ±1e308 each overflow to ±∞ on one output;
+            // every finite weight passes the model's validation.
+            let mut w2 = [0.0; 6];
+            w2[leg] = sign * 1e308;
+            let mut b2 = [0.0; 6];
+            b2[leg] = sign * 1e308;
+            // Leg 1's correction is also beyond its bound (unless leg 1 is the non-finite one):
+            // the non-finite output still makes the point invalid, not clamped.
+            b2[0] += 5.0;
+            let m = saturated_model(&g, 2, w2, b2);
+            m.validate().unwrap();
+            assert!(!m.raw_corrections(&home)[leg].is_finite());
+            assert_unchanged(
+                &compensate_legs(&g, Some(&m), &home),
+                &home,
+                PointStatus::InvalidInput,
+            );
+        }
+    }
+    // NaN: a valid but subnormal span overflows the normalised input to ±∞, and its zero input
+    // weight times ∞ is NaN.
+    let mut m = saturated_model(&g, 1, [0.0; 6], [0.1; 6]);
+    m.normalisation.span[3] = 1e-310;
+    m.validate().unwrap();
+    assert!(m.raw_corrections(&home).iter().all(|c| c.is_nan()));
+    assert_unchanged(
+        &compensate_legs(&g, Some(&m), &home),
+        &home,
+        PointStatus::InvalidInput,
+    );
+    let c = compensate_pose(&g, Some(&m), &g.home_pose());
+    assert_unchanged(&c, &home, PointStatus::InvalidInput);
+}
+
+#[test]
+fn clamped_takes_precedence_over_outside_trained_range() {
+    // Both apply: a leg below the trained 300 mm and a correction beyond ±1 mm. A point has one
+    // status; whichever leg comes first, it is clamped (the legs returned are not the model's
+    // output), and the correction is the bound.
+    let g = Geometry::prototype();
+    let home = inverse_kinematics(&g, &g.home_pose()).lengths;
+    for (untrained_leg, clamped_leg) in [(0, 5), (5, 0), (2, 2)] {
+        let mut offsets = [0.1; 6];
+        offsets[clamped_leg] = -2.0;
+        let m = constant_model(&g, offsets, [-1.0, 1.0]);
+        let mut q = home;
+        q[untrained_leg] = 290.0;
+        let c = compensate_legs(&g, Some(&m), &q);
+        assert_eq!(
+            c.status,
+            PointStatus::Clamped,
+            "legs {untrained_leg}, {clamped_leg}"
+        );
+        assert_eq!(c.corrections[clamped_leg], -1.0);
+        assert_eq!(c.legs[clamped_leg], q[clamped_leg] - 1.0);
+    }
+}
+
+#[test]
+fn the_trained_range_includes_its_ends_and_a_nanometre_beyond_them() {
+    // Leg i is trained on [300 + i, 400 − i] mm. At the ends, and up to 1e-6 mm (the tolerance
+    // for rounding in the nominal legs) beyond them, a point is inside; one ulp further it is
+    // outside. Only the leg that leaves its own range matters.
+    let g = Geometry::prototype();
+    let mut m = constant_model(&g, [0.1; 6], [-1.0, 1.0]);
+    m.training_range = std::array::from_fn(|i| [300.0 + i as f64, 400.0 - i as f64]);
+    let tolerance = 1e-6;
+    for leg in 0..6 {
+        let [lo, hi] = m.training_range[leg];
+        let inside = [lo, hi, lo - tolerance, hi + tolerance, lo - 1e-9, hi + 1e-9];
+        let outside = [
+            (lo - tolerance).next_down(),
+            (hi + tolerance).next_up(),
+            lo - 1e-3,
+            hi + 1e-3,
+        ];
+        for (values, status) in [
+            (&inside[..], PointStatus::Ok),
+            (&outside[..], PointStatus::OutsideTrainedRange),
+        ] {
+            for &v in values {
+                let mut q = [350.0; 6];
+                q[leg] = v;
+                let c = compensate_legs(&g, Some(&m), &q);
+                assert_eq!(c.status, status, "leg {} at {v} in [{lo}, {hi}]", leg + 1);
+                // Outside the trained range the point is still compensated.
+                assert_eq!(c.corrections, [0.1; 6]);
+            }
+        }
+        // Another leg's range does not apply: leg `leg` at the edge of the widest range [300,
+        // 400] is outside only for legs with a narrower one.
+        let mut q = [350.0; 6];
+        q[leg] = 300.5;
+        let expected = if leg == 0 {
+            PointStatus::Ok
+        } else {
+            PointStatus::OutsideTrainedRange
+        };
+        assert_eq!(
+            compensate_legs(&g, Some(&m), &q).status,
+            expected,
+            "leg {}",
+            leg + 1
+        );
+    }
+}
+
+#[test]
+fn corrections_at_their_bounds_are_kept_and_beyond_them_clamped_per_leg() {
+    // Leg i may be corrected by [−0.1 (i + 1), 0.2 (i + 1)] mm.
+    let g = Geometry::prototype();
+    let bounds: [[f64; 2]; 6] =
+        std::array::from_fn(|i| [-0.1 * (i + 1) as f64, 0.2 * (i + 1) as f64]);
+    let q = [350.0; 6];
+    let with = |offsets| Model {
+        correction_bounds: bounds,
+        ..constant_model(&g, offsets, [-1.0, 1.0])
+    };
+    for end in 0..2 {
+        let at_bounds = bounds.map(|b| b[end]);
+        let c = compensate_legs(&g, Some(&with(at_bounds)), &q);
+        assert_eq!(
+            c.status,
+            PointStatus::Ok,
+            "corrections at the bounds {at_bounds:?}"
+        );
+        assert_eq!(c.corrections, at_bounds);
+        for leg in 0..6 {
+            let mut beyond = at_bounds;
+            beyond[leg] = if end == 0 {
+                at_bounds[leg].next_down()
+            } else {
+                at_bounds[leg].next_up()
+            };
+            let c = compensate_legs(&g, Some(&with(beyond)), &q);
+            assert_eq!(
+                c.status,
+                PointStatus::Clamped,
+                "leg {} beyond {beyond:?}",
+                leg + 1
+            );
+            assert_eq!(
+                c.corrections, at_bounds,
+                "clamped to the bound, never beyond"
+            );
+            assert_eq!(c.legs, std::array::from_fn(|i| q[i] + at_bounds[i]));
+        }
+    }
+}
+
+#[test]
+fn stroke_ends_bound_nominal_and_corrected_legs_inclusively() {
+    let g = Geometry::prototype();
+    let mut m = constant_model(&g, [0.0; 6], [-1.0, 1.0]);
+    m.training_range = [[280.0, 430.0]; 6];
+    // Nominal legs at the stroke ends are compensated; one ulp outside they are refused.
+    let ends = [280.0, 430.0, 280.0, 430.0, 280.0, 430.0];
+    let c = compensate_legs(&g, Some(&m), &ends);
+    assert_eq!((c.status, c.legs), (PointStatus::Ok, ends));
+    for leg in 0..6 {
+        let mut q = ends;
+        q[leg] = if leg % 2 == 0 {
+            q[leg].next_down()
+        } else {
+            q[leg].next_up()
+        };
+        assert_unchanged(
+            &compensate_legs(&g, Some(&m), &q),
+            &q,
+            PointStatus::OutOfStroke,
+        );
+        assert_unchanged(&compensate_legs(&g, None, &q), &q, PointStatus::OutOfStroke);
+    }
+    // Corrected legs landing exactly on the stroke ends are kept; past them, refused.
+    let q = [280.5, 429.5, 280.5, 429.5, 280.5, 429.5];
+    let onto_ends = Model {
+        training_range: [[280.0, 430.0]; 6],
+        ..constant_model(&g, [-0.5, 0.5, -0.5, 0.5, -0.5, 0.5], [-1.0, 1.0])
+    };
+    let c = compensate_legs(&g, Some(&onto_ends), &q);
+    assert_eq!((c.status, c.legs), (PointStatus::Ok, ends));
+    for leg in 0..6 {
+        let mut offsets = [-0.5, 0.5, -0.5, 0.5, -0.5, 0.5];
+        offsets[leg] *= 1.001;
+        let past = constant_model(&g, offsets, [-1.0, 1.0]);
+        assert_unchanged(
+            &compensate_legs(&g, Some(&past), &q),
+            &q,
+            PointStatus::OutOfStroke,
+        );
+    }
+}
+
+#[test]
+fn status_names_are_the_documented_file_words() {
+    // README (`predict`): the `status` column's words, in numeric order.
+    let names = [
+        "ok",
+        "out_of_stroke",
+        "outside_trained_range",
+        "clamped",
+        "invalid_input",
+        "no_model",
+    ];
+    for (status, name) in PointStatus::ALL.into_iter().zip(names) {
+        assert_eq!(status.name(), name, "{status:?}");
+    }
 }

@@ -4,14 +4,19 @@
 //! is the derivative of the pose (as a twist) with respect to the leg lengths; `P` (Eq. 4) is the
 //! derivative of the target points with respect to a twist. Central differences have an error of
 //! order h²; the tolerances below are a few hundred times that and far below the entries' size.
+//!
+//! The ratios of singular values (`cond(PT)`, σ_min/σ_max of `W`, the singularity threshold of
+//! the twist solver) are checked against the definition through a different route: the
+//! eigenvalues of `MᵀM`, which are the squared singular values of `M`, and matrices with
+//! orthogonal columns, whose singular values are the column norms.
 
 use hexacomp_core::kinematics::target_points;
 use hexacomp_core::sampling::{SamplerOptions, WorkspaceSampler};
-use hexacomp_core::screw::{ActuationScrews, condition_number, point_matrix};
+use hexacomp_core::screw::{ActuationScrews, PointMatrix, condition_number, point_matrix};
 use hexacomp_core::{
     ForwardOptions, Geometry, Pose, Twist, forward_kinematics, inverse_kinematics,
 };
-use nalgebra::Matrix6;
+use nalgebra::{Matrix6, SMatrix};
 
 fn poses(count: usize) -> (Geometry, Vec<Pose>) {
     let g = Geometry::prototype();
@@ -154,4 +159,132 @@ fn condition_of_pt_stays_in_single_digits_inside_the_workspace() {
         })
         .fold(0.0, f64::max);
     assert!((1.0..10.0).contains(&worst), "worst cond(PT) = {worst}");
+}
+
+/// σ_max/σ_min of `m` from the eigenvalues of `mᵀm` (not from an SVD).
+fn condition_by_eigenvalues<const R: usize>(m: &SMatrix<f64, R, 6>) -> f64 {
+    let eigenvalues = (m.transpose() * m).symmetric_eigen().eigenvalues;
+    (eigenvalues.max() / eigenvalues.min()).sqrt()
+}
+
+#[test]
+fn condition_number_is_the_ratio_of_extreme_singular_values() {
+    // Orthogonal columns of norms 1, 2, 3, 4, 5, 10 (each column spread over two rows):
+    // the singular values are the norms, so cond = 10.
+    let norms = [1.0, 2.0, 3.0, 4.0, 5.0, 10.0];
+    let mut m = PointMatrix::zeros();
+    let h = std::f64::consts::FRAC_1_SQRT_2;
+    for k in 0..3 {
+        // Column k is n_k (e_k + e_{k+6})/√2, column k + 3 is n_{k+3} (e_k − e_{k+6})/√2.
+        m[(k, k)] = norms[k] * h;
+        m[(k + 6, k)] = norms[k] * h;
+        m[(k, k + 3)] = norms[k + 3] * h;
+        m[(k + 6, k + 3)] = -norms[k + 3] * h;
+    }
+    let gram = m.transpose() * m;
+    for i in 0..6 {
+        for j in 0..6 {
+            let expected = if i == j { norms[i] * norms[i] } else { 0.0 };
+            assert!((gram[(i, j)] - expected).abs() < 1e-12, "MᵀM[{i}][{j}]");
+        }
+    }
+    assert!(
+        (condition_number(&m) - 10.0).abs() < 1e-12,
+        "{}",
+        condition_number(&m)
+    );
+    // Scaling one column to zero makes the matrix rank-deficient: a condition number beyond
+    // any meaningful one (the SVD leaves σ_min at rounding level), and infinite for the zero
+    // matrix, whose σ_min is exactly 0.
+    let mut deficient = m;
+    deficient.column_mut(4).fill(0.0);
+    assert!(condition_number(&deficient) > 1e12);
+    assert_eq!(condition_number(&PointMatrix::zeros()), f64::INFINITY);
+    // And PT at workspace poses: the same number as from the eigenvalues of (PT)ᵀ(PT).
+    let (g, poses) = poses(50);
+    for pose in poses {
+        let t = ActuationScrews::at(&g, &pose).motion_jacobian().unwrap();
+        let pt = point_matrix(&g, &pose) * t;
+        let expected = condition_by_eigenvalues(&pt);
+        assert!(
+            (condition_number(&pt) - expected).abs() < 1e-9 * expected,
+            "cond(PT) {} vs {expected}",
+            condition_number(&pt)
+        );
+    }
+}
+
+#[test]
+fn singular_value_ratio_is_sigma_min_over_sigma_max_of_w() {
+    let (g, poses) = poses(50);
+    for pose in poses {
+        let screws = ActuationScrews::at(&g, &pose);
+        let expected = 1.0 / condition_by_eigenvalues(&screws.force_jacobian());
+        let ratio = screws.singular_value_ratio();
+        assert!(
+            (ratio - expected).abs() < 1e-9 * expected,
+            "σ_min/σ_max {ratio} vs {expected}"
+        );
+        assert!(ratio > 0.0 && ratio <= 1.0);
+    }
+    // It falls to 0 as the platform is lowered into the base plane (every leg horizontal).
+    let flat = Pose::new(glam::DVec3::ZERO, glam::DVec3::ZERO);
+    assert!(ActuationScrews::at(&g, &flat).singular_value_ratio() < 1e-12);
+}
+
+#[test]
+fn solve_twist_solves_wt_xi_equals_rho_and_refuses_below_its_threshold() {
+    // 3000 poses: nalgebra's SVD solve, used here before, was off by up to 1e-2 mm at about one
+    // pose in a hundred.
+    let (g, poses) = poses(3000);
+    for (n, pose) in poses.into_iter().enumerate() {
+        let screws = ActuationScrews::at(&g, &pose);
+        let rho: [f64; 6] = std::array::from_fn(|i| ((n * 6 + i) as f64 * 0.7).sin());
+        let ratio = 1.0 / condition_by_eigenvalues(&screws.force_jacobian());
+        // Below the pose's σ_min/σ_max the threshold lets the solve through…
+        let xi = screws.solve_twist(&rho, ratio * (1.0 - 1e-6)).unwrap();
+        let back = screws.force_jacobian().transpose() * nalgebra::Vector6::from(xi.to_array());
+        for i in 0..6 {
+            // Rounding level: ρ is about 1 mm, the entries of Wᵀ at most a few hundred.
+            assert!((back[i] - rho[i]).abs() < 1e-12, "Wᵀξ {back} vs ρ {rho:?}");
+        }
+        // …and so does a threshold equal to the ratio, which is not below it…
+        let exact = screws.singular_value_ratio();
+        assert!(screws.solve_twist(&rho, exact).is_ok(), "threshold {exact}");
+        // …above it the solve is refused, reporting the pose's ratio.
+        match screws.solve_twist(&rho, ratio * (1.0 + 1e-6)) {
+            Err(reported) => assert!(
+                (reported - ratio).abs() < 1e-9 * ratio,
+                "reported {reported} vs {ratio}"
+            ),
+            Ok(xi) => panic!("solved {xi:?} although σ_min/σ_max = {ratio} is below the threshold"),
+        }
+    }
+}
+
+#[test]
+fn non_finite_or_zero_matrices_count_as_singular() {
+    // nalgebra's SVD never returns for a matrix with a NaN or infinite entry: these calls used
+    // to hang.
+    let g = Geometry::prototype();
+    for bad in [f64::NAN, f64::INFINITY] {
+        let mut screws = ActuationScrews::at(&g, &g.home_pose());
+        screws.directions[2].x = bad;
+        assert_eq!(screws.singular_value_ratio(), 0.0);
+        assert_eq!(screws.solve_twist(&[0.1; 6], 1e-10), Err(0.0));
+        let mut m = point_matrix(&g, &g.home_pose());
+        m[(4, 2)] = bad;
+        assert_eq!(condition_number(&m), f64::INFINITY);
+    }
+    // No wrench at all (W = 0): σ_min/σ_max is 0/0, reported as 0.
+    let none = ActuationScrews {
+        directions: [glam::DVec3::ZERO; 6],
+        lever_arms: [glam::DVec3::ZERO; 6],
+    };
+    assert_eq!(none.solve_twist(&[0.1; 6], 1e-10), Err(0.0));
+    let nan_pose = Pose::new(glam::DVec3::new(0.0, f64::NAN, 280.0), glam::DVec3::ZERO);
+    assert_eq!(
+        ActuationScrews::at(&g, &nan_pose).singular_value_ratio(),
+        0.0
+    );
 }

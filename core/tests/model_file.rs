@@ -136,3 +136,29 @@ fn max_slope_bounds_every_finite_difference_and_is_exact_for_one_node_at_its_cen
     let fd = (single.raw_corrections(&step)[0] - single.raw_corrections(&centre)[0]) / 1e-4;
     assert!((fd - expected).abs() < 1e-9 * expected.max(1.0), "fd {fd}");
 }
+
+#[test]
+fn a_file_cut_right_after_the_magic_or_the_header_is_truncated_not_foreign() {
+    let g = Geometry::prototype();
+    let bytes = model(&g).to_bytes();
+    // Exactly the magic: a model file, cut before the end of its header.
+    assert_eq!(
+        problem(&bytes[..8]),
+        ModelFileProblem::Truncated {
+            actual: 8,
+            expected: 14
+        }
+    );
+    // One byte short of the magic: not a model at all.
+    assert_eq!(problem(&bytes[..7]), ModelFileProblem::NotAModel);
+    // Exactly the header: truncated, and the expected size counts payload and checksum.
+    let payload = u32::from_le_bytes(bytes[10..14].try_into().unwrap()) as usize;
+    assert_eq!(bytes.len(), 14 + payload + 8);
+    assert_eq!(
+        problem(&bytes[..14]),
+        ModelFileProblem::Truncated {
+            actual: 14,
+            expected: bytes.len()
+        }
+    );
+}
