@@ -169,3 +169,91 @@ fn apply(geometry: &mut Geometry, step: &DVector<f64>) {
         geometry.leg_offsets[i] += step[36 + i];
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use hexacomp_core::virtual_platform::{ErrorModel, ErrorVariant, VirtualPlatform};
+
+    /// `count` measurements of one and the same configuration: whatever their number, they
+    /// determine only the six parameter combinations that move the platform at that pose.
+    fn repeated_configuration(variant: ErrorVariant, count: usize) -> Vec<MeasurementRow> {
+        let g = Geometry::prototype();
+        let mut platform = VirtualPlatform::new(&g, &ErrorModel::variant(variant), 18, 1).unwrap();
+        let pose = Pose::from_mm_deg([10.0, -20.0, 300.0, 4.0, -3.0, 5.0]);
+        (0..count)
+            .map(|k| {
+                let m = platform.measure(&pose).unwrap();
+                MeasurementRow {
+                    id: (k + 1).to_string(),
+                    line: k as u64 + 2,
+                    pose_mm_deg: pose.to_mm_deg(),
+                    legs: m.commanded_legs,
+                    targets: m.targets,
+                }
+            })
+            .collect()
+    }
+
+    /// The identified minus the nominal parameters, in the order of [`linearise`]'s columns.
+    fn parameter_change(identified: &Geometry, nominal: &Geometry) -> DVector<f64> {
+        let mut delta = DVector::zeros(PARAMETERS);
+        for i in 0..LEGS {
+            for axis in 0..3 {
+                delta[3 * i + axis] =
+                    identified.base_joints[i][axis] - nominal.base_joints[i][axis];
+                delta[18 + 3 * i + axis] =
+                    identified.platform_joints[i][axis] - nominal.platform_joints[i][axis];
+            }
+            delta[36 + i] = identified.leg_offsets[i] - nominal.leg_offsets[i];
+        }
+        delta
+    }
+
+    #[test]
+    fn rank_deficient_data_moves_only_the_parameter_combinations_it_determines() {
+        let g = Geometry::prototype();
+        let rows = repeated_configuration(ErrorVariant::GeometricOnly, 8);
+        let result = identify(&g, &rows, &IdentifyOptions::default()).unwrap();
+        // Reported, not hidden: six of 42 directions are determined.
+        assert_eq!(result.rank, 6, "{result:?}");
+        // The measurements are explained (a rigid displacement of the targets)…
+        assert!(result.rms_before_mm > 0.1, "{result:?}");
+        assert!(result.rms_after_mm < 1e-6, "{result:?}");
+        // …by the smallest parameter change that explains them: nothing moves along the 36
+        // directions the data cannot see (the null space of ∂r_Pc/∂θ at the nominal geometry).
+        let delta = parameter_change(&result.geometry, &g);
+        let mut poses: Vec<Pose> = rows.iter().map(MeasurementRow::pose).collect();
+        let (jacobian, _) = linearise(&g, &rows, &mut poses).unwrap();
+        let svd = jacobian.svd(false, true);
+        let v_t = svd.v_t.unwrap();
+        let mut order: Vec<usize> = (0..PARAMETERS).collect();
+        order.sort_by(|a, b| svd.singular_values[*b].total_cmp(&svd.singular_values[*a]));
+        let unseen = order[6..]
+            .iter()
+            .map(|&k| v_t.row(k).transpose().dot(&delta).powi(2))
+            .sum::<f64>()
+            .sqrt();
+        assert!(
+            delta.norm() > 0.1 && unseen < 1e-4,
+            "change {} mm, of which {unseen} mm along unseen directions",
+            delta.norm()
+        );
+        result.geometry.validate().unwrap();
+    }
+
+    #[test]
+    fn repeated_noisy_measurements_give_a_bounded_geometry_and_a_noise_level_residual() {
+        let g = Geometry::prototype();
+        let rows = repeated_configuration(ErrorVariant::Paper, 8);
+        let result = identify(&g, &rows, &IdentifyOptions::default()).unwrap();
+        assert_eq!(result.rank, 6, "{result:?}");
+        // The machine's errors are a few tenths of a millimetre: so is the change.
+        assert!(
+            parameter_change(&result.geometry, &g).amax() < 1.0,
+            "{result:?}"
+        );
+        // 8 readings of 9 coordinates, 6 fitted: what remains is the 12 µm device noise.
+        assert!((0.003..0.02).contains(&result.rms_after_mm), "{result:?}");
+    }
+}

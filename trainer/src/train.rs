@@ -513,4 +513,61 @@ mod tests {
         let network = Network::from_weights(6, 2, fitted).unwrap();
         assert!(rmse(&network, &data) < 1e-3, "{}", rmse(&network, &data));
     }
+
+    #[test]
+    fn an_over_parameterised_fit_gets_past_failed_factorisations_and_interpolates() {
+        // 5 residuals, 49 weights: JᵀJ is singular and its Cholesky factorisation fails at small
+        // μ (as in a sweep's largest sizes on few configurations); raising μ gets past it.
+        let mut data = toy_data(1);
+        data.x.truncate(5);
+        data.y.truncate(5);
+        let hidden = 6;
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        let mut initial: Vec<f64> = (0..Network::weight_count(hidden, 1))
+            .map(|_| StandardNormal.sample(&mut rng))
+            .collect();
+        // Output weights 1e8 times too large: JᵀJ ~ 1e16, whose rounding swamps μ = 1e-3, so
+        // the very first factorisations fail until μ is raised.
+        let w2 = hidden * LEGS + hidden;
+        for w in &mut initial[w2..w2 + hidden] {
+            *w *= 1e8;
+        }
+        let fitted = levenberg_marquardt(&data, hidden, initial, &TrainOptions::default());
+        let network = Network::from_weights(hidden, 1, fitted).unwrap();
+        // Through the five points to far below a micrometre.
+        assert!(rmse(&network, &data) < 1e-6, "{}", rmse(&network, &data));
+    }
+
+    #[test]
+    fn the_fit_stops_at_the_first_accepted_step_that_gains_less_than_the_relative_tolerance() {
+        let data = toy_data(2);
+        let hidden = 4;
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        let initial: Vec<f64> = (0..Network::weight_count(hidden, 2))
+            .map(|_| StandardNormal.sample(&mut rng))
+            .collect();
+        let run = |max_iterations, relative_tolerance| {
+            let options = TrainOptions {
+                max_iterations,
+                relative_tolerance,
+                ..TrainOptions::default()
+            };
+            levenberg_marquardt(&data, hidden, initial.clone(), &options)
+        };
+        let loss = |w: &[f64]| residuals_and_jacobian(&data, hidden, w, None).norm_squared();
+        // Without a tolerance, each iteration is one accepted step: the path of the fit.
+        let path: Vec<Vec<f64>> = (0..=40).map(|k| run(k, 0.0)).collect();
+        let tolerance = 0.02;
+        let stop = (1..path.len())
+            .find(|&k| {
+                let (before, after) = (loss(&path[k - 1]), loss(&path[k]));
+                (before - after) / before < tolerance
+            })
+            .expect("the gain falls below 2 % within 40 steps");
+        assert!(stop >= 3, "the case discriminates: stop at step {stop}");
+        assert_eq!(run(100, tolerance), path[stop]);
+        // A tolerance of 1 (every gain is below 100 %) stops at the first accepted step.
+        assert_eq!(run(100, 1.0), path[1]);
+        assert!(loss(&path[1]) < loss(&initial));
+    }
 }

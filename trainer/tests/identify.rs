@@ -51,3 +51,19 @@ fn too_few_configurations_are_refused() {
         Err(Error::InsufficientData(_))
     ));
 }
+
+#[test]
+fn a_configuration_the_model_cannot_place_is_a_clear_error_naming_it() {
+    let g = Geometry::prototype();
+    let rows = common::plan_rows(&g, 10, 9);
+    let (_, mut measurements) =
+        common::measure(&g, &ErrorModel::default(), DEFAULT_MACHINE_SEED, 1, &rows);
+    measurements[3].legs[2] = 440.0;
+    match identify(&g, &measurements, &IdentifyOptions::default()) {
+        Err(Error::InsufficientData(message)) => {
+            assert!(message.contains("configuration 4 (line 5)"), "{message}");
+            assert!(message.contains("leg 3 length 440"), "{message}");
+        }
+        other => panic!("expected a clear error, got {other:?}"),
+    }
+}

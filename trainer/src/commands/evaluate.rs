@@ -75,7 +75,12 @@ pub fn run(geometry: &Geometry, args: &EvaluateArgs) -> anyhow::Result<()> {
 
 /// Prints Table 2 (largest size), Fig. 13's numbers, Table 1 and the input comparison.
 pub fn print_evaluation(evaluation: &Evaluation, validation: usize) {
-    let last = evaluation.sizes.last().expect("at least one size");
+    // The largest size, wherever it is in the list: the input comparison is made there.
+    let last = evaluation
+        .sizes
+        .iter()
+        .max_by_key(|s| s.configurations)
+        .expect("at least one size");
     println!(
         "Table 2: pose errors at {validation} fresh validation poses, {} training configurations",
         last.configurations

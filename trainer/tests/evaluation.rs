@@ -1,0 +1,419 @@
+//! The paper's comparison (`evaluate` and the `evaluate` command) on small cases, checked
+//! against the comparison redone here step by step from the documented procedure: one plan
+//! measured once, robust and ordinary corrections, identification and training on a prefix of
+//! the plan, then every method driving its own copy of the machine, in the same state, to fresh
+//! validation poses.
+
+mod common;
+
+use std::process::Command;
+
+use hexacomp_core::compensator::compensate_pose;
+use hexacomp_core::formats::{CorrectionRow, MeasurementRow};
+use hexacomp_core::model::NetworkInput;
+use hexacomp_core::sampling::{SamplerOptions, WorkspaceSampler};
+use hexacomp_core::stats::{ErrorStats, PoseErrorNorm, PoseErrorStats};
+use hexacomp_core::virtual_platform::{
+    DEFAULT_MACHINE_SEED, ErrorModel, ErrorVariant, VirtualPlatform,
+};
+use hexacomp_core::{Geometry, LEGS, Pose, inverse_kinematics};
+use hexacomp_trainer::corrections::{Checks, Outcome, SolverOptions, solve_all};
+use hexacomp_trainer::evaluate::{Evaluation, EvaluationOptions, Method, evaluate};
+use hexacomp_trainer::identify::{IdentifyOptions, identify};
+use hexacomp_trainer::train::{Architecture, TrainOptions, train};
+
+fn options(sizes: Vec<usize>, error_model: ErrorModel) -> EvaluationOptions {
+    EvaluationOptions {
+        training_sizes: sizes,
+        validation_count: 5,
+        plan_seed: 3,
+        validation_seed: 4,
+        error_model,
+        machine_seed: DEFAULT_MACHINE_SEED,
+        noise_seed: 5,
+        train: TrainOptions {
+            hidden_sizes: vec![1, 2, 3],
+            restarts: 1,
+            ..TrainOptions::default()
+        },
+    }
+}
+
+/// The comparison redone from its parts.
+struct Redone {
+    /// Per size: per method, the errors at the validation poses.
+    errors: Vec<Vec<(Method, Vec<PoseErrorNorm>)>>,
+    /// Robust solutions with cond(PT) above the threshold.
+    above_threshold: usize,
+    /// Decoupled networks at the largest size with the other input.
+    other_input: PoseErrorStats,
+}
+
+fn redo(g: &Geometry, o: &EvaluationOptions) -> Redone {
+    let largest = *o.training_sizes.iter().max().unwrap();
+    let planned = common::plan_rows(g, largest, o.plan_seed);
+    let mut platform =
+        VirtualPlatform::new(g, &o.error_model, o.machine_seed, o.noise_seed).unwrap();
+    let measurements: Vec<MeasurementRow> =
+        hexacomp_trainer::acquire::measure_plan(&mut platform, &planned).unwrap();
+    let robust_options = SolverOptions::default();
+    let solve =
+        |options: &SolverOptions| solve_all(g, &measurements, options, &Checks::default()).unwrap();
+    let robust = solve(&robust_options);
+    let ordinary = solve(&SolverOptions {
+        robust: false,
+        ..robust_options
+    });
+    let above_threshold = robust
+        .iter()
+        .filter(|o| o.solution.as_ref().unwrap().max_cond_pt > 1e3)
+        .count();
+    let first = |outcomes: &[Outcome], n: usize| -> Vec<CorrectionRow> {
+        outcomes[..n]
+            .iter()
+            .map(|o| o.correction_row().unwrap())
+            .collect()
+    };
+    let validation = WorkspaceSampler::new(g, o.validation_seed, SamplerOptions::default())
+        .unwrap()
+        .samples(o.validation_count)
+        .unwrap();
+    let fit = |rows: &[CorrectionRow], architecture, input| {
+        let options = TrainOptions {
+            input,
+            ..o.train.clone()
+        };
+        train(rows, architecture, g.fingerprint(), &options, &|| {})
+            .unwrap()
+            .model
+    };
+    // A fresh copy of the machine, as it is after measuring the plan, for every drive.
+    let drive = |command: &dyn Fn(&Pose) -> [f64; LEGS]| -> Vec<PoseErrorNorm> {
+        let mut copy = platform.clone();
+        validation
+            .iter()
+            .map(|pose| {
+                PoseErrorNorm::between(pose, &copy.move_legs(&command(pose), pose).unwrap())
+            })
+            .collect()
+    };
+    let input = o.train.input;
+    let mut errors = Vec::new();
+    let mut other_input = None;
+    for &n in &o.training_sizes {
+        let identified = identify(g, &measurements[..n], &IdentifyOptions::default())
+            .unwrap()
+            .geometry;
+        let ordinary_coupled = fit(&first(&ordinary, n), Architecture::Coupled, input);
+        let coupled = fit(&first(&robust, n), Architecture::Coupled, input);
+        let decoupled = fit(&first(&robust, n), Architecture::Decoupled, input);
+        errors.push(vec![
+            // Through the platform's own uncompensated drive.
+            (
+                Method::Uncompensated,
+                platform.clone().uncompensated_errors(&validation).unwrap(),
+            ),
+            (
+                Method::ModelBased,
+                drive(&|p| inverse_kinematics(&identified, p).lengths),
+            ),
+            (
+                Method::OrdinaryCoupled,
+                drive(&|p| compensate_pose(g, Some(&ordinary_coupled), p).legs),
+            ),
+            (
+                Method::RobustCoupled,
+                drive(&|p| compensate_pose(g, Some(&coupled), p).legs),
+            ),
+            (
+                Method::RobustDecoupled,
+                drive(&|p| compensate_pose(g, Some(&decoupled), p).legs),
+            ),
+        ]);
+        if n == largest {
+            let other = fit(
+                &first(&robust, n),
+                Architecture::Decoupled,
+                NetworkInput::Commanded,
+            );
+            other_input = Some(PoseErrorStats::of(&drive(&|p| {
+                compensate_pose(g, Some(&other), p).legs
+            })));
+        }
+    }
+    Redone {
+        errors,
+        above_threshold,
+        other_input: other_input.unwrap(),
+    }
+}
+
+/// Max, mean and sample standard deviation, by hand.
+fn by_hand(values: &[f64]) -> (f64, f64, f64) {
+    let n = values.len() as f64;
+    let mean = values.iter().sum::<f64>() / n;
+    let max = values.iter().copied().fold(0.0, f64::max);
+    let std = (values.iter().map(|v| (v - mean) * (v - mean)).sum::<f64>() / (n - 1.0)).sqrt();
+    (max, mean, std)
+}
+
+fn assert_stats(stats: &ErrorStats, values: &[f64]) {
+    let (max, mean, std) = by_hand(values);
+    assert_eq!(stats.count, values.len());
+    assert_eq!(stats.max, max);
+    assert!((stats.mean - mean).abs() < 1e-12 && (stats.std - std).abs() < 1e-12);
+}
+
+#[test]
+fn every_method_meets_the_same_machine_and_the_numbers_match_the_comparison_redone_by_hand() {
+    let g = Geometry::prototype();
+    // Sizes out of order: results follow the given order, the inputs are compared at the largest.
+    let o = options(vec![14, 10], ErrorModel::default());
+    let evaluation: Evaluation = evaluate(&g, &o, &|_| {}).unwrap();
+    let redone = redo(&g, &o);
+
+    assert_eq!(evaluation.above_threshold, redone.above_threshold);
+    assert_eq!(evaluation.sizes.len(), 2);
+    for ((size, &n), expected) in evaluation
+        .sizes
+        .iter()
+        .zip(&o.training_sizes)
+        .zip(&redone.errors)
+    {
+        assert_eq!(size.configurations, n);
+        assert_eq!(size.coupled.model.provenance.configurations, n);
+        assert_eq!(size.decoupled.model.provenance.configurations, n);
+        let methods: Vec<Method> = size.errors.iter().map(|(m, _)| *m).collect();
+        assert_eq!(methods, Method::ALL);
+        for ((method, got), (_, want)) in size.errors.iter().zip(expected) {
+            assert_eq!(got, want, "{method:?} at {n} configurations");
+            let stats = size.stats(*method);
+            assert_stats(
+                &stats.position_mm,
+                &want.iter().map(|e| e.position_mm).collect::<Vec<_>>(),
+            );
+            assert_stats(
+                &stats.orientation_deg,
+                &want.iter().map(|e| e.orientation_deg).collect::<Vec<_>>(),
+            );
+        }
+        // Sanity of the case: compensation helps at every size.
+        let before = size.stats(Method::Uncompensated).position_mm.mean;
+        let robust = size.stats(Method::RobustCoupled).position_mm.mean;
+        assert!(before > 0.3 && robust < before / 3.0, "{before} {robust}");
+    }
+    // The input comparison is made at the largest size (the first given here).
+    let largest = &evaluation.sizes[0];
+    assert_eq!(evaluation.inputs.len(), 2);
+    assert_eq!(
+        evaluation.inputs[0],
+        (
+            NetworkInput::Equivalent,
+            largest.stats(Method::RobustDecoupled)
+        )
+    );
+    assert_eq!(
+        evaluation.inputs[1],
+        (NetworkInput::Commanded, redone.other_input)
+    );
+}
+
+#[test]
+fn where_some_configurations_are_near_singular_the_ordinary_compensator_learns_the_lambda_free_corrections()
+ {
+    // Targets 0.6 mm from the platform axis: cond(PT) is about 1e3, above it for some of the
+    // plan and below for the rest, so the robust and the ordinary corrections differ.
+    let mut g = Geometry::prototype();
+    for (j, deg) in [90.0f64, 210.0, 330.0].into_iter().enumerate() {
+        let (s, c) = deg.to_radians().sin_cos();
+        g.targets[j] = glam::DVec3::new(0.6 * c, 0.6 * s, 25.0);
+    }
+    let o = options(vec![14], ErrorModel::default());
+    let evaluation = evaluate(&g, &o, &|_| {}).unwrap();
+    let redone = redo(&g, &o);
+    assert!(
+        (1..14).contains(&evaluation.above_threshold),
+        "{}",
+        evaluation.above_threshold
+    );
+    assert_eq!(evaluation.above_threshold, redone.above_threshold);
+    let size = &evaluation.sizes[0];
+    let errors = |method| &size.errors.iter().find(|(m, _)| *m == method).unwrap().1;
+    assert_ne!(
+        errors(Method::OrdinaryCoupled),
+        errors(Method::RobustCoupled)
+    );
+    for (method, want) in &redone.errors[0] {
+        assert_eq!(errors(*method), want, "{method:?}");
+    }
+}
+
+#[test]
+fn on_a_purely_geometric_machine_the_model_based_baseline_is_exact_and_ordinary_equals_robust() {
+    let g = Geometry::prototype();
+    let o = options(vec![20], ErrorModel::variant(ErrorVariant::GeometricOnly));
+    let evaluation = evaluate(&g, &o, &|_| {}).unwrap();
+    let size = &evaluation.sizes[0];
+    // Identification recovers a purely geometric machine: its inverse kinematics is exact.
+    let model_based = size.stats(Method::ModelBased);
+    assert!(model_based.position_mm.max < 1e-4, "{model_based:?}");
+    assert!(model_based.orientation_deg.max < 1e-5, "{model_based:?}");
+    assert!(size.stats(Method::Uncompensated).position_mm.mean > 0.3);
+    // No configuration is near-singular, so λ₀ is never applied: the ordinary and the robust
+    // corrections, hence their networks and errors, are the same.
+    assert_eq!(evaluation.above_threshold, 0);
+    let errors = |method| &size.errors.iter().find(|(m, _)| *m == method).unwrap().1;
+    assert_eq!(
+        errors(Method::OrdinaryCoupled),
+        errors(Method::RobustCoupled)
+    );
+}
+
+/// The words after `head` of the first line of `text` whose words start with `head`.
+fn row<'t>(text: &'t str, head: &[&str]) -> Vec<&'t str> {
+    text.lines()
+        .map(|l| l.split_whitespace().collect::<Vec<_>>())
+        .find(|words| words.starts_with(head))
+        .unwrap_or_else(|| panic!("no row {head:?} in\n{text}"))[head.len()..]
+        .to_vec()
+}
+
+fn four(values: &[f64]) -> Vec<String> {
+    values.iter().map(|v| format!("{v:.4}")).collect()
+}
+
+#[test]
+fn the_evaluate_command_prints_the_tables_of_the_largest_size_and_writes_the_figures() {
+    let g = Geometry::prototype();
+    let dir = tempfile::tempdir().unwrap();
+    let out_dir = dir.path().join("figures");
+    // Sizes out of order: the tables are of the largest, whatever its place in the list.
+    let output = Command::new(env!("CARGO_BIN_EXE_hexacomp-trainer"))
+        .args([
+            "evaluate",
+            "--sizes",
+            "12,9",
+            "--validation",
+            "3",
+            "--seed",
+            "2",
+        ])
+        .args(["--validation-seed", "5", "--out-dir"])
+        .arg(&out_dir)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8(output.stdout).unwrap();
+    assert!(
+        output.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    // What the command documents it runs: plan and noise from --seed, the default machine and
+    // error variant, default training with equivalent input.
+    let o = EvaluationOptions {
+        training_sizes: vec![12, 9],
+        validation_count: 3,
+        plan_seed: 2,
+        validation_seed: 5,
+        error_model: ErrorModel::default(),
+        machine_seed: DEFAULT_MACHINE_SEED,
+        noise_seed: 2,
+        train: TrainOptions::default(),
+    };
+    let evaluation = evaluate(&g, &o, &|_| {}).unwrap();
+    let largest = &evaluation.sizes[0];
+    assert_eq!(largest.configurations, 12);
+
+    // Table 2.
+    assert!(
+        stdout.contains(
+            "Table 2: pose errors at 3 fresh validation poses, 12 training configurations"
+        ),
+        "{stdout}"
+    );
+    let stats: Vec<PoseErrorStats> = Method::ALL.iter().map(|m| largest.stats(*m)).collect();
+    for (head, pick) in [
+        (
+            ["‖δ_A‖", "(mm)", "max"],
+            (|s: &PoseErrorStats| s.position_mm.max) as fn(&PoseErrorStats) -> f64,
+        ),
+        (["‖δ_A‖", "(mm)", "mean"], |s| s.position_mm.mean),
+        (["‖δ_A‖", "(mm)", "std"], |s| s.position_mm.std),
+        (["‖ε‖", "(deg)", "max"], |s| s.orientation_deg.max),
+        (["‖ε‖", "(deg)", "mean"], |s| s.orientation_deg.mean),
+        (["‖ε‖", "(deg)", "std"], |s| s.orientation_deg.std),
+    ] {
+        let values: Vec<f64> = stats.iter().map(pick).collect();
+        assert_eq!(row(&stdout, &head), four(&values), "{head:?}");
+    }
+    // Fig. 13's numbers, one row per size in the order given.
+    for size in &evaluation.sizes {
+        let head = size.configurations.to_string();
+        let expected: Vec<String> = Method::ALL
+            .iter()
+            .flat_map(|m| {
+                let s = size.stats(*m);
+                [
+                    format!("{:.4}", s.position_mm.mean),
+                    "/".to_string(),
+                    format!("{:.4}", s.orientation_deg.mean),
+                ]
+            })
+            .collect();
+        assert_eq!(row(&stdout, &[&head]), expected);
+    }
+    // Table 1.
+    assert!(stdout.contains("Table 1: robust networks at 12 configurations"));
+    for (name, trained) in [
+        ("coupled", &largest.coupled),
+        ("decoupled", &largest.decoupled),
+    ] {
+        let words = row(&stdout, &[name]).join(" ");
+        let nodes = format!("{:?}", trained.model.hidden_nodes());
+        assert!(words.starts_with(&nodes), "{words}");
+        assert!(
+            words.ends_with(&format!("{:.4}", trained.validation_rmse_mm)),
+            "{words}"
+        );
+    }
+    assert!(stdout.contains(&format!(
+        "{} of the training configurations had cond(PT) above c = 1e3",
+        evaluation.above_threshold
+    )));
+    // The input comparison, labelled with the size it was made at.
+    assert!(
+        stdout.contains("Network input, robust decoupled at 12 configurations:"),
+        "{stdout}"
+    );
+    for (input, s) in &evaluation.inputs {
+        let head = [input.name(), "legs"];
+        let values = [
+            s.position_mm.mean,
+            s.position_mm.max,
+            s.orientation_deg.mean,
+        ];
+        assert_eq!(row(&stdout, &head), four(&values), "{head:?}");
+    }
+    for file in [
+        "fig12_position.svg",
+        "fig12_orientation.svg",
+        "fig13_position.svg",
+        "fig13_orientation.svg",
+    ] {
+        let svg = std::fs::read_to_string(out_dir.join(file)).unwrap();
+        assert!(
+            svg.contains("<svg") && svg.contains("robust decoupled"),
+            "{file}"
+        );
+    }
+}
+
+#[test]
+fn no_training_size_is_refused() {
+    let g = Geometry::prototype();
+    let result = evaluate(&g, &options(vec![], ErrorModel::default()), &|_| {});
+    assert!(matches!(
+        result,
+        Err(hexacomp_trainer::Error::InvalidSetting(_))
+    ));
+}
