@@ -235,20 +235,24 @@ const KNOWN_POSES: [[f64; 6]; 5] = [
     [-55.0, 20.0, 255.0, -5.0, 7.0, -4.0],
 ];
 
+/// Each of `lengths` (mm) within 1e-9 mm of the known answer `expected` at pose `v` (mm, deg).
+fn assert_leg_lengths(g: &Geometry, v: [f64; 6], lengths: &[f64; 6], expected: &[f64; 6]) {
+    for (i, (q, expected)) in lengths.iter().zip(expected).enumerate() {
+        assert!(
+            (q - expected).abs() < 1e-9,
+            "{} at {v:?}, leg {}: {q} vs {expected}",
+            g.name,
+            i + 1,
+        );
+    }
+}
+
 #[test]
 fn inverse_kinematics_matches_leg_lengths_computed_by_hand_at_rotated_poses() {
     for g in [Geometry::prototype(), bent_prototype()] {
         for v in KNOWN_POSES {
             let legs = inverse_kinematics(&g, &Pose::from_mm_deg(v));
-            for (i, expected) in legs_by_hand(&g, v).into_iter().enumerate() {
-                let q = legs.lengths[i];
-                assert!(
-                    (q - expected).abs() < 1e-9,
-                    "{} at {v:?}, leg {}: {q} vs {expected}",
-                    g.name,
-                    i + 1,
-                );
-            }
+            assert_leg_lengths(&g, v, &legs.lengths, &legs_by_hand(&g, v));
         }
     }
 }
@@ -379,14 +383,8 @@ fn inverse_kinematics_matches_an_independent_python_computation() {
     ] {
         for (v, row) in KNOWN_POSES.iter().zip(table) {
             let legs = inverse_kinematics(&g, &Pose::from_mm_deg(*v));
+            assert_leg_lengths(&g, *v, &legs.lengths, &row);
             for (i, expected) in row.into_iter().enumerate() {
-                let q = legs.lengths[i];
-                assert!(
-                    (q - expected).abs() < 1e-9,
-                    "{} at {v:?}, leg {}: {q} vs {expected}",
-                    g.name,
-                    i + 1,
-                );
                 let status = if expected < 280.0 {
                     LegStatus::BelowStroke
                 } else if expected > 430.0 {

@@ -101,7 +101,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
             let model = crate::validate::validate(&bytes, &geometry)
                 .map_err(|why| anyhow::anyhow!("{}: refused: {why}", path.display()))?;
-            state::persist(&state_dir, &model.to_bytes(), 1).map_err(anyhow::Error::msg)?;
+            state::persist(&state_dir, &bytes, 1).map_err(anyhow::Error::msg)?;
             Some((model, 1))
         }
         None => state::restore(&state_dir, &geometry),

@@ -203,7 +203,6 @@ fn handle_deploy(
     }
     let number = latest + 1;
     let line = summarise(&model);
-    let file = model.to_bytes();
     match setup
         .outgoing
         .try_send(Box::new(Generation { model, number }))
@@ -219,7 +218,7 @@ fn handle_deploy(
         }
     }
     let mut note = String::new();
-    if let Err(e) = state::persist(&setup.state_dir, &file, number) {
+    if let Err(e) = state::persist(&setup.state_dir, bytes, number) {
         tracing::error!("accepted generation {number} but could not persist it: {e}");
         setup
             .counters
