@@ -6,10 +6,9 @@ use anyhow::Context;
 use hexacomp_core::Geometry;
 use hexacomp_core::model::Model;
 use hexacomp_core::virtual_platform::{ErrorModel, ErrorVariant, VirtualPlatform};
-use hexacomp_trainer::acquire::measure_plan;
-use hexacomp_trainer::corrections::{Checks, SolverOptions, solve_all};
-use hexacomp_trainer::plan::{PlanOptions, numbered_rows, plan};
-use hexacomp_trainer::train::{Architecture, TrainOptions, train};
+use hexacomp_trainer::pipeline::Pipeline;
+use hexacomp_trainer::plan::PlanOptions;
+use hexacomp_trainer::train::{Architecture, TrainOptions};
 use indicatif::{ProgressBar, ProgressStyle};
 
 /// The virtual machine a benchmark drives: drawn from `machine_seed` with the paper's error
@@ -49,41 +48,35 @@ pub fn calibrate(
 ) -> anyhow::Result<Calibration> {
     let start = std::time::Instant::now();
     let geometry = platform.nominal().clone();
-    let poses = plan(
-        &geometry,
-        &PlanOptions {
+    let pipeline = Pipeline {
+        plan: PlanOptions {
             count: configurations,
             seed,
             ..Default::default()
         },
-    )?;
-    let measurements = measure_plan(platform, &numbered_rows(&poses))?;
-    let outcomes = solve_all(
-        &geometry,
-        &measurements,
-        &SolverOptions::default(),
-        &Checks::default(),
-    )?;
-    let corrections: Vec<_> = outcomes.iter().filter_map(|o| o.correction_row()).collect();
-    let options = TrainOptions {
-        seed,
+        train: TrainOptions {
+            seed,
+            ..Default::default()
+        },
         ..Default::default()
     };
-    let bar = ProgressBar::new((6 * options.hidden_sizes.len()) as u64);
+    let (_, measurements) = pipeline.measure_virtual(platform)?;
+    let bar = ProgressBar::new((6 * pipeline.train.hidden_sizes.len()) as u64);
     bar.set_style(
         ProgressStyle::with_template("training decoupled networks [{bar:30}] {pos}/{len} fits")
             .expect("valid template")
             .progress_chars("=> "),
     );
-    let mut trained = train(
-        &corrections,
-        Architecture::Decoupled,
-        geometry.fingerprint(),
-        &options,
-        &|| bar.inc(1),
-    )
-    .context("training the decoupled networks")?;
+    let calibration = pipeline
+        .calibrate(
+            &geometry,
+            &measurements,
+            &[Architecture::Decoupled],
+            &|_| bar.inc(1),
+        )
+        .context("calibrating the virtual platform")?;
     bar.finish_and_clear();
+    let (_, mut trained) = calibration.models.into_iter().next().expect("one model");
     trained.model.provenance.source = format!(
         "hexacomp-bench {} virtual calibration ({configurations} configurations)",
         env!("CARGO_PKG_VERSION")

@@ -4,11 +4,11 @@
 //! hexacomp's round trip.
 
 use anyhow::Context;
+use hexacomp_client::wire::endpoints::{self, Role};
 use hexacomp_client::wire::{
-    DeployReply, MAX_CLIENTS, MAX_NODES, PROTOCOL_VERSION, PointResponse, RequestOutcome,
-    ResponseHeader, StatusReport, WAIT_SPIN, text_field,
+    DeployReply, PROTOCOL_VERSION, PointResponse, RequestOutcome, ResponseHeader, StatusReport,
+    WAIT_SPIN, text_field,
 };
-use hexacomp_client::{Endpoint, iceoryx_name};
 use hexacomp_service::serving::compensation_endpoint;
 use iceoryx2::prelude::*;
 use iceoryx2_bb_posix::signal::SignalHandler;
@@ -20,28 +20,15 @@ pub fn serve(instance: &str) -> anyhow::Result<()> {
     let node = NodeBuilder::new()
         .create::<ipc::Service>()
         .context("creating the iceoryx2 node")?;
-    let name = |endpoint| iceoryx_name(instance, endpoint);
     // The service's own endpoint: same sizes, same server settings.
     let (_compensate_service, compensate) =
         compensation_endpoint(&node, instance).map_err(anyhow::Error::msg)?;
-    let status_service = node
-        .service_builder(&name(Endpoint::Status)?)
-        .request_response::<u64, StatusReport>()
-        .max_clients(MAX_CLIENTS)
-        .max_nodes(MAX_NODES)
-        .create()
-        .map_err(|e| anyhow::anyhow!("echo status endpoint: {e:?}"))?;
+    let status_service = endpoints::status(&node, instance, Role::Serve)?;
     let status = status_service
         .server_builder()
         .create()
         .map_err(|e| anyhow::anyhow!("echo status port: {e:?}"))?;
-    let deploy_service = node
-        .service_builder(&name(Endpoint::Deploy)?)
-        .request_response::<[u8], DeployReply>()
-        .max_clients(MAX_CLIENTS)
-        .max_nodes(MAX_NODES)
-        .create()
-        .map_err(|e| anyhow::anyhow!("echo deploy endpoint: {e:?}"))?;
+    let deploy_service = endpoints::deploy(&node, instance, Role::Serve)?;
     let deploy = deploy_service
         .server_builder()
         .create()

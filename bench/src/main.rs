@@ -75,7 +75,7 @@ fn main() -> ExitCode {
         Command::Swap(c) => commands::swap::run(&c),
         Command::Service(args) => {
             hexacomp_service::cli::init_logging();
-            hexacomp_service::cli::run(args)
+            hexacomp_service::cli::run(args).map_err(anyhow::Error::from)
         }
         Command::ServeEcho { instance } => echo::serve(&instance),
         Command::ServeUds {

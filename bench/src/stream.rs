@@ -6,9 +6,8 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use hdrhistogram::Histogram;
-use hexacomp_client::CompensatedPoint;
 use hexacomp_client::wire::MAX_BATCH;
-use hexacomp_core::compensator::PointStatus;
+use hexacomp_client::{CompensatedPoint, PointStatus};
 
 use crate::variant::Variant;
 

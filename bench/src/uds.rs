@@ -11,10 +11,9 @@ use std::os::unix::net::{UnixListener, UnixStream};
 use std::path::Path;
 
 use anyhow::{Context, ensure};
-use hexacomp_client::CompensatedPoint;
 use hexacomp_client::wire::{MAX_BATCH, PointRequest, PointResponse, RequestKind};
+use hexacomp_client::{CompensatedPoint, PointStatus};
 use hexacomp_core::Geometry;
-use hexacomp_core::compensator::PointStatus;
 use hexacomp_service::Generation;
 use hexacomp_service::serving::compute_point;
 
@@ -172,7 +171,7 @@ mod tests {
         for (pose, got) in poses.iter().zip(&out) {
             let want = compensate_pose(&geometry, None, &Pose::from_mm_deg(*pose));
             assert_eq!(got.legs, want.legs);
-            assert_eq!(got.status, want.status);
+            assert_eq!(got.status as u8, want.status as u8);
         }
         assert_eq!(out[2].status, PointStatus::OutOfStroke);
     }

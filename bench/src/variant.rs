@@ -5,9 +5,8 @@
 use std::path::Path;
 
 use hexacomp_client::wire::{PointRequest, RequestKind};
-use hexacomp_client::{Client, ClientOptions, CompensatedPoint};
+use hexacomp_client::{Client, ClientOptions, CompensatedPoint, PointStatus};
 use hexacomp_core::Geometry;
-use hexacomp_core::compensator::PointStatus;
 use hexacomp_service::Generation;
 use hexacomp_service::serving::compute_point;
 

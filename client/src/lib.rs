@@ -22,26 +22,26 @@
 
 #![warn(missing_docs)]
 
-pub mod c_api;
 mod waiting;
-pub mod wire;
+
+/// The wire contract this client speaks (the `hexacomp-protocol` crate).
+pub use hexacomp_protocol as wire;
+pub use hexacomp_protocol::{DEFAULT_INSTANCE, MAX_BATCH, PointStatus, RequestKind};
 
 use std::time::{Duration, Instant};
 
-use hexacomp_core::compensator::PointStatus;
+use hexacomp_protocol::endpoints::{
+    self, CompensateEndpoint, DeployEndpoint, Role, StatusEndpoint, WakeEndpoint,
+};
 use iceoryx2::port::client::Client as Port;
 use iceoryx2::prelude::*;
-use iceoryx2::service::port_factory::request_response::PortFactory;
 use thiserror::Error;
 use waiting::Waiter;
 
 use wire::{
-    DeployReply, MAX_BATCH, MAX_MODEL_BYTES, PROTOCOL_VERSION, PointRequest, PointResponse,
-    RequestHeader, RequestKind, RequestOutcome, ResponseHeader, StatusReport,
+    DeployReply, MAX_MODEL_BYTES, PROTOCOL_VERSION, PointRequest, PointResponse, RequestHeader,
+    RequestOutcome, ResponseHeader, StatusReport,
 };
-
-/// The instance name used when none is given.
-pub const DEFAULT_INSTANCE: &str = "default";
 
 /// The one error type of `hexacomp-client`.
 #[derive(Debug, Clone, PartialEq, Eq, Error)]
@@ -104,54 +104,14 @@ fn transport(e: impl std::fmt::Display) -> Error {
     Error::Transport(e.to_string())
 }
 
-/// The endpoints one service instance offers.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Endpoint {
-    /// Compensation requests (the hot path).
-    Compensate,
-    /// Status queries.
-    Status,
-    /// Model deployment (hot swap).
-    Deploy,
-    /// Wake-up events for a service waiting in a WaitSet (`--wait event`).
-    Wake,
-}
-
-impl Endpoint {
-    fn suffix(self) -> &'static str {
-        match self {
-            Endpoint::Compensate => "compensate",
-            Endpoint::Status => "status",
-            Endpoint::Deploy => "deploy",
-            Endpoint::Wake => "wake",
+impl From<hexacomp_protocol::Error> for Error {
+    fn from(e: hexacomp_protocol::Error) -> Self {
+        match e {
+            hexacomp_protocol::Error::InvalidInstance { name } => Error::InvalidInstance { name },
+            hexacomp_protocol::Error::Absent { instance, .. } => Error::ServiceAbsent { instance },
+            other => Error::Transport(other.to_string()),
         }
     }
-}
-
-/// The iceoryx2 service name of `endpoint` of instance `instance`:
-/// `hexacomp/v<PROTOCOL_VERSION>/<instance>/<endpoint>`.
-pub fn service_name(instance: &str, endpoint: Endpoint) -> Result<String, Error> {
-    let valid = (1..=64).contains(&instance.len())
-        && instance
-            .chars()
-            .all(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.'));
-    if !valid || instance.starts_with('.') {
-        return Err(Error::InvalidInstance {
-            name: instance.to_string(),
-        });
-    }
-    Ok(format!(
-        "hexacomp/v{PROTOCOL_VERSION}/{instance}/{}",
-        endpoint.suffix()
-    ))
-}
-
-/// The iceoryx2 `ServiceName` of an endpoint.
-pub fn iceoryx_name(instance: &str, endpoint: Endpoint) -> Result<ServiceName, Error> {
-    service_name(instance, endpoint)?
-        .as_str()
-        .try_into()
-        .map_err(transport)
 }
 
 /// The shortest deadline of status requests (also made by [`Client::connect`]), whatever the
@@ -240,10 +200,6 @@ pub enum DeployOutcome {
     },
 }
 
-type CompensateFactory =
-    PortFactory<ipc::Service, [PointRequest], RequestHeader, [PointResponse], ResponseHeader>;
-type StatusFactory = PortFactory<ipc::Service, u64, (), StatusReport, ()>;
-type DeployFactory = PortFactory<ipc::Service, [u8], (), DeployReply, ()>;
 type CompensatePort =
     Port<ipc::Service, [PointRequest], RequestHeader, [PointResponse], ResponseHeader>;
 
@@ -252,10 +208,10 @@ pub struct Client {
     compensate: CompensatePort,
     status: Port<ipc::Service, u64, (), StatusReport, ()>,
     deploy: Port<ipc::Service, [u8], (), DeployReply, ()>,
-    _factories: (CompensateFactory, StatusFactory, DeployFactory),
+    _endpoints: (CompensateEndpoint, StatusEndpoint, DeployEndpoint),
     /// Set when the service waits on events: notified after every compensation request.
     wake: Option<iceoryx2::port::notifier::Notifier<ipc::Service>>,
-    _wake_factory: Option<iceoryx2::service::port_factory::event::PortFactory<ipc::Service>>,
+    _wake_endpoint: Option<WakeEndpoint>,
     _node: Node<ipc::Service>,
     timeout: Duration,
     /// How compensation calls wait for their answers.
@@ -280,26 +236,9 @@ impl Client {
             .signal_handling_mode(SignalHandlingMode::Disabled)
             .create::<ipc::Service>()
             .map_err(transport)?;
-        let absent = |_| Error::ServiceAbsent {
-            instance: instance.to_string(),
-        };
-        let compensate_factory = node
-            .service_builder(&iceoryx_name(instance, Endpoint::Compensate)?)
-            .request_response::<[PointRequest], [PointResponse]>()
-            .request_user_header::<RequestHeader>()
-            .response_user_header::<ResponseHeader>()
-            .open()
-            .map_err(absent)?;
-        let status_factory = node
-            .service_builder(&iceoryx_name(instance, Endpoint::Status)?)
-            .request_response::<u64, StatusReport>()
-            .open()
-            .map_err(absent)?;
-        let deploy_factory = node
-            .service_builder(&iceoryx_name(instance, Endpoint::Deploy)?)
-            .request_response::<[u8], DeployReply>()
-            .open()
-            .map_err(absent)?;
+        let compensate_factory = endpoints::compensate(&node, instance, Role::Use)?;
+        let status_factory = endpoints::status(&node, instance, Role::Use)?;
+        let deploy_factory = endpoints::deploy(&node, instance, Role::Use)?;
         let compensate = compensate_factory
             .client_builder()
             .initial_max_slice_len(MAX_BATCH)
@@ -318,25 +257,18 @@ impl Client {
             compensate,
             status,
             deploy,
-            _factories: (compensate_factory, status_factory, deploy_factory),
+            _endpoints: (compensate_factory, status_factory, deploy_factory),
             wake: None,
-            _wake_factory: None,
+            _wake_endpoint: None,
             _node: node,
             timeout: options.timeout,
             waiter: Waiter::default(),
         };
         // A service that sleeps in a WaitSet needs a notification after each request.
         if client.status_report()?.wait_mode == wire::WAIT_EVENT {
-            let factory = client
-                ._node
-                .service_builder(&iceoryx_name(instance, Endpoint::Wake)?)
-                .event()
-                .open()
-                .map_err(|_| Error::ServiceAbsent {
-                    instance: instance.to_string(),
-                })?;
+            let factory = endpoints::wake(&client._node, instance, Role::Use)?;
             client.wake = Some(factory.notifier_builder().create().map_err(transport)?);
-            client._wake_factory = Some(factory);
+            client._wake_endpoint = Some(factory);
         }
         Ok(client)
     }
@@ -543,45 +475,5 @@ impl CompensatedPoint {
             status: PointStatus::NoModel,
             generation: 0,
         }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn service_names_are_versioned_per_instance() {
-        assert_eq!(
-            service_name("default", Endpoint::Compensate).unwrap(),
-            "hexacomp/v1/default/compensate"
-        );
-        assert_eq!(
-            service_name("mill-2.left", Endpoint::Deploy).unwrap(),
-            "hexacomp/v1/mill-2.left/deploy"
-        );
-    }
-
-    #[test]
-    fn instance_names_that_could_escape_their_namespace_are_refused() {
-        for bad in ["", "a/b", "..", ".hidden", "with space", &"x".repeat(65)] {
-            assert_eq!(
-                service_name(bad, Endpoint::Status),
-                Err(Error::InvalidInstance {
-                    name: bad.to_string()
-                })
-            );
-        }
-    }
-
-    #[test]
-    fn text_fields_round_trip_and_cut_at_character_boundaries() {
-        assert_eq!(
-            wire::field_text(&wire::text_field("geometry ‖δ‖")),
-            "geometry ‖δ‖"
-        );
-        let long = "é".repeat(200);
-        let cut = wire::field_text(&wire::text_field(&long));
-        assert!(cut.len() <= wire::TEXT_BYTES && cut.chars().all(|c| c == 'é'));
     }
 }

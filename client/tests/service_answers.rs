@@ -9,13 +9,12 @@ use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use std::thread::JoinHandle;
 use std::time::Duration;
 
+use hexacomp_client::wire::endpoints::{self, Role};
 use hexacomp_client::wire::{
-    DeployReply, MAX_BATCH, MAX_MODEL_BYTES, PROTOCOL_VERSION, PointRequest, PointResponse,
-    RequestHeader, RequestKind, RequestOutcome, ResponseHeader, StatusReport, WAIT_SPIN,
-    text_field,
+    DeployReply, MAX_BATCH, MAX_MODEL_BYTES, PROTOCOL_VERSION, PointResponse, RequestKind,
+    RequestOutcome, ResponseHeader, StatusReport, WAIT_SPIN, text_field,
 };
-use hexacomp_client::{Client, ClientOptions, Endpoint, Error, iceoryx_name};
-use hexacomp_core::compensator::PointStatus;
+use hexacomp_client::{Client, ClientOptions, Error, PointStatus};
 use iceoryx2::prelude::*;
 
 /// How the stand-in answers the next compensation requests.
@@ -94,23 +93,9 @@ fn serve(
         .signal_handling_mode(SignalHandlingMode::Disabled)
         .create::<ipc::Service>()
         .unwrap();
-    let compensate = node
-        .service_builder(&iceoryx_name(instance, Endpoint::Compensate).unwrap())
-        .request_response::<[PointRequest], [PointResponse]>()
-        .request_user_header::<RequestHeader>()
-        .response_user_header::<ResponseHeader>()
-        .create()
-        .unwrap();
-    let status = node
-        .service_builder(&iceoryx_name(instance, Endpoint::Status).unwrap())
-        .request_response::<u64, StatusReport>()
-        .create()
-        .unwrap();
-    let deploy = node
-        .service_builder(&iceoryx_name(instance, Endpoint::Deploy).unwrap())
-        .request_response::<[u8], DeployReply>()
-        .create()
-        .unwrap();
+    let compensate = endpoints::compensate(&node, instance, Role::Serve).unwrap();
+    let status = endpoints::status(&node, instance, Role::Serve).unwrap();
+    let deploy = endpoints::deploy(&node, instance, Role::Serve).unwrap();
     let compensate = compensate
         .server_builder()
         .initial_max_slice_len(MAX_BATCH + 1)

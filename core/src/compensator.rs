@@ -1,13 +1,14 @@
-//! Run-time compensation (Eq. 19–20): nominal inverse kinematics, the model's correction, and a
-//! status for every point. The service and `hexacomp-trainer predict` both call this, so they
-//! return the same numbers.
+//! Run-time compensation (Eq. 19, Eq. 20): nominal inverse kinematics, the model's correction,
+//! and a status for every point. The service and `hexacomp-trainer predict` both call this, so
+//! they return the same numbers.
 
 use crate::geometry::{Geometry, LEGS};
 use crate::kinematics::{LegStatus, inverse_kinematics, stroke_status};
 use crate::model::Model;
 use crate::pose::Pose;
 
-/// How a point was compensated. The numeric values are part of the wire contract.
+/// How a point was compensated. The service sends it as `status as u8`: the values and names
+/// are those of `hexacomp_protocol::PointStatus` (a test in the service ties the two).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 #[repr(u8)]
 pub enum PointStatus {
@@ -19,7 +20,8 @@ pub enum PointStatus {
     OutsideTrainedRange = 2,
     /// A correction exceeded the model's bounds and was clamped to them.
     Clamped = 3,
-    /// A non-finite input: nothing computed, the legs returned are the input.
+    /// A non-finite input, or a non-finite output of the model: no correction applied, the legs
+    /// returned are the input (for a non-finite pose, its non-finite inverse kinematics).
     InvalidInput = 4,
     /// No model loaded: the legs returned are the nominal ones.
     NoModel = 5,
@@ -68,8 +70,9 @@ pub struct Compensated {
 /// Tolerance on the trained range before a point counts as outside it, mm.
 const RANGE_TOLERANCE_MM: f64 = 1e-6;
 
-/// Compensates nominal leg lengths `q` (mm) with `model` (or reports `NoModel`).
-/// Allocation-free.
+/// Compensates nominal leg lengths `q` (mm) with `model` (or reports `NoModel`): the predicted
+/// corrections `Δq = N(q, ŵ)` (Eq. 19), clamped to the model's bounds, and the corrected legs
+/// `q_m = q + Δq` (Eq. 20). Allocation-free.
 pub fn compensate_legs(geometry: &Geometry, model: Option<&Model>, q: &[f64; LEGS]) -> Compensated {
     let unchanged = |status| Compensated {
         legs: *q,

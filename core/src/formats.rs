@@ -1,4 +1,4 @@
-//! The CSV files of DESIGN.md: poses, measurements and joint corrections.
+//! The CSV files of docs/formats.md: poses, measurements and joint corrections.
 //!
 //! Every file has a header row, one configuration per row, `,` separators and `#` comment lines.
 //! Readers are strict: a missing column, a row of the wrong width, an empty or duplicate id, or a
@@ -429,7 +429,7 @@ pub fn write_measurements<W: Write>(writer: W, rows: &[MeasurementRow]) -> Resul
     )
 }
 
-/// Writes a corrections file: the DESIGN.md columns, then diagnostic columns named by
+/// Writes a corrections file: the columns of docs/formats.md, then diagnostic columns named by
 /// `diagnostic_columns` whose cells come from `diagnostics` (one `Vec` per row).
 pub fn write_corrections<W: Write>(
     writer: W,

@@ -1,6 +1,6 @@
 //! The platform geometry: joint centres, stroke, home pose, measuring targets and task workspace.
 //!
-//! Read from and written to the geometry TOML of DESIGN.md. Numbers are kept exactly as the file
+//! Read from and written to the geometry TOML of docs/formats.md. Numbers are kept exactly as the file
 //! states them (mm and degrees), so that saving and reloading a geometry gives the same
 //! [`Fingerprint`].
 
@@ -34,7 +34,7 @@ pub struct Workspace {
     pub yaw_range: [f64; 2],
 }
 
-/// A Stewart platform's nominal geometry, as in the geometry TOML of DESIGN.md.
+/// A Stewart platform's nominal geometry, as in the geometry TOML of docs/formats.md.
 ///
 /// Leg `i` runs from base joint `B_i` (base frame, mm) to platform joint `A_i` (platform frame,
 /// mm); its nominal length is `q_i = |t + R·a_i − b_i|`.
@@ -194,7 +194,7 @@ impl Geometry {
         })
     }
 
-    /// The geometry as TOML text in the DESIGN.md layout; numbers print exactly (shortest
+    /// The geometry as TOML text in the layout of docs/formats.md; numbers print exactly (shortest
     /// round-trip form), so [`Geometry::from_toml_str`] gives back an equal geometry.
     pub fn to_toml_string(&self) -> String {
         let to_rows = |v: &[DVec3]| v.iter().map(|p| p.to_array()).collect::<Vec<_>>();

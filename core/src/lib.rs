@@ -3,7 +3,7 @@
 //! The numerics of hexacomp, after Song, Tian, Tian & Liu (2022), "Calibration of a Stewart
 //! platform by designing a robust joint compensator with artificial neural networks":
 //!
-//! - [`geometry`]: the platform geometry (DESIGN.md TOML), its validation and fingerprint, and the
+//! - [`geometry`]: the platform geometry (the TOML of docs/formats.md), its validation and fingerprint, and the
 //!   built-in `prototype`;
 //! - [`pose`]: poses in LinuxCNC's convention `R = Rz(c)·Ry(b)·Rx(a)`, twists;
 //! - [`kinematics`]: allocation-free inverse kinematics and Newton forward kinematics;
@@ -12,7 +12,7 @@
 //! - [`virtual_platform`]: a simulated real machine with realistic error sources and a simulated
 //!   point-measuring device;
 //! - [`network`], [`model`]: the trained networks, their normalisation and the model file;
-//! - [`compensator`]: run-time compensation with a status per point (Eq. 19–20);
+//! - [`compensator`]: run-time compensation with a status per point (Eq. 19, Eq. 20);
 //! - [`stats`]: max/mean/std summaries of pose errors (the paper's Table 2 layout);
 //! - [`durable`]: files replaced whole or not at all, durable across a power loss.
 //!

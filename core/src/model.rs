@@ -1,4 +1,4 @@
-//! The trained compensation model and its file (DESIGN.md "Model file").
+//! The trained compensation model and its file (docs/formats.md, "Model file").
 //!
 //! File layout: 8 magic bytes `HXCMODEL`, the format version (u16, little-endian), the payload
 //! length (u32 LE), the postcard-encoded [`Model`], and a CRC-64/XZ (u64 LE) of everything
@@ -74,7 +74,9 @@ pub struct Model {
     pub input: NetworkInput,
     /// Input normalisation (Eq. 13).
     pub normalisation: Normalisation,
-    /// `[min, max]` of each leg over the training samples, mm.
+    /// `[min, max]` of each nominal leg the model answers for without the status
+    /// `outside_trained_range`, mm: for a trained model, every configuration's commanded and
+    /// network-input legs (held-out ones included).
     pub training_range: [[f64; 2]; LEGS],
     /// `[min, max]` of each correction the model may return, mm.
     pub correction_bounds: [[f64; 2]; LEGS],
@@ -85,8 +87,8 @@ pub struct Model {
 }
 
 impl Model {
-    /// The raw network output `Δq` (mm) for network input legs `q` (mm), before clamping.
-    /// Allocation-free.
+    /// The raw network output `Δq = N(q, w)` (Eq. 14; mm) for network input legs `q` (mm),
+    /// normalised by Eq. 13, before clamping. Allocation-free.
     #[inline]
     pub fn raw_corrections(&self, q: &[f64; LEGS]) -> [f64; LEGS] {
         let x = self.normalisation.apply(q);

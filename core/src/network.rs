@@ -1,5 +1,6 @@
-//! Three-layer feed-forward networks (Sec. 3.2): tanh hidden layer (Eq. 11), linear output
-//! (Eq. 12 with k = 1), inputs normalised by Eq. 13.
+//! Three-layer feed-forward networks (Sec. 3.2): nodes as in Eq. 10, tanh hidden layer (Eq. 11:
+//! `σ_H(z) = (1 − e^(−2z))/(1 + e^(−2z)) = tanh z`), linear output (Eq. 12 with k = 1), inputs
+//! normalised by Eq. 13; the network as a whole is the `N(q, w)` of Eq. 14.
 //!
 //! Inference is allocation-free: the hidden activations live in a stack buffer of
 //! [`MAX_HIDDEN`] values.
@@ -79,7 +80,8 @@ impl Network {
         &self.weights
     }
 
-    /// Evaluates the network at normalised input `x`, writing `outputs` values to `out` (Eq. 10).
+    /// Evaluates the network at normalised input `x`, writing `outputs` values to `out`: Eq. 10
+    /// for both layers, with Eq. 11 (tanh) on the hidden layer and Eq. 12 (`k = 1`) on the output.
     /// Allocation-free; each hidden activation is consumed as it is computed, so no buffer of
     /// activations is set up per call.
     #[inline]
@@ -125,7 +127,7 @@ impl Network {
             .fold(0.0, f64::max)
     }
 
-    /// The hidden activations `tanh(w1·x + b1)` (Eq. 10–11) into `hidden[..self.hidden()]`.
+    /// The hidden activations `tanh(w1·x + b1)` (Eq. 10, Eq. 11) into `hidden[..self.hidden()]`.
     #[inline]
     pub fn hidden_layer(&self, x: &[f64; LEGS], hidden: &mut [f64; MAX_HIDDEN]) {
         let h = self.hidden;
@@ -150,7 +152,8 @@ pub struct Normalisation {
 }
 
 impl Normalisation {
-    /// The normalisation of a set of leg-length vectors (mm).
+    /// The normalisation of a set of leg-length vectors (mm): Eq. 13's `q_i,mean` is the samples'
+    /// mean of leg `i` and `q_i,max − q_i,min` the range the samples span.
     pub fn of(samples: &[[f64; LEGS]]) -> Result<Self> {
         if samples.len() < 2 {
             return Err(Error::InvalidModel(
@@ -177,7 +180,8 @@ impl Normalisation {
         Ok(Self { mean, span })
     }
 
-    /// The normalised input of leg lengths `q` (mm).
+    /// The normalised input of leg lengths `q` (mm): `(q_i − q_i,mean)/(q_i,max − q_i,min)`
+    /// (Eq. 13).
     #[inline]
     pub fn apply(&self, q: &[f64; LEGS]) -> [f64; LEGS] {
         std::array::from_fn(|i| (q[i] - self.mean[i]) / self.span[i])

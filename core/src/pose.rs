@@ -112,7 +112,8 @@ impl Pose {
         Self::from_rotation(self.position + twist.translation, &rotation)
     }
 
-    /// The twist that takes `self` to `other`: `δ_A = t_other − t_self`,
+    /// The twist that takes `self` to `other` (the pose-error twist `ξ_t = (δ_A, ε)` of Eq. 2 when
+    /// `other` is the reached pose): `δ_A = t_other − t_self`,
     /// `ε = log(R_other·R_selfᵀ)` in base-frame axes. Exact for any size, not only small ones.
     pub fn twist_to(&self, other: &Pose) -> Twist {
         let relative = other.rotation() * self.rotation().transpose();

@@ -38,7 +38,7 @@ impl ActuationScrews {
         }
     }
 
-    /// The unit wrench of actuation of leg `i` (0-based), `ξ̂_wa,3,i = (s_i, a_i × s_i)`
+    /// The unit wrench of actuation of leg `i` (0-based), `ξ̂_wa,3,i = (s_i, a_i × s_i)` (Eq. 3)
     /// (force: unitless direction; moment about `A`: mm).
     pub fn unit_wrench(&self, leg: usize) -> [f64; 6] {
         let s = self.directions[leg];
@@ -70,8 +70,8 @@ impl ActuationScrews {
         sv.min() / sv.max()
     }
 
-    /// Solves `Wᵀ·ξ = ρ` for the twist `ξ` that changes the leg lengths by `ρ` (mm), to first
-    /// order. Fails with σ_min/σ_max when that ratio is below `singular_ratio`.
+    /// Solves `Wᵀ·ξ = ρ` (Eq. 3) for the twist `ξ` that changes the leg lengths by `ρ` (mm), to
+    /// first order. Fails with σ_min/σ_max when that ratio is below `singular_ratio`.
     pub fn solve_twist(&self, rho: &[f64; LEGS], singular_ratio: f64) -> Result<Twist, f64> {
         let ratio = self.singular_value_ratio();
         if ratio.is_nan() || ratio < singular_ratio {

@@ -149,7 +149,7 @@ fn unit_wrench_is_unit_force_along_the_leg_with_its_moment_about_a() {
 
 #[test]
 fn condition_of_pt_stays_in_single_digits_inside_the_workspace() {
-    // DESIGN.md: the robust regularisation (c = 1e3) acts only near singularities.
+    // docs/calibration.md: the robust regularisation (c = 1e3) acts only near singularities.
     let (g, poses) = poses(500);
     let worst = poses
         .iter()

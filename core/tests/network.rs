@@ -1,4 +1,4 @@
-//! Networks and models against hand computation: the three-layer network of Eq. 10–12, the input
+//! Networks and models against hand computation: the three-layer network of Eq. 10, Eq. 11 and Eq. 12, the input
 //! normalisation of Eq. 13 (and its refusals), which network a decoupled model uses for which
 //! leg, and the checks a model must pass before it is used.
 
@@ -28,7 +28,7 @@ fn two_by_two() -> Network {
     Network::from_weights(2, 2, w).unwrap()
 }
 
-/// Eq. 10–12 written out: `y_k = b2_k + Σ_j w2_kj · tanh(b1_j + Σ_i w1_ji · x_i)`.
+/// Eq. 10, Eq. 11 and Eq. 12 written out: `y_k = b2_k + Σ_j w2_kj · tanh(b1_j + Σ_i w1_ji · x_i)`.
 fn by_hand(x: &[f64; 6]) -> ([f64; 2], [f64; 2]) {
     let hidden = [0, 1].map(|j| (B1[j] + (0..6).map(|i| W1[j][i] * x[i]).sum::<f64>()).tanh());
     let out = [0, 1].map(|k| B2[k] + W2[k][0] * hidden[0] + W2[k][1] * hidden[1]);

@@ -1,11 +1,11 @@
 #!/bin/sh
 # Builds the LinuxCNC HAL component hexacomp.so (halcompile, LinuxCNC's uspace build) with the
-# hexacomp C client library linked in statically, so the module needs no other file at run time.
+# hexacomp C library (libhexacomp.a) linked in statically, so the module needs no other file at run time.
 #
 #   integrations/linuxcnc/build-component.sh                  # builds ./hexacomp.so
 #   integrations/linuxcnc/build-component.sh --out DIR        # writes DIR/hexacomp.so
 #   sudo integrations/linuxcnc/build-component.sh --install   # also copies it to LinuxCNC's modules
-#   ... --client-lib PATH   # use this libhexacomp_client.a instead of building it (release)
+#   ... --client-lib PATH   # use this libhexacomp.a instead of building it (release)
 #
 # Needs halcompile (Debian: linuxcnc-uspace-dev) and cargo.
 set -eu
@@ -33,8 +33,8 @@ command -v halcompile >/dev/null || {
 }
 
 if [ -z "$client_lib" ]; then
-    (cd "$repo" && cargo build --release --locked -p hexacomp-client)
-    client_lib="${CARGO_TARGET_DIR:-$repo/target}/release/libhexacomp_client.a"
+    (cd "$repo" && cargo build --release --locked -p hexacomp-client-c)
+    client_lib="${CARGO_TARGET_DIR:-$repo/target}/release/libhexacomp.a"
 fi
 [ -f "$client_lib" ] || { echo "build-component.sh: no client library at $client_lib" >&2; exit 1; }
 client_lib=$(cd "$(dirname "$client_lib")" && pwd)/$(basename "$client_lib")
@@ -43,7 +43,7 @@ mkdir -p "$out"
 out=$(cd "$out" && pwd)
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
-cp "$here/hexacomp.comp" "$repo/client/include/hexacomp.h" "$work/"
+cp "$here/hexacomp.comp" "$repo/client-c/include/hexacomp.h" "$work/"
 
 # halcompile's uspace Makefile puts LDFLAGS before the component's object file, so the archive
 # members are pulled in by naming the entry points with -u; the module's version script keeps

@@ -13,7 +13,7 @@
 
 use std::time::Instant;
 
-use hexacomp_client::wire::{MAX_BATCH, MAX_CLIENTS};
+use hexacomp_protocol::{MAX_BATCH, MAX_CLIENTS};
 
 /// Default sustained budget per client, points per second: about a third of what one serving
 /// thread computes (3.0 M points/s in batches of 1024, `hexacomp-bench batches`), so that one

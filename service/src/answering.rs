@@ -9,11 +9,11 @@
 
 use std::sync::atomic::Ordering;
 
-use hexacomp_client::wire::{
+use hexacomp_core::Geometry;
+use hexacomp_protocol::{
     MAX_BATCH, MAX_CLIENTS, MAX_REQUESTS_IN_FLIGHT, PROTOCOL_VERSION, PointRequest, PointResponse,
     RequestHeader, RequestKind, RequestOutcome, ResponseHeader,
 };
-use hexacomp_core::Geometry;
 use iceoryx2::port::ReceiveError;
 use iceoryx2::prelude::*;
 

@@ -3,16 +3,13 @@
 //! process so that one `cargo run` is enough for the demo.
 
 use std::path::PathBuf;
-use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
 
-use crate::control::{self, ControlSetup, summarise};
-use crate::serving::{self, ServingSetup, WaitMode};
-use crate::{Counters, Generation, state};
-use anyhow::Context;
 use clap::Parser;
-use hexacomp_client::DEFAULT_INSTANCE;
 use hexacomp_core::Geometry;
+use hexacomp_protocol::DEFAULT_INSTANCE;
+
+use crate::serving::WaitMode;
+use crate::{Error, Service, ServiceOptions};
 
 /// Serve joint compensation for one hexapod over iceoryx2 shared memory.
 ///
@@ -28,7 +25,7 @@ pub struct Args {
     /// Instance name: one service per machine tool.
     #[arg(long, default_value = DEFAULT_INSTANCE)]
     instance: String,
-    /// Geometry TOML (DESIGN.md layout). Default: the built-in `prototype`.
+    /// Geometry TOML (docs/formats.md). Default: the built-in `prototype`.
     #[arg(long, value_name = "FILE")]
     geometry: Option<PathBuf>,
     /// Model file to serve at start (else the persisted one, else none).
@@ -83,122 +80,29 @@ fn default_state_dir(instance: &str) -> PathBuf {
 
 /// Serves until SIGINT/SIGTERM; an error when the service cannot start (bad geometry or model,
 /// state directory, instance already served).
-pub fn run(args: Args) -> anyhow::Result<()> {
-    hexacomp_client::service_name(&args.instance, hexacomp_client::Endpoint::Compensate)?;
+pub fn run(args: Args) -> Result<(), Error> {
     let geometry = match &args.geometry {
-        Some(path) => Geometry::load(path)?,
+        Some(path) => Geometry::load(path).map_err(|source| Error::Geometry {
+            path: path.clone(),
+            source,
+        })?,
         None => Geometry::prototype(),
     };
     let state_dir = args
         .state_dir
         .clone()
         .unwrap_or_else(|| default_state_dir(&args.instance));
-    state::prepare(&state_dir)
-        .with_context(|| format!("state directory {}", state_dir.display()))?;
-    let initial = match &args.model {
-        Some(path) => {
-            let bytes =
-                std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
-            let model = crate::validate::validate(&bytes, &geometry)
-                .map_err(|why| anyhow::anyhow!("{}: refused: {why}", path.display()))?;
-            state::persist(&state_dir, &bytes, 1).map_err(anyhow::Error::msg)?;
-            Some((model, 1))
-        }
-        None => state::restore(&state_dir, &geometry),
-    };
-    let initial_summary = initial
-        .as_ref()
-        .map(|(model, _)| summarise(model))
-        .unwrap_or_default();
-    let initial_generation = initial.as_ref().map_or(0, |(_, number)| *number);
-    let initial = initial.map(|(model, number)| Box::new(Generation { model, number }));
-    tracing::info!(
-        "instance {} geometry {} ({}), model generation {}, state {}",
-        args.instance,
-        geometry.name,
-        geometry.fingerprint(),
-        initial.as_ref().map_or(0, |g| g.number),
-        state_dir.display()
-    );
-
-    let wait_mode = match args.wait {
+    let mut options = ServiceOptions::new(&args.instance, geometry, state_dir);
+    options.model = args.model;
+    options.wait = match args.wait {
         WaitArg::Spin => WaitMode::Spin,
         WaitArg::Event => WaitMode::Event,
         WaitArg::Sleep => WaitMode::Sleep,
     };
-    let counters = Arc::new(Counters::default());
-    let stop = Arc::new(AtomicBool::new(false));
-    let (to_serving, incoming) = crossbeam_channel::bounded(1);
-    let (retired_tx, retired_rx) = crossbeam_channel::bounded(4);
-    let (ready_tx, ready_rx) = crossbeam_channel::bounded(2);
-    let serving = {
-        let setup = ServingSetup {
-            instance: args.instance.clone(),
-            geometry: geometry.clone(),
-            initial,
-            incoming,
-            retired: retired_tx,
-            counters: counters.clone(),
-            stop: stop.clone(),
-            wait: wait_mode,
-            client_budget: Some(args.client_budget),
-        };
-        let ready = ready_tx.clone();
-        let (cpu, realtime) = (args.cpu, args.realtime);
-        std::thread::Builder::new()
-            .name("serving".into())
-            .spawn(move || {
-                if let Some(cpu) = cpu {
-                    match crate::realtime::pin_to_cpu(cpu) {
-                        Ok(()) => tracing::info!("serving thread pinned to CPU {cpu}"),
-                        Err(e) => tracing::warn!("not pinned, serving anyway: {e}"),
-                    }
-                }
-                if let Some(priority) = realtime {
-                    match crate::realtime::set_realtime(priority) {
-                        Ok(()) => {
-                            tracing::info!("serving thread at SCHED_FIFO priority {priority}")
-                        }
-                        Err(e) => tracing::warn!("no real-time priority, serving anyway: {e}"),
-                    }
-                }
-                serving::serve(setup, ready)
-            })?
-    };
-    ready_rx
-        .recv()
-        .context("serving thread")?
-        .map_err(anyhow::Error::msg)?;
-    let control = {
-        let setup = ControlSetup {
-            instance: args.instance.clone(),
-            geometry,
-            state_dir,
-            outgoing: to_serving,
-            retired: retired_rx,
-            counters,
-            stop: stop.clone(),
-            initial_summary,
-            initial_generation,
-            wait_mode: wait_mode.wire_value(),
-        };
-        std::thread::Builder::new()
-            .name("control".into())
-            .spawn(move || control::run(setup, ready_tx))?
-    };
-    if let Err(e) = ready_rx
-        .recv()
-        .context("control thread")?
-        .map_err(anyhow::Error::msg)
-    {
-        stop.store(true, Ordering::Relaxed);
-        let _ = serving.join();
-        return Err(e);
-    }
-    tracing::info!("serving instance {}", args.instance);
-    let _ = serving.join();
-    stop.store(true, Ordering::Relaxed);
-    let _ = control.join();
-    tracing::info!("stopped; iceoryx2 resources released");
+    options.cpu = args.cpu;
+    options.realtime = args.realtime;
+    // 0 means unlimited on the command line.
+    options.client_budget = Some(args.client_budget);
+    Service::start(options)?.join();
     Ok(())
 }

@@ -7,14 +7,12 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use crossbeam_channel::{Receiver, Sender, TrySendError};
-use hexacomp_client::wire::{
-    DeployReply, MAX_CLIENTS, MAX_NODES, PROTOCOL_VERSION, StatusReport, text_field,
-};
-use hexacomp_client::{Endpoint, iceoryx_name};
 use hexacomp_core::Geometry;
+use hexacomp_protocol::endpoints::{self, Role};
+use hexacomp_protocol::{DeployReply, PROTOCOL_VERSION, StatusReport, text_field};
 use iceoryx2::prelude::*;
 
-use crate::{Counters, Generation, state, validate};
+use crate::{Counters, Error, Generation, state, validate};
 
 /// How long a deploy waits for the serving thread to take the accepted model in before it
 /// answers anyway (saying so).
@@ -72,37 +70,22 @@ pub fn summarise(model: &hexacomp_core::model::Model) -> String {
 }
 
 /// Creates the status and deploy endpoints and serves them until stopped.
-pub fn run(setup: ControlSetup, ready: Sender<Result<(), String>>) {
-    let started = (|| -> Result<_, String> {
+pub fn run(setup: ControlSetup, ready: Sender<Result<(), Error>>) {
+    let started = (|| -> Result<_, Error> {
         let node = NodeBuilder::new()
             .signal_handling_mode(SignalHandlingMode::Disabled)
             .create::<ipc::Service>()
-            .map_err(|e| format!("creating the iceoryx2 node: {e}"))?;
-        let name = |endpoint| iceoryx_name(&setup.instance, endpoint).map_err(|e| e.to_string());
-        let status_service = node
-            .service_builder(&name(Endpoint::Status)?)
-            .request_response::<u64, StatusReport>()
-            .max_clients(MAX_CLIENTS)
-            .max_servers(1)
-            .max_nodes(MAX_NODES)
-            .open_or_create()
-            .map_err(|e| format!("status endpoint: {e:?}"))?;
-        let deploy_service = node
-            .service_builder(&name(Endpoint::Deploy)?)
-            .request_response::<[u8], DeployReply>()
-            .max_clients(MAX_CLIENTS)
-            .max_servers(1)
-            .max_nodes(MAX_NODES)
-            .open_or_create()
-            .map_err(|e| format!("deploy endpoint: {e:?}"))?;
+            .map_err(|e| Error::Iceoryx(format!("creating the control thread's node: {e}")))?;
+        let status_service = endpoints::status(&node, &setup.instance, Role::Serve)?;
+        let deploy_service = endpoints::deploy(&node, &setup.instance, Role::Serve)?;
         let status = status_service
             .server_builder()
             .create()
-            .map_err(|e| format!("status server: {e:?}"))?;
+            .map_err(|e| Error::Iceoryx(format!("status server: {e:?}")))?;
         let deploy = deploy_service
             .server_builder()
             .create()
-            .map_err(|e| format!("deploy server: {e:?}"))?;
+            .map_err(|e| Error::Iceoryx(format!("deploy server: {e:?}")))?;
         Ok((node, status_service, deploy_service, status, deploy))
     })();
     let (node, _s, _d, status, deploy) = match started {
@@ -196,7 +179,7 @@ fn handle_deploy(
     };
     let model = match validate::validate(bytes, &setup.geometry) {
         Ok(model) => model,
-        Err(why) => return refuse(why),
+        Err(why) => return refuse(why.to_string()),
     };
     if !deployer_alive() {
         return refuse("the deployer disconnected before the model was committed".into());
@@ -389,7 +372,7 @@ mod tests {
         assert!(!dir.path().join("model.hxm").exists());
     }
 
-    fn text(field: &[u8; hexacomp_client::wire::TEXT_BYTES]) -> String {
-        hexacomp_client::wire::field_text(field)
+    fn text(field: &[u8; hexacomp_protocol::TEXT_BYTES]) -> String {
+        hexacomp_protocol::field_text(field)
     }
 }

@@ -1,9 +1,13 @@
 //! # hexacomp-service (library)
 //!
-//! The compensation daemon's parts: [`serving`] (the hot path: one function that answers a
-//! request into a loaned response, allocation-free, and the serving loop), [`validate`] (checks a
-//! deployed model off the serving thread), [`state`] (persists the accepted model atomically) and
-//! [`control`] (status and deploy endpoints, on their own thread).
+//! The compensation daemon as a library: [`Service::start`] runs one instance from
+//! [`ServiceOptions`] until [`Service::stop`] or SIGINT/SIGTERM; `hexacomp-service` is a thin
+//! `main` around [`cli`]. Its parts: [`serving`] (the hot path: one function that answers a
+//! request into a loaned response, allocation-free, and [`serving::ServingLoop`], whose
+//! `poll_once` step tests drive), [`answering`] (fair answering of the waiting requests),
+//! [`validate`] (checks a deployed model off the serving thread), [`state`] (persists the
+//! accepted model durably) and [`control`] (status and deploy endpoints, on their own thread).
+//! Errors are [`Error`]; why a model is refused is a [`Refusal`].
 
 #![warn(missing_docs)]
 
@@ -11,11 +15,16 @@ pub mod admission;
 pub mod answering;
 pub mod cli;
 pub mod control;
+mod daemon;
+mod error;
 pub mod fair_queue;
 pub mod realtime;
 pub mod serving;
 pub mod state;
 pub mod validate;
+
+pub use daemon::{Service, ServiceOptions};
+pub use error::{Error, Refusal};
 
 use std::sync::atomic::AtomicU64;
 

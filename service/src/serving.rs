@@ -7,19 +7,19 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
 use crossbeam_channel::{Receiver, Sender};
-use hexacomp_client::wire::{
-    MAX_BATCH, MAX_CLIENTS, MAX_NODES, MAX_REQUESTS_IN_FLIGHT, PROTOCOL_VERSION, PointRequest,
-    PointResponse, RequestHeader, RequestKind, RequestOutcome, ResponseHeader,
-};
-use hexacomp_client::{Endpoint, iceoryx_name};
 use hexacomp_core::compensator::{compensate_legs, compensate_pose};
 use hexacomp_core::{Geometry, Pose};
+use hexacomp_protocol::endpoints::{self, Role};
+use hexacomp_protocol::{
+    MAX_BATCH, PROTOCOL_VERSION, PointRequest, PointResponse, RequestHeader, RequestKind,
+    RequestOutcome, ResponseHeader,
+};
 use iceoryx2::prelude::*;
 use iceoryx2::waitset::WaitSetRunResult;
 use iceoryx2_bb_posix::signal::SignalHandler;
 
 use crate::answering::Answerer;
-use crate::{Counters, Generation};
+use crate::{Counters, Error, Generation};
 
 /// Computes one point of a request. Allocation-free.
 #[inline]
@@ -70,9 +70,9 @@ impl WaitMode {
     /// The mode's value in the status report.
     pub fn wire_value(self) -> u32 {
         match self {
-            WaitMode::Spin => hexacomp_client::wire::WAIT_SPIN,
-            WaitMode::Sleep => hexacomp_client::wire::WAIT_SLEEP,
-            WaitMode::Event => hexacomp_client::wire::WAIT_EVENT,
+            WaitMode::Spin => hexacomp_protocol::WAIT_SPIN,
+            WaitMode::Sleep => hexacomp_protocol::WAIT_SLEEP,
+            WaitMode::Event => hexacomp_protocol::WAIT_EVENT,
         }
     }
 }
@@ -109,51 +109,88 @@ pub type CompensationServer = iceoryx2::port::server::Server<
 >;
 
 /// The compensation endpoint's service and its one server port.
-pub type CompensationEndpoint = (
-    iceoryx2::service::port_factory::request_response::PortFactory<
-        ipc::Service,
-        [PointRequest],
-        RequestHeader,
-        [PointResponse],
-        ResponseHeader,
-    >,
-    CompensationServer,
-);
+pub type CompensationEndpoint = (endpoints::CompensateEndpoint, CompensationServer);
 
 /// Opens (or creates) the compensation endpoint of `instance` with the sizes every client
 /// expects and creates its one server port; refused when another server owns the instance.
 pub fn compensation_endpoint(
     node: &Node<ipc::Service>,
     instance: &str,
-) -> Result<CompensationEndpoint, String> {
-    let name = iceoryx_name(instance, Endpoint::Compensate).map_err(|e| e.to_string())?;
-    let service = node
-        .service_builder(&name)
-        .request_response::<[PointRequest], [PointResponse]>()
-        .request_user_header::<RequestHeader>()
-        .response_user_header::<ResponseHeader>()
-        .max_clients(MAX_CLIENTS)
-        .max_servers(1)
-        .max_active_requests_per_client(MAX_REQUESTS_IN_FLIGHT)
-        .max_nodes(MAX_NODES)
-        // Open when clients still hold the service of a killed server: its dead node is
-        // cleaned up when this node is created, which frees the one server slot.
-        .open_or_create()
-        .map_err(|e| format!("opening the compensation service: {e:?}"))?;
+) -> Result<CompensationEndpoint, Error> {
+    let service = endpoints::compensate(node, instance, Role::Serve)?;
     // One server per instance: a live second server cannot create its port.
     let server = service
         .server_builder()
         .initial_max_slice_len(MAX_BATCH)
         .create()
-        .map_err(|e| {
-            format!("instance {instance:?} is already served by another hexacomp-service ({e:?})")
+        .map_err(|e| Error::AlreadyServed {
+            instance: instance.to_string(),
+            cause: format!("{e:?}"),
         })?;
     Ok((service, server))
 }
 
+/// The serving thread's state between two requests: the answering state, the model serving,
+/// and the channels a new model comes in on and the retired one goes back on. Tests drive it
+/// one step at a time with [`ServingLoop::poll_once`].
+pub struct ServingLoop<'a> {
+    answerer: Answerer<'a>,
+    current: Option<Box<Generation>>,
+    incoming: Receiver<Box<Generation>>,
+    retired: Sender<Box<Generation>>,
+    counters: &'a Counters,
+}
+
+impl<'a> ServingLoop<'a> {
+    /// A loop answering with `answerer`, starting with `initial` (published in `counters`
+    /// at once, so that a status answered from now on names it).
+    pub fn new(
+        answerer: Answerer<'a>,
+        initial: Option<Box<Generation>>,
+        incoming: Receiver<Box<Generation>>,
+        retired: Sender<Box<Generation>>,
+        counters: &'a Counters,
+    ) -> Self {
+        counters
+            .generation
+            .store(initial.as_ref().map_or(0, |g| g.number), Ordering::Relaxed);
+        Self {
+            answerer,
+            current: initial,
+            incoming,
+            retired,
+            counters,
+        }
+    }
+
+    /// One step: switches to a model that came in (between two requests; the old one goes
+    /// back to be freed off this thread), then answers the next waiting request. Returns false
+    /// when no request was waiting. Allocation-free.
+    pub fn poll_once(&mut self) -> bool {
+        if let Ok(next) = self.incoming.try_recv() {
+            self.counters
+                .generation
+                .store(next.number, Ordering::Relaxed);
+            if let Some(old) = self.current.replace(next) {
+                let _ = self.retired.try_send(old);
+            }
+        }
+        self.answerer.answer_next(self.current.as_deref())
+    }
+}
+
+impl Drop for ServingLoop<'_> {
+    fn drop(&mut self) {
+        if let Some(old) = self.current.take() {
+            let _ = self.retired.try_send(old);
+        }
+    }
+}
+
 /// Creates the compensation endpoint (refusing when another service owns the instance) and
-/// serves until stopped. Returns when `stop` is set or a termination signal arrives.
-pub fn serve(setup: ServingSetup, ready: Sender<Result<(), String>>) {
+/// serves until stopped. Returns when `stop` is set or a termination signal arrives; `ready`
+/// gets `Ok` once the endpoint serves, or why it cannot.
+pub fn serve(setup: ServingSetup, ready: Sender<Result<(), Error>>) {
     let ServingSetup {
         instance,
         geometry,
@@ -165,28 +202,21 @@ pub fn serve(setup: ServingSetup, ready: Sender<Result<(), String>>) {
         wait,
         client_budget,
     } = setup;
-    let started = (|| -> Result<_, String> {
-        let node = NodeBuilder::new()
-            .create::<ipc::Service>()
-            .map_err(|e| format!("creating the iceoryx2 node: {e}"))?;
-        let (service, server) = compensation_endpoint(&node, &instance)?;
-        Ok((node, service, server))
-    })();
-    let mut current = initial;
-    // Stored before "ready": the status answered from then on names the serving generation.
-    counters
-        .generation
-        .store(current.as_ref().map_or(0, |g| g.number), Ordering::Relaxed);
-    let (node, _service, server) = match started {
-        Ok(parts) => {
-            let _ = ready.send(Ok(()));
-            parts
-        }
+    let started = NodeBuilder::new()
+        .create::<ipc::Service>()
+        .map_err(|e| Error::Iceoryx(format!("creating the serving thread's node: {e}")))
+        .and_then(|node| Ok((compensation_endpoint(&node, &instance)?, node)));
+    let ((_service, server), node) = match started {
+        Ok(parts) => parts,
         Err(e) => {
             let _ = ready.send(Err(e));
             return;
         }
     };
+    let answerer = Answerer::new(&server, &geometry, &counters, client_budget);
+    // Stored before "ready": the status answered from then on names the serving generation.
+    let mut serving = ServingLoop::new(answerer, initial, incoming, retired, &counters);
+    let _ = ready.send(Ok(()));
     // Event mode: a listener on the wake endpoint, attached to a WaitSet together with a 10 ms
     // tick that keeps stop requests and model switches prompt while no request comes.
     let wake = match wait {
@@ -209,70 +239,73 @@ pub fn serve(setup: ServingSetup, ready: Sender<Result<(), String>>) {
             .zip(waitset.attach_interval(Duration::from_millis(10)).ok()),
         _ => None,
     };
-    let mut answerer = Answerer::new(&server, &geometry, &counters, client_budget);
     while !stop.load(Ordering::Relaxed) {
-        // A new model switches in between two requests; the old one goes back to be freed.
-        if let Ok(next) = incoming.try_recv() {
-            counters.generation.store(next.number, Ordering::Relaxed);
-            if let Some(old) = current.replace(next) {
-                let _ = retired.try_send(old);
-            }
+        if serving.poll_once() {
+            continue;
         }
-        if !answerer.answer_next(current.as_deref()) {
-            match (&waitset, &wake, &guards) {
-                (Some(waitset), Some((_, listener)), Some(_)) => {
-                    let result = waitset.wait_and_process_once_with_timeout(
-                        |_| CallbackProgression::Continue,
-                        Duration::from_millis(100),
-                    );
-                    if matches!(
-                        result,
-                        Ok(WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt)
-                    ) {
-                        stop.store(true, Ordering::Relaxed);
-                    }
-                    let _ = listener.try_wait(|_| {});
+        match (&waitset, &wake, &guards) {
+            (Some(waitset), Some((_, listener)), Some(_)) => {
+                let result = waitset.wait_and_process_once_with_timeout(
+                    |_| CallbackProgression::Continue,
+                    Duration::from_millis(100),
+                );
+                if matches!(
+                    result,
+                    Ok(WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt)
+                ) {
+                    stop.store(true, Ordering::Relaxed);
                 }
-                _ => {
-                    if wait == WaitMode::Spin {
-                        std::hint::spin_loop();
-                    } else {
-                        std::thread::sleep(Duration::from_micros(50));
-                    }
-                    // Termination signals, checked while idle. Not with `node.wait(ZERO)`: its
-                    // zero-length nanosleep sleeps for the timer slack (tens of µs, over 100 µs on
-                    // a virtual machine) and delays the next request by as much.
-                    if SignalHandler::termination_requested() {
-                        stop.store(true, Ordering::Relaxed);
-                    }
+                let _ = listener.try_wait(|_| {});
+            }
+            _ => {
+                if wait == WaitMode::Spin {
+                    std::hint::spin_loop();
+                } else {
+                    std::thread::sleep(Duration::from_micros(50));
+                }
+                // Termination signals, checked while idle. Not with `node.wait(ZERO)`: its
+                // zero-length nanosleep sleeps for the timer slack (tens of µs, over 100 µs on
+                // a virtual machine) and delays the next request by as much.
+                if SignalHandler::termination_requested() {
+                    stop.store(true, Ordering::Relaxed);
                 }
             }
         }
-    }
-    if let Some(old) = current.take() {
-        let _ = retired.try_send(old);
     }
 }
 
-type WakeParts = (
-    iceoryx2::service::port_factory::event::PortFactory<ipc::Service>,
-    iceoryx2::port::listener::Listener<ipc::Service>,
-);
-
 /// The wake endpoint's service and this thread's listener on it.
-fn wake_listener(node: &Node<ipc::Service>, instance: &str) -> Result<WakeParts, String> {
-    let name = iceoryx_name(instance, Endpoint::Wake).map_err(|e| e.to_string())?;
-    let service = node
-        .service_builder(&name)
-        .event()
-        .max_notifiers(MAX_CLIENTS)
-        .max_listeners(1)
-        .max_nodes(MAX_NODES)
-        .open_or_create()
-        .map_err(|e| format!("wake endpoint: {e:?}"))?;
+fn wake_listener(
+    node: &Node<ipc::Service>,
+    instance: &str,
+) -> Result<
+    (
+        endpoints::WakeEndpoint,
+        iceoryx2::port::listener::Listener<ipc::Service>,
+    ),
+    Error,
+> {
+    let service = endpoints::wake(node, instance, Role::Serve)?;
     let listener = service
         .listener_builder()
         .create()
-        .map_err(|e| format!("wake listener: {e:?}"))?;
+        .map_err(|e| Error::Iceoryx(format!("wake listener: {e:?}")))?;
     Ok((service, listener))
+}
+
+#[cfg(test)]
+mod tests {
+    use hexacomp_core::compensator;
+    use hexacomp_protocol::PointStatus;
+
+    /// `compute_point` sends the compensator's status as `u8`; clients read it as the
+    /// protocol's status. The two enums must agree value for value and name for name.
+    #[test]
+    fn the_compensators_statuses_are_the_wire_statuses() {
+        assert_eq!(compensator::PointStatus::ALL.len(), PointStatus::ALL.len());
+        for status in compensator::PointStatus::ALL {
+            let wire = PointStatus::from_u8(status as u8).expect("a wire status");
+            assert_eq!(wire.name(), status.name());
+        }
+    }
 }

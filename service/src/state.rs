@@ -7,6 +7,8 @@ use hexacomp_core::Geometry;
 use hexacomp_core::durable::replace_file;
 use hexacomp_core::model::Model;
 
+use crate::Error;
+
 /// The accepted model's file in a state directory.
 pub fn model_path(dir: &Path) -> PathBuf {
     dir.join("model.hxm")
@@ -17,20 +19,24 @@ fn generation_path(dir: &Path) -> PathBuf {
 }
 
 /// Creates the state directory, readable and writable by its owner only.
-pub fn prepare(dir: &Path) -> std::io::Result<()> {
-    std::fs::create_dir_all(dir)?;
+pub fn prepare(dir: &Path) -> Result<(), Error> {
     use std::os::unix::fs::PermissionsExt;
-    std::fs::set_permissions(dir, std::fs::Permissions::from_mode(0o700))
+    std::fs::create_dir_all(dir)
+        .and_then(|()| std::fs::set_permissions(dir, std::fs::Permissions::from_mode(0o700)))
+        .map_err(|source| Error::StateDir {
+            path: dir.to_path_buf(),
+            source,
+        })
 }
 
 /// Persists an accepted model file (its bytes) and its generation, each file replaced whole and
 /// durably ([`hexacomp_core::durable::replace_file`]).
-pub fn persist(dir: &Path, model_file: &[u8], generation: u64) -> Result<(), String> {
-    let path = model_path(dir);
-    replace_file(&path, model_file).map_err(|e| format!("writing {}: {e}", path.display()))?;
-    let path = generation_path(dir);
-    replace_file(&path, generation.to_string().as_bytes())
-        .map_err(|e| format!("writing {}: {e}", path.display()))
+pub fn persist(dir: &Path, model_file: &[u8], generation: u64) -> Result<(), Error> {
+    let replace = |path: PathBuf, bytes: &[u8]| {
+        replace_file(&path, bytes).map_err(|source| Error::Persist { path, source })
+    };
+    replace(model_path(dir), model_file)?;
+    replace(generation_path(dir), generation.to_string().as_bytes())
 }
 
 /// The persisted model and generation, if any, for `geometry`. A file for another geometry or a

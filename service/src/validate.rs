@@ -4,6 +4,8 @@
 //! reaches.
 
 use hexacomp_core::model::Model;
+
+use crate::Refusal;
 use hexacomp_core::sampling::{SamplerOptions, WorkspaceSampler};
 use hexacomp_core::{Geometry, LEGS, inverse_kinematics};
 
@@ -26,36 +28,34 @@ pub const MAX_JUMP_MM: f64 = 0.05;
 /// Yields the core every few dozen samples: with `--wait spin` on a small machine, the serving
 /// thread and the NC's client may hold every core, and validation then takes only short slices
 /// from them instead of a scheduler time slice of milliseconds.
-pub fn validate(bytes: &[u8], geometry: &Geometry) -> Result<Model, String> {
-    let model = Model::from_bytes(bytes).map_err(|p| p.to_string())?;
+pub fn validate(bytes: &[u8], geometry: &Geometry) -> Result<Model, Refusal> {
+    let model = Model::from_bytes(bytes).map_err(Refusal::File)?;
     if model.geometry != geometry.fingerprint() {
-        return Err(format!(
-            "trained for geometry {}, the service serves {} ({})",
-            model.geometry,
-            geometry.fingerprint(),
-            geometry.name
-        ));
+        return Err(Refusal::OtherGeometry {
+            model: model.geometry.to_string(),
+            served: geometry.fingerprint().to_string(),
+            name: geometry.name.clone(),
+        });
     }
     let jump = model.max_slope() * NEIGHBOUR_MM;
     if jump.is_nan() || jump > MAX_JUMP_MM {
-        return Err(format!(
-            "corrections may jump by up to {jump:.3} mm between legs {NEIGHBOUR_MM} mm apart \
-             (at most {MAX_JUMP_MM} mm allowed)"
-        ));
+        return Err(Refusal::Jumps {
+            jump_mm: jump,
+            neighbour_mm: NEIGHBOUR_MM,
+            max_jump_mm: MAX_JUMP_MM,
+        });
     }
     // The legs of workspace poses, not the training-range box: most of the six-dimensional box
     // is leg combinations no pose has, where a network extrapolates freely and is never asked.
-    let unsampleable =
-        |e: hexacomp_core::Error| format!("cannot sample the geometry's workspace: {e}");
     let mut poses = WorkspaceSampler::new(geometry, 0x6865_7861, SamplerOptions::default())
-        .map_err(unsampleable)?;
+        .map_err(Refusal::Unsampleable)?;
     let mut outside = 0usize;
     let mut checked = 0usize;
     for sample in 0..SAMPLES {
         if sample % SAMPLES_PER_SLICE == 0 {
             std::thread::yield_now();
         }
-        let pose = poses.sample().map_err(unsampleable)?;
+        let pose = poses.sample().map_err(Refusal::Unsampleable)?;
         let q = inverse_kinematics(geometry, &pose).lengths;
         let trained = (0..LEGS).all(|i| {
             let [lo, hi] = model.training_range[i];
@@ -67,7 +67,7 @@ pub fn validate(bytes: &[u8], geometry: &Geometry) -> Result<Model, String> {
         checked += 1;
         let dq = model.raw_corrections(&q);
         if dq.iter().any(|d| !d.is_finite()) {
-            return Err(format!("non-finite correction at legs {q:?}"));
+            return Err(Refusal::NonFinite { legs_mm: q });
         }
         let beyond = (0..LEGS).any(|i| {
             let [lo, hi] = model.correction_bounds[i];
@@ -77,11 +77,9 @@ pub fn validate(bytes: &[u8], geometry: &Geometry) -> Result<Model, String> {
     }
     let fraction = outside as f64 / checked.max(1) as f64;
     if fraction > OUT_OF_BOUNDS_FRACTION {
-        return Err(format!(
-            "corrections exceed the model's own bounds at {:.1} % of the workspace poses \
-             inside its training range",
-            100.0 * fraction
-        ));
+        return Err(Refusal::BeyondBounds {
+            percent: 100.0 * fraction,
+        });
     }
     Ok(model)
 }
@@ -126,7 +124,7 @@ mod tests {
         // inside the correction bounds everywhere: only the jump bound can see it.
         let model = one_node_model(&g, [5000.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.3, 0.0]);
         let why = validate(&model.to_bytes(), &g).unwrap_err();
-        assert!(why.contains("jump"), "{why}");
+        assert!(matches!(why, Refusal::Jumps { .. }), "{why}");
     }
 
     #[test]
@@ -135,7 +133,7 @@ mod tests {
         // Finite weights, flat (no slope), but b2 + w2 · tanh(10) overflows to infinity.
         let model = one_node_model(&g, [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 10.0, f64::MAX, f64::MAX]);
         let why = validate(&model.to_bytes(), &g).unwrap_err();
-        assert!(why.contains("non-finite"), "{why}");
+        assert!(matches!(why, Refusal::NonFinite { .. }), "{why}");
     }
 
     #[test]
@@ -143,6 +141,6 @@ mod tests {
         let g = Geometry::prototype();
         let model = one_node_model(&g, [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 2.0]);
         let why = validate(&model.to_bytes(), &g).unwrap_err();
-        assert!(why.contains("exceed"), "{why}");
+        assert!(matches!(why, Refusal::BeyondBounds { .. }), "{why}");
     }
 }

@@ -2,14 +2,16 @@
 //! are queued first, then [`Answerer::answer_next`] is called and what each client got is read.
 //! No timing is involved: every request waits before the first answer.
 
-use hexacomp_client::wire::{
+use hexacomp_core::Geometry;
+use hexacomp_core::compensator::compensate_pose;
+use hexacomp_core::pose::Pose;
+use hexacomp_protocol::{
     PROTOCOL_VERSION, PointRequest, PointResponse, RequestHeader, RequestKind, RequestOutcome,
     ResponseHeader,
 };
-use hexacomp_core::Geometry;
-use hexacomp_service::Counters;
 use hexacomp_service::answering::Answerer;
-use hexacomp_service::serving::compensation_endpoint;
+use hexacomp_service::serving::{ServingLoop, compensation_endpoint};
+use hexacomp_service::{Counters, Generation};
 use iceoryx2::prelude::*;
 
 type ClientPort = iceoryx2::port::client::Client<
@@ -71,7 +73,7 @@ fn endpoint_with_clients(
             endpoint
                 .0
                 .client_builder()
-                .initial_max_slice_len(hexacomp_client::wire::MAX_BATCH)
+                .initial_max_slice_len(hexacomp_protocol::MAX_BATCH)
                 .create()
                 .expect("client port")
         })
@@ -117,4 +119,69 @@ fn a_large_batch_steps_aside_for_a_single_point_that_waits() {
     assert_eq!(answered_points(&batch), Some(1024));
     assert_eq!(answered_points(&single), Some(1));
     assert!(!answerer.answer_next(None));
+}
+
+#[test]
+fn the_serving_loop_switches_models_between_two_requests_and_hands_the_old_one_back() {
+    use std::sync::atomic::Ordering::Relaxed;
+    let (_node, (_service, server), ports) = endpoint_with_clients("switch", 1);
+    let geometry = Geometry::prototype();
+    let counters = Counters::default();
+    let (to_serving, incoming) = crossbeam_channel::bounded(1);
+    let (retired_tx, retired) = crossbeam_channel::bounded(4);
+    let generation = |number| {
+        Box::new(Generation {
+            model: hexacomp_tests::smooth_model(number),
+            number,
+        })
+    };
+    let answerer = Answerer::new(&server, &geometry, &counters, None);
+    let mut serving = ServingLoop::new(
+        answerer,
+        Some(generation(1)),
+        incoming,
+        retired_tx,
+        &counters,
+    );
+    assert_eq!(
+        counters.generation.load(Relaxed),
+        1,
+        "published before serving"
+    );
+    assert!(!serving.poll_once(), "no request waits yet");
+    // What the answer to `send`'s pose must be with the model of `number`.
+    let home = Pose::from_mm_deg([0.0, 0.0, 280.0, 0.0, 0.0, 0.0]);
+    let expected = |number| {
+        compensate_pose(
+            &geometry,
+            Some(&hexacomp_tests::smooth_model(number)),
+            &home,
+        )
+        .legs
+    };
+    let answer = |pending: &Pending| {
+        let response = pending.receive().expect("receive").expect("answered");
+        let point = response.payload()[0];
+        (
+            response.user_header().generation,
+            point.generation,
+            point.legs,
+        )
+    };
+    let first = send(&ports[0], 1);
+    assert!(serving.poll_once());
+    assert_eq!(answer(&first), (1, 1, expected(1)));
+    to_serving.send(generation(2)).unwrap();
+    let second = send(&ports[0], 1);
+    assert!(serving.poll_once());
+    assert_eq!(answer(&second), (2, 2, expected(2)));
+    assert_ne!(expected(1), expected(2), "the two models must differ");
+    assert_eq!(counters.generation.load(Relaxed), 2);
+    assert_eq!(retired.try_recv().map(|g| g.number), Ok(1));
+    drop(serving);
+    assert_eq!(
+        retired.try_recv().map(|g| g.number),
+        Ok(2),
+        "the last one on drop"
+    );
 }

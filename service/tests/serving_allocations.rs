@@ -14,7 +14,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::time::Duration;
 
-use hexacomp_client::wire::RequestKind;
+use hexacomp_client::RequestKind;
 use hexacomp_client::{Client, ClientOptions, CompensatedPoint};
 use hexacomp_core::Geometry;
 use hexacomp_core::model::{Model, NetworkInput, Networks, Provenance};

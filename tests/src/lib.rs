@@ -39,7 +39,7 @@ fn binary_dir() -> &'static PathBuf {
 }
 
 /// The directory of the workspace's built libraries, among them the C client library
-/// (`libhexacomp_client.a`, `libhexacomp_client.so`).
+/// (`libhexacomp.a`, `libhexacomp.so`).
 pub fn library_dir() -> &'static std::path::Path {
     binary_dir()
 }
@@ -210,13 +210,7 @@ pub type RawClient = iceoryx2::port::client::Client<
 >;
 
 /// The compensation endpoint's service as a raw client opens it.
-pub type RawFactory = iceoryx2::service::port_factory::request_response::PortFactory<
-    iceoryx2::prelude::ipc::Service,
-    [hexacomp_client::wire::PointRequest],
-    hexacomp_client::wire::RequestHeader,
-    [hexacomp_client::wire::PointResponse],
-    hexacomp_client::wire::ResponseHeader,
->;
+pub type RawFactory = hexacomp_client::wire::endpoints::CompensateEndpoint;
 
 /// Opens the compensation endpoint of `instance` with a [`RawClient`] that may loan
 /// `max_points` per request (more than a request may carry, if asked). The node and the
@@ -232,21 +226,17 @@ pub fn raw_client(
     ),
     String,
 > {
-    use hexacomp_client::wire::{PointRequest, PointResponse, RequestHeader, ResponseHeader};
     use iceoryx2::prelude::*;
     let node = NodeBuilder::new()
         .signal_handling_mode(SignalHandlingMode::Disabled)
         .create::<ipc::Service>()
         .map_err(|e| format!("node: {e}"))?;
-    let name = hexacomp_client::iceoryx_name(instance, hexacomp_client::Endpoint::Compensate)
-        .map_err(|e| e.to_string())?;
-    let factory = node
-        .service_builder(&name)
-        .request_response::<[PointRequest], [PointResponse]>()
-        .request_user_header::<RequestHeader>()
-        .response_user_header::<ResponseHeader>()
-        .open()
-        .map_err(|e| format!("opening the compensation endpoint: {e:?}"))?;
+    let factory = hexacomp_client::wire::endpoints::compensate(
+        &node,
+        instance,
+        hexacomp_client::wire::endpoints::Role::Use,
+    )
+    .map_err(|e| e.to_string())?;
     let client = factory
         .client_builder()
         .initial_max_slice_len(max_points)

@@ -64,7 +64,7 @@ fn install_component() {
             .arg("--out")
             .arg(&out)
             .arg("--client-lib")
-            .arg(library_dir().join("libhexacomp_client.a"))
+            .arg(library_dir().join("libhexacomp.a"))
             .stdout(Stdio::null())
             .status()
             .expect("running build-component.sh");
@@ -344,6 +344,21 @@ impl Drop for SimConfig {
 pub struct SimService(Child);
 
 impl SimService {
+    /// Sends `signal` to the service and, for SIGSTOP, waits until it is stopped.
+    pub fn signal(&self, signal: i32) {
+        let pid = self.0.id();
+        // SAFETY: kill(2) on the pid of a child this value owns and has not reaped.
+        let result = unsafe { libc::kill(pid as i32, signal) };
+        assert_eq!(result, 0, "kill({pid}, {signal})");
+        if signal == libc::SIGSTOP {
+            let deadline = Instant::now() + Duration::from_secs(10);
+            while crate::process_state(pid) != Some('T') {
+                assert!(Instant::now() < deadline, "the service did not stop");
+                std::thread::sleep(Duration::from_millis(5));
+            }
+        }
+    }
+
     /// Kills the service with SIGKILL and reaps it.
     pub fn kill(mut self) {
         let _ = self.0.kill();
@@ -375,6 +390,11 @@ impl Drop for LinuxCncRun {
 }
 
 impl LinuxCncRun {
+    /// Whether LinuxCNC has ended (then [`LinuxCncRun::finish`] returns at once).
+    pub fn ended(&mut self) -> bool {
+        self.child.try_wait().ok().flatten().is_some()
+    }
+
     /// Waits for LinuxCNC to end (it ends when the driver script does) and returns the
     /// script's results; panics with LinuxCNC's logs after `timeout` or without results.
     pub fn finish(&mut self, timeout: Duration) -> serde_json::Value {

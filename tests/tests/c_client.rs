@@ -1,4 +1,4 @@
-//! The C library (`libhexacomp_client.a` and `.so`, `client/include/hexacomp.h`) used by a C
+//! The C library (`libhexacomp.a` and `.so`, `client-c/include/hexacomp.h`, `hexacomp.pc`) used by a C
 //! program compiled here with the system's C compiler, against a running service: every point
 //! it prints equals the compensator's answer bit for bit, its error paths give codes, and a call
 //! to a stopped service gives the timeout code after the deadline `hexacomp_set_timeout` set.
@@ -18,29 +18,98 @@ fn workspace() -> PathBuf {
         .to_path_buf()
 }
 
-/// Compiles `tests/c/client_test.c` against the static or the shared library.
+/// Writes `hexacomp.pc` for this build (the library in the build directory, the header in
+/// `client-c/include`) from `client-c/hexacomp.pc.in` into `dir`, as an install step would.
+fn write_pkg_config(dir: &Path) {
+    let template = std::fs::read_to_string(workspace().join("client-c/hexacomp.pc.in")).unwrap();
+    let filled = template
+        .replace("@LIBDIR@", &library_dir().display().to_string())
+        .replace(
+            "@INCLUDEDIR@",
+            &workspace().join("client-c/include").display().to_string(),
+        )
+        .replace("@VERSION@", env!("CARGO_PKG_VERSION"));
+    assert!(
+        !filled.contains('@'),
+        "a placeholder left unfilled:\n{filled}"
+    );
+    std::fs::write(dir.join("hexacomp.pc"), filled).unwrap();
+}
+
+/// The words `pkg-config` prints for `args` with the `hexacomp.pc` of `dir`; `None` where
+/// pkg-config is not installed, unless `HEXACOMP_REQUIRE_PKG_CONFIG` is set (as in CI), which
+/// turns its absence into a failure.
+fn pkg_config(dir: &Path, args: &[&str]) -> Option<Vec<String>> {
+    let output = match Command::new("pkg-config")
+        .env("PKG_CONFIG_PATH", dir)
+        .args(args)
+        .arg("hexacomp")
+        .output()
+    {
+        Ok(output) => output,
+        Err(e) if std::env::var_os("HEXACOMP_REQUIRE_PKG_CONFIG").is_none() => {
+            eprintln!("pkg-config not found ({e}): hexacomp.pc is not checked, fixed flags used");
+            return None;
+        }
+        Err(e) => panic!("running pkg-config (Debian: apt-get install pkg-config): {e}"),
+    };
+    assert!(
+        output.status.success(),
+        "pkg-config {args:?} hexacomp failed: {}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    Some(
+        String::from_utf8(output.stdout)
+            .unwrap()
+            .split_whitespace()
+            .map(str::to_string)
+            .collect(),
+    )
+}
+
+/// Compiles `tests/c/client_test.c` against the static or the shared library, with the flags
+/// `hexacomp.pc` gives.
 fn compile(out: &Path, shared: bool) -> PathBuf {
-    let libs = library_dir();
+    write_pkg_config(out);
     let exe = out.join(if shared {
         "client_test_shared"
     } else {
         "client_test_static"
     });
     let mut cc = Command::new(std::env::var("CC").unwrap_or_else(|_| "cc".into()));
-    cc.args(["-std=c11", "-Wall", "-Wextra", "-Werror", "-O2", "-I"])
-        .arg(workspace().join("client/include"))
+    let include = format!("-I{}", workspace().join("client-c/include").display());
+    cc.args(["-std=c11", "-Wall", "-Wextra", "-Werror", "-O2"])
+        .args(pkg_config(out, &["--cflags"]).unwrap_or_else(|| vec![include]))
         .arg(workspace().join("tests/c/client_test.c"))
         .arg("-o")
         .arg(&exe);
     if shared {
-        cc.arg("-L").arg(libs).arg("-lhexacomp_client");
-        cc.arg(format!("-Wl,-rpath,{}", libs.display()));
+        let libs = vec![
+            format!("-L{}", library_dir().display()),
+            "-lhexacomp".into(),
+        ];
+        cc.args(pkg_config(out, &["--libs"]).unwrap_or(libs));
+        cc.arg(format!("-Wl,-rpath,{}", library_dir().display()));
     } else {
-        // The static library needs what Rust's standard library links (`cargo rustc --
-        // --print native-static-libs`).
-        cc.arg(libs.join("libhexacomp_client.a"));
-        cc.args(["-lgcc_s", "-lutil", "-lrt", "-lpthread", "-ldl", "-lc"]);
+        // The archive itself, then what it needs from the system (`Libs.private`).
+        cc.arg(library_dir().join("libhexacomp.a"));
+        let system = [
+            "-lgcc_s",
+            "-lutil",
+            "-lrt",
+            "-lpthread",
+            "-ldl",
+            "-lc",
+            "-lm",
+        ];
+        cc.args(
+            pkg_config(out, &["--static", "--libs-only-l"])
+                .unwrap_or_else(|| system.map(String::from).to_vec())
+                .into_iter()
+                .filter(|flag| flag != "-lhexacomp"),
+        );
     }
+    // The test program itself uses libm (sin, cos).
     cc.arg("-lm");
     let output = cc.output().expect("running the C compiler");
     assert!(

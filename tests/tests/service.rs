@@ -5,62 +5,42 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use hexacomp_client::wire::RequestKind;
-use hexacomp_client::{CompensatedPoint, DeployOutcome};
-use hexacomp_core::compensator::{PointStatus, compensate_legs, compensate_pose};
-use hexacomp_core::formats::CorrectionRow;
+use hexacomp_client::{CompensatedPoint, DeployOutcome, PointStatus};
+use hexacomp_core::compensator::{compensate_legs, compensate_pose};
 use hexacomp_core::model::Model;
 use hexacomp_core::sampling::{SamplerOptions, WorkspaceSampler};
 use hexacomp_core::stats::PoseErrorNorm;
 use hexacomp_core::virtual_platform::{DEFAULT_MACHINE_SEED, ErrorModel, VirtualPlatform};
 use hexacomp_core::{Geometry, Pose, inverse_kinematics};
 use hexacomp_tests::{ServiceProcess, unique_instance};
-use hexacomp_trainer::acquire::measure_plan;
-use hexacomp_trainer::corrections::{Checks, SolverOptions, solve_all};
-use hexacomp_trainer::plan::{PlanOptions, numbered_rows, plan};
-use hexacomp_trainer::train::{Architecture, TrainOptions, train};
+use hexacomp_trainer::pipeline::Pipeline;
+use hexacomp_trainer::plan::PlanOptions;
+use hexacomp_trainer::train::{Architecture, TrainOptions};
 
 /// A small decoupled model of the default virtual machine, trained with `seed`, saved in `dir`.
 fn small_model(dir: &Path, seed: u64) -> (Model, PathBuf) {
     let g = Geometry::prototype();
-    let rows = numbered_rows(
-        &plan(
-            &g,
-            &PlanOptions {
-                count: 40,
-                seed,
-                ..Default::default()
-            },
-        )
-        .unwrap(),
-    );
-    let mut platform =
-        VirtualPlatform::new(&g, &ErrorModel::default(), DEFAULT_MACHINE_SEED, seed).unwrap();
-    let measurements = measure_plan(&mut platform, &rows).unwrap();
-    let corrections: Vec<CorrectionRow> = solve_all(
-        &g,
-        &measurements,
-        &SolverOptions::default(),
-        &Checks::default(),
-    )
-    .unwrap()
-    .iter()
-    .filter_map(|o| o.correction_row())
-    .collect();
-    let options = TrainOptions {
-        hidden_sizes: vec![1, 2, 3],
-        restarts: 1,
-        seed,
+    let pipeline = Pipeline {
+        plan: PlanOptions {
+            count: 40,
+            seed,
+            ..Default::default()
+        },
+        train: TrainOptions {
+            hidden_sizes: vec![1, 2, 3],
+            restarts: 1,
+            seed,
+            ..Default::default()
+        },
         ..Default::default()
     };
-    let model = train(
-        &corrections,
-        Architecture::Decoupled,
-        g.fingerprint(),
-        &options,
-        &|| {},
-    )
-    .unwrap()
-    .model;
+    let mut platform =
+        VirtualPlatform::new(&g, &ErrorModel::default(), DEFAULT_MACHINE_SEED, seed).unwrap();
+    let (_, measurements) = pipeline.measure_virtual(&mut platform).unwrap();
+    let calibration = pipeline
+        .calibrate(&g, &measurements, &[Architecture::Decoupled], &|_| {})
+        .unwrap();
+    let model = calibration.models[0].1.model.clone();
     let path = dir.join(format!("model-{seed}.hxm"));
     model.save(&path).unwrap();
     (model, path)
@@ -80,7 +60,7 @@ fn p(path: &Path) -> &str {
 fn assert_same(got: &CompensatedPoint, expected: &hexacomp_core::compensator::Compensated) {
     assert_eq!(got.legs, expected.legs);
     assert_eq!(got.corrections, expected.corrections);
-    assert_eq!(got.status, expected.status);
+    assert_eq!(got.status as u8, expected.status as u8);
 }
 
 #[test]
@@ -455,7 +435,7 @@ fn event_mode_serves_the_same_numbers_swaps_and_leaves_the_core_free_when_idle()
 }
 
 /// A model whose answers are known by hand: for each leg `k` one tanh node on that leg's own
-/// normalised length, `Δq_k = b2_k + w2_k · tanh(b1 + (q_k − mean) / span)` (Eqs. 10–11).
+/// normalised length, `Δq_k = b2_k + w2_k · tanh(b1 + (q_k − mean) / span)` (Eq. 10, Eq. 11).
 struct HandModel {
     model: Model,
     mean: f64,

@@ -5,13 +5,12 @@ use std::path::Path;
 
 use std::time::{Duration, Instant};
 
-use hexacomp_client::Error;
 use hexacomp_client::wire::{
     MAX_BATCH, MAX_REQUESTS_IN_FLIGHT, PROTOCOL_VERSION, PointRequest, RequestHeader, RequestKind,
     RequestOutcome,
 };
+use hexacomp_client::{Error, PointStatus};
 use hexacomp_core::Geometry;
-use hexacomp_core::compensator::PointStatus;
 use hexacomp_tests::{
     ServiceProcess, binary, raw_client, save_smooth_model, smooth_model, unique_instance,
 };

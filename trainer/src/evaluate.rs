@@ -14,12 +14,12 @@ use hexacomp_core::stats::{PoseErrorNorm, PoseErrorStats};
 use hexacomp_core::virtual_platform::{ErrorModel, VirtualPlatform};
 use hexacomp_core::{Geometry, Pose, inverse_kinematics};
 
-use crate::acquire::measure_plan;
-use crate::corrections::{Checks, SolverOptions, solve_all};
+use crate::corrections::SolverOptions;
 use crate::error::{Error, Result};
 use crate::identify::{IdentifyOptions, identify};
-use crate::plan::{PlanOptions, numbered_rows, plan};
-use crate::train::{Architecture, TrainOptions, Trained, train};
+use crate::pipeline::Pipeline;
+use crate::plan::PlanOptions;
+use crate::train::{Architecture, TrainOptions, Trained};
 
 /// A compensation method of the comparison.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -127,12 +127,23 @@ pub fn evaluate(
         .iter()
         .max()
         .ok_or_else(|| Error::InvalidSetting("at least one training size is needed".into()))?;
-    let plan_options = PlanOptions {
-        count: largest,
-        seed: options.plan_seed,
+    let robust_pipeline = Pipeline {
+        plan: PlanOptions {
+            count: largest,
+            seed: options.plan_seed,
+            ..Default::default()
+        },
+        train: options.train.clone(),
         ..Default::default()
     };
-    let planned = numbered_rows(&plan(geometry, &plan_options)?);
+    // The paper's ordinary compensator: the same pipeline with λ = 0.
+    let ordinary_pipeline = Pipeline {
+        solver: SolverOptions {
+            robust: false,
+            ..robust_pipeline.solver
+        },
+        ..robust_pipeline.clone()
+    };
     let mut platform = VirtualPlatform::new(
         geometry,
         &options.error_model,
@@ -142,23 +153,13 @@ pub fn evaluate(
     progress(&format!(
         "measuring {largest} configurations on the virtual machine"
     ));
-    let measurements = measure_plan(&mut platform, &planned)?;
-    let robust_options = SolverOptions::default();
-    let ordinary_options = SolverOptions {
-        robust: false,
-        ..robust_options
-    };
-    let robust = solve_all(geometry, &measurements, &robust_options, &Checks::default())?;
-    let ordinary = solve_all(
-        geometry,
-        &measurements,
-        &ordinary_options,
-        &Checks::default(),
-    )?;
+    let (_, measurements) = robust_pipeline.measure_virtual(&mut platform)?;
+    let robust = robust_pipeline.solve(geometry, &measurements)?.outcomes;
+    let ordinary = ordinary_pipeline.solve(geometry, &measurements)?.outcomes;
     let above_threshold = robust
         .iter()
         .filter_map(|o| o.solution.as_ref().ok())
-        .filter(|s| s.max_cond_pt > robust_options.cond_threshold)
+        .filter(|s| s.max_cond_pt > robust_pipeline.solver.cond_threshold)
         .count();
     let rows = |outcomes: &[crate::corrections::Outcome], n: usize| -> Vec<CorrectionRow> {
         outcomes[..n]
@@ -171,17 +172,14 @@ pub fn evaluate(
             .samples(options.validation_count)?;
 
     let fit = |corrections: &[CorrectionRow], architecture, input| {
-        let train_options = TrainOptions {
-            input,
-            ..options.train.clone()
+        let pipeline = Pipeline {
+            train: TrainOptions {
+                input,
+                ..options.train.clone()
+            },
+            ..robust_pipeline.clone()
         };
-        train(
-            corrections,
-            architecture,
-            geometry.fingerprint(),
-            &train_options,
-            &|| {},
-        )
+        pipeline.train(geometry, corrections, architecture, &|| {})
     };
     let mut sizes = Vec::new();
     let mut inputs = Vec::new();

@@ -6,7 +6,8 @@
 //! the model's pose is the forward kinematics of the parameters, and its residual is
 //! `r_k = r_Pm − r_Pc` (9 values). Differentiating the leg constraint
 //! `|t + R·a_i − b_i| − o_i = q_i` with the legs held gives `Wᵀ·ξ = G·δθ` with row `i` of `G`
-//! being `s_iᵀ` on `b_i`, `−(Rᵀs_i)ᵀ` on `a_i` and 1 on `o_i`; so `∂r_Pc/∂θ = P·T·G` (Eq. 3–4).
+//! being `s_iᵀ` on `b_i`, `−(Rᵀs_i)ᵀ` on `a_i` and 1 on `o_i`; so `∂r_Pc/∂θ = P·T·G` (Eq. 3,
+//! Eq. 4, and Eq. 5 with `ρ = G·δθ`).
 //!
 //! Gauss–Newton steps solve `J·δθ = r` by SVD, dropping directions whose singular value is below
 //! a fraction of the largest: parameter combinations the measurements cannot see stay at their
@@ -84,7 +85,8 @@ pub fn identify(
     let mut rank = 0;
     let mut iterations = 0;
     for _ in 0..options.max_iterations {
-        let (jacobian, residual) = linearise(&geometry, rows, &mut poses)?;
+        let (jacobian, residual) =
+            linearise(&geometry, rows, &mut poses).map_err(|e| ill_conditioned(e, rank))?;
         let rms = (residual.norm_squared() / residual.len() as f64).sqrt();
         rms_before.get_or_insert(rms);
         if rms_previous.is_finite() && rms_previous - rms <= options.stall_fraction * rms_previous {
@@ -103,7 +105,8 @@ pub fn identify(
             break;
         }
     }
-    let (_, residual) = linearise(&geometry, rows, &mut poses)?;
+    let (_, residual) =
+        linearise(&geometry, rows, &mut poses).map_err(|e| ill_conditioned(e, rank))?;
     Ok(Identification {
         geometry,
         iterations,
@@ -113,8 +116,22 @@ pub fn identify(
     })
 }
 
-/// The Jacobian `∂r_Pc/∂θ` (9K × 42) and the residual `r_Pm − r_Pc` (9K) at the current
-/// parameters; `poses` are updated to the model's poses (and seed the next call).
+/// `error` of an iterate, with the likely cause when the last step's data determined fewer
+/// than all parameter combinations (`rank` of them): an ill-conditioned identification drifts
+/// into geometries where forward kinematics fails.
+fn ill_conditioned(error: Error, rank: usize) -> Error {
+    if rank == 0 || rank >= PARAMETERS {
+        return error;
+    }
+    Error::InsufficientData(format!(
+        "{error}; the configurations determine only {rank} of the {PARAMETERS} parameter \
+         combinations (ill-conditioned: measure configurations spread over the whole workspace)"
+    ))
+}
+
+/// The Jacobian `∂r_Pc/∂θ` (9K × 42; per configuration `P·T·G`, Eq. 5 with `ρ = G·δθ`) and the
+/// residual `r_Pm − r_Pc` (9K; the `ζ` of Eq. 4) at the current parameters; `poses` are updated
+/// to the model's poses (and seed the next call).
 fn linearise(
     geometry: &Geometry,
     rows: &[MeasurementRow],

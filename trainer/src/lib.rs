@@ -4,8 +4,11 @@
 //!
 //! - [`plan`]: measuring configurations spread over the task workspace (the paper's Fig. 8);
 //! - [`acquire`]: measuring a plan on the virtual platform;
-//! - [`corrections`]: the robust Levenberg–Marquardt joint-correction solver (Fig. 2, Eq. 5–9);
+//! - [`corrections`]: the robust Levenberg–Marquardt joint-correction solver (Fig. 2; Eq. 5,
+//!   Eq. 6, Eq. 7, Eq. 8, Eq. 9);
 //! - [`train`], [`evaluate`]: the networks and their check on the virtual platform;
+//! - [`pipeline`]: the calibration pipeline (plan → acquire → solve → train) as one type, which
+//!   every command, the bench and the tests run;
 //! - [`svg`], [`table`]: plots and terminal tables for reports;
 //! - [`identify`]: the model-based baseline — identification of the geometric parameters by
 //!   iterative least squares, compensation by the identified inverse kinematics;
@@ -21,6 +24,7 @@ pub mod error;
 pub mod evaluate;
 pub mod identify;
 pub mod linuxcnc;
+pub mod pipeline;
 pub mod plan;
 pub mod svg;
 pub mod table;

@@ -17,7 +17,7 @@ use hexacomp_core::Geometry;
 #[derive(Debug, Parser)]
 #[command(name = "hexacomp-trainer", version, propagate_version = true)]
 struct Cli {
-    /// Geometry TOML (the layout of DESIGN.md). Default: the built-in `prototype`
+    /// Geometry TOML (the layout of docs/formats.md). Default: the built-in `prototype`
     /// (base radius 370 mm, platform radius 250 mm, stroke 280–430 mm, φ150 × 100 mm workspace,
     /// tilt ≤ 15°, yaw ±10°).
     #[arg(long, global = true, value_name = "FILE")]

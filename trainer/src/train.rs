@@ -1,13 +1,13 @@
 //! Training the joint-correction networks (Sec. 3.2).
 //!
-//! Each network is fitted by Levenberg–Marquardt on the mean squared error (Eq. 15–17) with the
-//! analytic Jacobian of Eq. 16, an adaptive μ (÷10 after an accepted step, ×10 after a rejected
-//! one), stopping when an accepted step changes the loss by less than a relative tolerance;
-//! several restarts from standard-normal weights (the paper's initialisation), keeping the one
-//! with the lowest training loss. The hidden-node count is chosen by holdout validation (Eq. 18;
-//! Eq. 21 for the decoupled networks) over a sweep of sizes: the smallest size whose validation
-//! RMSE is within 2 % of the best. The final model is then refitted on all samples at that size
-//! unless asked not to.
+//! Each network is fitted by Levenberg–Marquardt on the mean squared error (Eq. 15): steps of
+//! Eq. 16 with the analytic Jacobian `J`, updates of Eq. 17, an adaptive μ (÷10 after an
+//! accepted step, ×10 after a rejected one), stopping when an accepted step changes the loss by
+//! less than a relative tolerance; several restarts from standard-normal weights (the paper's
+//! initialisation), keeping the one with the lowest training loss. The hidden-node count is
+//! chosen by holdout validation (Eq. 18; Eq. 21 for the decoupled networks) over a sweep of
+//! sizes: the smallest size whose validation RMSE is within 2 % of the best. The final model is
+//! then refitted on all samples at that size unless asked not to.
 
 use std::time::Instant;
 
@@ -123,6 +123,47 @@ fn samples(rows: &[CorrectionRow], input: NetworkInput) -> (Vec<[f64; LEGS]>, Ve
     (x, rows.iter().map(|r| r.corrections).collect())
 }
 
+/// `0..count` in a seeded random order (Fisher–Yates): the first part is held out for
+/// validation.
+fn shuffled(count: usize, seed: u64) -> Vec<usize> {
+    let mut order: Vec<usize> = (0..count).collect();
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    for i in (1..order.len()).rev() {
+        order.swap(i, rng.random_range(0..=i));
+    }
+    order
+}
+
+/// The smallest and largest value of leg `leg` over `values`, mm.
+fn leg_range(values: &[[f64; LEGS]], leg: usize) -> [f64; 2] {
+    values
+        .iter()
+        .fold([f64::INFINITY, f64::NEG_INFINITY], |[lo, hi], v| {
+            [lo.min(v[leg]), hi.max(v[leg])]
+        })
+}
+
+/// The model's training range per leg, mm: the run-time input is the nominal legs, so it covers
+/// both the commanded legs and the network-input legs of every row (they differ by the
+/// corrections when the input is the equivalent legs), whether the row was held out or not.
+fn training_range(inputs: &[[f64; LEGS]], commanded: &[[f64; LEGS]]) -> [[f64; 2]; LEGS] {
+    std::array::from_fn(|leg| {
+        let ([a, b], [c, d]) = (leg_range(inputs, leg), leg_range(commanded, leg));
+        [a.min(c), b.max(d)]
+    })
+}
+
+/// The model's correction bounds per leg, mm: the measured corrections' range widened on each
+/// side by half its spread plus 0.01 mm (so that a leg whose corrections barely vary still has
+/// room for noise). The run-time clamp holds corrections inside them.
+fn correction_bounds(targets: &[[f64; LEGS]]) -> [[f64; 2]; LEGS] {
+    std::array::from_fn(|leg| {
+        let [lo, hi] = leg_range(targets, leg);
+        let margin = 0.5 * (hi - lo) + 0.01;
+        [lo - margin, hi + margin]
+    })
+}
+
 /// Trains a model on corrections rows for the geometry with fingerprint `geometry`.
 /// `progress` is called once per fit of the sweep (for progress bars), from worker threads.
 pub fn train(
@@ -148,12 +189,7 @@ pub fn train(
     let normalisation = Normalisation::of(&inputs)?;
     let x: Vec<[f64; LEGS]> = inputs.iter().map(|q| normalisation.apply(q)).collect();
 
-    // Holdout split, seeded.
-    let mut order: Vec<usize> = (0..rows.len()).collect();
-    let mut rng = ChaCha8Rng::seed_from_u64(options.seed);
-    for i in (1..order.len()).rev() {
-        order.swap(i, rng.random_range(0..=i));
-    }
+    let order = shuffled(rows.len(), options.seed);
     let validation_count = ((rows.len() as f64 * options.validation_fraction).round() as usize)
         .clamp(1, rows.len() - 1);
     let (validation, training) = order.split_at(validation_count);
@@ -206,6 +242,7 @@ pub fn train(
         networks.push(network);
         selections.push(Selection { sweep, chosen });
     }
+    // Eq. 21 (for a coupled model, the one network's Eq. 18 validation RMSE).
     let validation_rmse_mm = selections
         .iter()
         .map(|s| s.chosen_point().validation_rmse_mm.powi(2))
@@ -215,26 +252,9 @@ pub fn train(
         Architecture::Coupled => Networks::Coupled(networks.remove(0)),
         Architecture::Decoupled => Networks::Decoupled(networks),
     };
-    let range = |values: &[[f64; LEGS]], leg: usize| -> [f64; 2] {
-        values
-            .iter()
-            .fold([f64::INFINITY, f64::NEG_INFINITY], |[lo, hi], v| {
-                [lo.min(v[leg]), hi.max(v[leg])]
-            })
-    };
-    // The run-time input is the nominal legs: cover both the commanded and the network-input
-    // legs of the samples (they differ by the corrections when the input is the equivalent legs).
     let commanded: Vec<[f64; LEGS]> = rows.iter().map(|r| r.legs).collect();
-    let training_range = std::array::from_fn(|leg| {
-        let ([a, b], [c, d]) = (range(&inputs, leg), range(&commanded, leg));
-        [a.min(c), b.max(d)]
-    });
-    // Corrections may exceed the measured ones by half their spread, no more.
-    let correction_bounds = std::array::from_fn(|leg| {
-        let [lo, hi] = range(targets, leg);
-        let margin = 0.5 * (hi - lo) + 0.01;
-        [lo - margin, hi + margin]
-    });
+    let training_range = training_range(&inputs, &commanded);
+    let correction_bounds = correction_bounds(targets);
     let created_unix_s = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
         .map_or(0, |d| d.as_secs());
@@ -402,7 +422,9 @@ fn residuals_and_jacobian(
     e
 }
 
-/// Levenberg–Marquardt on the sum of squared residuals (Eq. 15–17).
+/// Levenberg–Marquardt on the sum of squared residuals `K·E(w)` (Eq. 15's loss times `K`: the
+/// same minimiser): the step `Δw = (JᵀJ + μI)⁻¹Jᵀe` (Eq. 16) and the update `w ← w + Δw`
+/// (Eq. 17), kept only when it lowers the loss.
 fn levenberg_marquardt(
     data: &Data,
     hidden: usize,

@@ -1,36 +1,42 @@
 //! Networks on the default virtual machine: the acceptance figures of the paper's comparison,
 //! on fresh poses that no training used.
 
-mod common;
-
 use hexacomp_core::compensator::compensate_pose;
 use hexacomp_core::formats::CorrectionRow;
 use hexacomp_core::sampling::{SamplerOptions, WorkspaceSampler};
 use hexacomp_core::stats::PoseErrorStats;
-use hexacomp_core::virtual_platform::{DEFAULT_MACHINE_SEED, ErrorModel};
+use hexacomp_core::virtual_platform::{DEFAULT_MACHINE_SEED, ErrorModel, VirtualPlatform};
 use hexacomp_core::{Geometry, Pose, inverse_kinematics};
 use hexacomp_trainer::Error;
-use hexacomp_trainer::corrections::{Checks, SolverOptions, solve_all};
 use hexacomp_trainer::evaluate;
 use hexacomp_trainer::identify::{IdentifyOptions, identify};
+use hexacomp_trainer::pipeline::Pipeline;
+use hexacomp_trainer::plan::PlanOptions;
 use hexacomp_trainer::train::{Architecture, TrainOptions, train};
 
 #[test]
 fn robust_networks_beat_the_papers_figures_and_the_model_based_baseline() {
     let g = Geometry::prototype();
-    let rows = common::plan_rows(&g, 150, 1);
-    let (platform, measurements) =
-        common::measure(&g, &ErrorModel::default(), DEFAULT_MACHINE_SEED, 1, &rows);
-    let corrections: Vec<CorrectionRow> = solve_all(
-        &g,
-        &measurements,
-        &SolverOptions::default(),
-        &Checks::default(),
-    )
-    .unwrap()
-    .iter()
-    .filter_map(|o| o.correction_row())
-    .collect();
+    let pipeline = Pipeline {
+        plan: PlanOptions {
+            count: 150,
+            seed: 1,
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    let mut platform =
+        VirtualPlatform::new(&g, &ErrorModel::default(), DEFAULT_MACHINE_SEED, 1).unwrap();
+    let (_, measurements) = pipeline.measure_virtual(&mut platform).unwrap();
+    let calibration = pipeline
+        .calibrate(
+            &g,
+            &measurements,
+            &[Architecture::Decoupled, Architecture::Coupled],
+            &|_| {},
+        )
+        .unwrap();
+    let (decoupled, coupled) = (&calibration.models[0].1, &calibration.models[1].1);
     let fresh = WorkspaceSampler::new(&g, 4242, SamplerOptions::default())
         .unwrap()
         .samples(100)
@@ -38,23 +44,6 @@ fn robust_networks_beat_the_papers_figures_and_the_model_based_baseline() {
     let drive = |command: &dyn Fn(&Pose) -> [f64; 6]| {
         PoseErrorStats::of(&evaluate::drive(&mut platform.clone(), &fresh, command).unwrap())
     };
-    let options = TrainOptions::default();
-    let decoupled = train(
-        &corrections,
-        Architecture::Decoupled,
-        g.fingerprint(),
-        &options,
-        &|| {},
-    )
-    .unwrap();
-    let coupled = train(
-        &corrections,
-        Architecture::Coupled,
-        g.fingerprint(),
-        &options,
-        &|| {},
-    )
-    .unwrap();
     let identified = identify(&g, &measurements, &IdentifyOptions::default())
         .unwrap()
         .geometry;

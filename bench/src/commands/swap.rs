@@ -10,8 +10,9 @@ use hexacomp_client::{Client, ClientOptions, DeployOutcome};
 use crate::path::interpolate;
 use crate::report::{self, JsonSummary, Summary, write_into};
 use crate::session::{PathArgs, Session, SetupArgs};
-use crate::stream::{Pacing, StreamOptions, stream};
+use crate::stream::{Pacing, StreamOptions, StreamRun, stream};
 use crate::variant::OverIceoryx;
+use hdrhistogram::Histogram;
 
 /// Stream a path through the service while another client deploys a model every --interval
 /// seconds, and compare the round trips of requests sent during a swap (from the deploy request
@@ -62,35 +63,13 @@ pub fn run(command: &SwapCommand) -> anyhow::Result<()> {
     let model_bytes = std::fs::read(&session.model_path)?;
     let swapping = Arc::new(AtomicBool::new(false));
     let done = Arc::new(AtomicBool::new(false));
-    let deployer = {
-        let (swapping, done, instance) = (swapping.clone(), done.clone(), instance.clone());
-        let interval = Duration::from_secs_f64(command.interval);
-        std::thread::spawn(move || -> anyhow::Result<Deploys> {
-            let mut client = Client::connect(&instance, &ClientOptions::default())?;
-            let mut deploys = Deploys::default();
-            let mut next = Instant::now() + interval;
-            while !done.load(Ordering::Relaxed) {
-                if Instant::now() < next {
-                    std::thread::sleep(Duration::from_millis(5));
-                    continue;
-                }
-                next += interval;
-                swapping.store(true, Ordering::Relaxed);
-                let start = Instant::now();
-                let outcome = client.deploy(&model_bytes);
-                deploys.slowest = deploys.slowest.max(start.elapsed());
-                // The model serves once the reply comes; the old one is freed on the control
-                // thread just after: keep the window open a little.
-                std::thread::sleep(Duration::from_millis(2));
-                swapping.store(false, Ordering::Relaxed);
-                match outcome? {
-                    DeployOutcome::Accepted { .. } => deploys.accepted += 1,
-                    DeployOutcome::Refused { reason, .. } => deploys.refused.push(reason),
-                }
-            }
-            Ok(deploys)
-        })
-    };
+    let deployer = spawn_deployer(
+        instance.clone(),
+        model_bytes,
+        Duration::from_secs_f64(command.interval),
+        swapping.clone(),
+        done.clone(),
+    );
     let mut variant = OverIceoryx::connect(&instance)?;
     session.pin_client()?;
     let options = StreamOptions {
@@ -118,23 +97,15 @@ pub fn run(command: &SwapCommand) -> anyhow::Result<()> {
         .join()
         .map_err(|_| anyhow::anyhow!("the deploying thread panicked"))??;
 
-    let mut steady = crate::stream::new_histogram();
-    let mut during = crate::stream::new_histogram();
-    let (mut points, mut failures, mut misses, mut generations) = (0, 0, 0, Vec::new());
-    let mut not_ok = 0;
-    for run in &runs {
-        steady.add(&run.histogram)?;
-        during.add(&run.during_swaps)?;
-        points += run.points;
-        failures += run.failures;
-        misses += run.deadline_misses;
-        not_ok += run.not_ok.iter().map(|(_, n)| n).sum::<usize>();
-        for g in &run.generations {
-            if !generations.contains(g) {
-                generations.push(*g);
-            }
-        }
-    }
+    let Totals {
+        steady,
+        during,
+        points,
+        failures,
+        misses,
+        not_ok,
+        generations,
+    } = Totals::of(&runs)?;
     let steady_summary = Summary::of(&steady, points - during.len() as usize, misses);
     let during_summary = Summary::of(&during, during.len() as usize, 0);
     println!(
@@ -189,4 +160,82 @@ pub fn run(command: &SwapCommand) -> anyhow::Result<()> {
         generations.len()
     );
     Ok(())
+}
+
+/// Deploys `model_bytes` to `instance` every `interval` until `done`, with `swapping` set from
+/// just before each deploy until shortly after its reply (the window counted "during swaps").
+fn spawn_deployer(
+    instance: String,
+    model_bytes: Vec<u8>,
+    interval: Duration,
+    swapping: Arc<AtomicBool>,
+    done: Arc<AtomicBool>,
+) -> std::thread::JoinHandle<anyhow::Result<Deploys>> {
+    std::thread::spawn(move || -> anyhow::Result<Deploys> {
+        let mut client = Client::connect(&instance, &ClientOptions::default())?;
+        let mut deploys = Deploys::default();
+        let mut next = Instant::now() + interval;
+        while !done.load(Ordering::Relaxed) {
+            if Instant::now() < next {
+                std::thread::sleep(Duration::from_millis(5));
+                continue;
+            }
+            next += interval;
+            swapping.store(true, Ordering::Relaxed);
+            let start = Instant::now();
+            let outcome = client.deploy(&model_bytes);
+            deploys.slowest = deploys.slowest.max(start.elapsed());
+            // The model serves once the reply comes; the old one is freed on the control
+            // thread just after: keep the window open a little.
+            std::thread::sleep(Duration::from_millis(2));
+            swapping.store(false, Ordering::Relaxed);
+            match outcome? {
+                DeployOutcome::Accepted { .. } => deploys.accepted += 1,
+                DeployOutcome::Refused { reason, .. } => deploys.refused.push(reason),
+            }
+        }
+        Ok(deploys)
+    })
+}
+
+/// What the stream slices of a swap run add up to.
+struct Totals {
+    /// Round trips outside the swap windows.
+    steady: Histogram<u64>,
+    /// Round trips inside them.
+    during: Histogram<u64>,
+    points: usize,
+    failures: usize,
+    misses: usize,
+    not_ok: usize,
+    /// Model generations served, in the order first seen.
+    generations: Vec<u64>,
+}
+
+impl Totals {
+    fn of(runs: &[StreamRun]) -> anyhow::Result<Self> {
+        let mut totals = Totals {
+            steady: crate::stream::new_histogram(),
+            during: crate::stream::new_histogram(),
+            points: 0,
+            failures: 0,
+            misses: 0,
+            not_ok: 0,
+            generations: Vec::new(),
+        };
+        for run in runs {
+            totals.steady.add(&run.histogram)?;
+            totals.during.add(&run.during_swaps)?;
+            totals.points += run.points;
+            totals.failures += run.failures;
+            totals.misses += run.deadline_misses;
+            totals.not_ok += run.not_ok.iter().map(|(_, n)| n).sum::<usize>();
+            for g in &run.generations {
+                if !totals.generations.contains(g) {
+                    totals.generations.push(*g);
+                }
+            }
+        }
+        Ok(totals)
+    }
 }

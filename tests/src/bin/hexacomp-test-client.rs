@@ -12,12 +12,12 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, anyhow};
 use clap::{Parser, Subcommand};
 use hdrhistogram::Histogram;
+use hexacomp_client::wire::endpoints::{self, Role};
 use hexacomp_client::wire::{
-    DeployReply, PROTOCOL_VERSION, PointRequest, PointResponse, RequestHeader, RequestKind,
-    RequestOutcome, ResponseHeader,
+    PROTOCOL_VERSION, PointRequest, PointResponse, RequestHeader, RequestKind, RequestOutcome,
+    ResponseHeader,
 };
-use hexacomp_client::{Client, ClientOptions, Endpoint, Error, iceoryx_name};
-use hexacomp_core::compensator::PointStatus;
+use hexacomp_client::{Client, ClientOptions, Error, PointStatus};
 use hexacomp_tests::{RawClient, raw_client};
 use iceoryx2::prelude::*;
 use serde_json::json;
@@ -333,11 +333,7 @@ fn deploy_and_die(instance: &str, model: &std::path::Path) -> anyhow::Result<ser
     let node = NodeBuilder::new()
         .signal_handling_mode(SignalHandlingMode::Disabled)
         .create::<ipc::Service>()?;
-    let factory = node
-        .service_builder(&iceoryx_name(instance, Endpoint::Deploy)?)
-        .request_response::<[u8], DeployReply>()
-        .open()
-        .map_err(|e| anyhow!("opening the deploy endpoint: {e:?}"))?;
+    let factory = endpoints::deploy(&node, instance, Role::Use)?;
     let client = factory
         .client_builder()
         .initial_max_slice_len(bytes.len())
@@ -349,6 +345,8 @@ fn deploy_and_die(instance: &str, model: &std::path::Path) -> anyhow::Result<ser
         .write_from_fn(|i| bytes[i]);
     let _pending = request.send().map_err(|e| anyhow!("send: {e:?}"))?;
     // Dies before the service can answer: no destructor runs, nothing is cleaned up.
+    // SAFETY: kill(2) on this process's own pid with a valid signal number; no memory is
+    // touched.
     unsafe {
         libc::kill(libc::getpid(), libc::SIGKILL);
     }

@@ -1,23 +1,23 @@
 //! `hexacomp-trainer calibrate`: the whole pipeline in one command.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::Context;
 use hexacomp_core::compensator::compensate_pose;
-use hexacomp_core::formats::{read_measurements, write_measurements, write_poses};
+use hexacomp_core::formats::{MeasurementRow, read_measurements, write_measurements, write_poses};
 use hexacomp_core::sampling::{SamplerOptions, WorkspaceSampler};
 use hexacomp_core::stats::PoseErrorStats;
 use hexacomp_core::virtual_platform::{
     DEFAULT_MACHINE_SEED, ErrorModel, ErrorVariant, VirtualPlatform,
 };
 use hexacomp_core::{Geometry, inverse_kinematics};
-use hexacomp_trainer::acquire::measure_plan;
-use hexacomp_trainer::corrections::{Checks, Outcome, SolverOptions, solve_all};
+use hexacomp_trainer::corrections::Outcome;
 use hexacomp_trainer::evaluate::drive;
 use hexacomp_trainer::identify::{IdentifyOptions, identify};
-use hexacomp_trainer::plan::{PlanOptions, numbered_rows, plan};
-use hexacomp_trainer::train::{Architecture, TrainOptions};
+use hexacomp_trainer::pipeline::{Pipeline, Solved};
+use hexacomp_trainer::plan::PlanOptions;
+use hexacomp_trainer::train::{Architecture, TrainOptions, Trained};
 
 use super::solve::{print_problems, write_outcomes};
 use super::train::{
@@ -63,37 +63,40 @@ pub struct CalibrateArgs {
     out_dir: PathBuf,
 }
 
+/// How long each stage took, seconds, in the order they ran.
+#[derive(Default)]
+struct Stages(Vec<(&'static str, f64)>);
+
+impl Stages {
+    fn record(&mut self, name: &'static str, start: Instant) {
+        self.0.push((name, start.elapsed().as_secs_f64()));
+    }
+}
+
 pub fn run(geometry: &Geometry, args: &CalibrateArgs) -> anyhow::Result<()> {
     let total = Instant::now();
-    let mut stages: Vec<(&str, f64)> = Vec::new();
-    let mut stage = |name, start: Instant| stages.push((name, start.elapsed().as_secs_f64()));
+    let mut stages = Stages::default();
     let dir = &args.out_dir;
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    let model = ErrorModel::variant(args.error_variant);
-    let mut platform = VirtualPlatform::new(geometry, &model, args.machine_seed, args.seed)?;
+    let error_model = ErrorModel::variant(args.error_variant);
+    let mut platform = VirtualPlatform::new(geometry, &error_model, args.machine_seed, args.seed)?;
+    let pipeline = Pipeline {
+        plan: PlanOptions {
+            count: args.count,
+            seed: args.seed,
+            ..Default::default()
+        },
+        train: TrainOptions {
+            input: args.input.into(),
+            seed: args.seed,
+            ..Default::default()
+        },
+        ..Default::default()
+    };
 
     let start = Instant::now();
-    let measurements = match &args.measurements {
-        Some(path) => read_measurements(path)?,
-        None => {
-            let poses = plan(
-                geometry,
-                &PlanOptions {
-                    count: args.count,
-                    seed: args.seed,
-                    ..Default::default()
-                },
-            )?;
-            let rows = numbered_rows(&poses);
-            write_file(&dir.join("poses.csv"), |w| write_poses(w, &rows))?;
-            let measured = measure_plan(&mut platform, &rows)?;
-            write_file(&dir.join("measurements.csv"), |w| {
-                write_measurements(w, &measured)
-            })?;
-            measured
-        }
-    };
-    stage(
+    let measurements = acquire(args, &pipeline, &mut platform)?;
+    stages.record(
         if args.measurements.is_some() {
             "read measurements"
         } else {
@@ -103,100 +106,34 @@ pub fn run(geometry: &Geometry, args: &CalibrateArgs) -> anyhow::Result<()> {
     );
 
     let start = Instant::now();
-    let outcomes = solve_all(
-        geometry,
-        &measurements,
-        &SolverOptions::default(),
-        &Checks::default(),
-    )?;
-    print_problems(&outcomes, " (kept)");
-    let solved: Vec<&Outcome> = outcomes.iter().collect();
-    write_outcomes(&dir.join("corrections.csv"), &solved)?;
-    let corrections: Vec<_> = outcomes.iter().filter_map(|o| o.correction_row()).collect();
-    stage("solve corrections", start);
+    let solved = pipeline.solve(geometry, &measurements)?;
+    print_problems(&solved.outcomes, " (kept)");
+    let all: Vec<&Outcome> = solved.outcomes.iter().collect();
+    write_outcomes(&dir.join("corrections.csv"), &all)?;
+    stages.record("solve corrections", start);
 
-    let options = TrainOptions {
-        input: args.input.into(),
-        seed: args.seed,
-        ..Default::default()
-    };
-    let mut trained = Vec::new();
-    for architecture in [Architecture::Coupled, Architecture::Decoupled] {
-        let start = Instant::now();
-        let source = format!(
-            "hexacomp-trainer {} calibrate ({} configurations)",
-            env!("CARGO_PKG_VERSION"),
-            measurements.len()
-        );
-        let t = train_with_progress(&corrections, architecture, geometry, &options, source)?;
-        let name = arch_name(architecture);
-        t.model.save(&dir.join(format!("model-{name}.hxm")))?;
-        write_selection_plot(
-            &t,
-            architecture,
-            &dir.join(format!("model-{name}.selection.svg")),
-        )?;
-        print_selection(&t, architecture);
-        stage(
-            if architecture == Architecture::Coupled {
-                "train coupled"
-            } else {
-                "train decoupled"
-            },
-            start,
-        );
-        trained.push((architecture, t));
-    }
+    let trained = train_both(
+        geometry,
+        &pipeline,
+        &solved,
+        measurements.len(),
+        dir,
+        &mut stages,
+    )?;
     let (best_arch, best) = trained
         .iter()
         .min_by(|a, b| a.1.validation_rmse_mm.total_cmp(&b.1.validation_rmse_mm))
         .expect("two models");
     best.model.save(&dir.join("model.hxm"))?;
 
-    let mut table = Table::new([
-        "method",
-        "mean ‖δ_A‖ (mm)",
-        "max ‖δ_A‖ (mm)",
-        "mean ‖ε‖ (deg)",
-    ]);
-    if args.measurements.is_none() {
+    let check = if args.measurements.is_none() {
         let start = Instant::now();
-        let poses = WorkspaceSampler::new(
-            geometry,
-            args.seed.wrapping_add(1000),
-            SamplerOptions::default(),
-        )?
-        .samples(args.validation.max(1))?;
-        let identified = identify(geometry, &measurements, &IdentifyOptions::default())?.geometry;
-        let stats = |command: &dyn Fn(&hexacomp_core::Pose) -> [f64; 6]| {
-            drive(&mut platform.clone(), &poses, command).map(|e| PoseErrorStats::of(&e))
-        };
-        let mut rows = vec![
-            (
-                "uncompensated".to_string(),
-                stats(&|p| inverse_kinematics(geometry, p).lengths)?,
-            ),
-            (
-                "model-based (identified geometry)".to_string(),
-                stats(&|p| inverse_kinematics(&identified, p).lengths)?,
-            ),
-        ];
-        for (architecture, t) in &trained {
-            rows.push((
-                format!("robust {}", arch_name(*architecture)),
-                stats(&|p| compensate_pose(geometry, Some(&t.model), p).legs)?,
-            ));
-        }
-        for (name, s) in rows {
-            table.row([
-                name,
-                format!("{:.4}", s.position_mm.mean),
-                format!("{:.4}", s.position_mm.max),
-                format!("{:.4}", s.orientation_deg.mean),
-            ]);
-        }
-        stage("evaluate on fresh poses", start);
-    }
+        let table = check_on_fresh_poses(geometry, &platform, &measurements, &trained, args)?;
+        stages.record("evaluate on fresh poses", start);
+        Some(table)
+    } else {
+        None
+    };
 
     println!(
         "\nCalibration summary ({} configurations, {})",
@@ -216,7 +153,7 @@ pub fn run(geometry: &Geometry, args: &CalibrateArgs) -> anyhow::Result<()> {
             t.seconds
         );
     }
-    if args.measurements.is_none() {
+    if let Some(table) = check {
         println!(
             "\nOn {} fresh poses of the virtual machine:\n{table}",
             args.validation.max(1)
@@ -228,6 +165,7 @@ pub fn run(geometry: &Geometry, args: &CalibrateArgs) -> anyhow::Result<()> {
         dir.display()
     );
     let breakdown: Vec<String> = stages
+        .0
         .iter()
         .map(|(n, s)| format!("{n} {s:.2} s"))
         .collect();
@@ -237,4 +175,119 @@ pub fn run(geometry: &Geometry, args: &CalibrateArgs) -> anyhow::Result<()> {
         breakdown.join(", ")
     );
     Ok(())
+}
+
+/// The measurements: read from --measurements, or the plan measured on the virtual platform
+/// (both written to the output folder).
+fn acquire(
+    args: &CalibrateArgs,
+    pipeline: &Pipeline,
+    platform: &mut VirtualPlatform,
+) -> anyhow::Result<Vec<MeasurementRow>> {
+    if let Some(path) = &args.measurements {
+        return Ok(read_measurements(path)?);
+    }
+    let (poses, measured) = pipeline.measure_virtual(platform)?;
+    write_file(&args.out_dir.join("poses.csv"), |w| write_poses(w, &poses))?;
+    write_file(&args.out_dir.join("measurements.csv"), |w| {
+        write_measurements(w, &measured)
+    })?;
+    Ok(measured)
+}
+
+/// Trains the coupled and the decoupled networks on the solved corrections, writing each model
+/// and its selection curve into `dir`.
+fn train_both(
+    geometry: &Geometry,
+    pipeline: &Pipeline,
+    solved: &Solved,
+    configurations: usize,
+    dir: &Path,
+    stages: &mut Stages,
+) -> anyhow::Result<Vec<(Architecture, Trained)>> {
+    let mut trained = Vec::new();
+    for architecture in [Architecture::Coupled, Architecture::Decoupled] {
+        let start = Instant::now();
+        let source = format!(
+            "hexacomp-trainer {} calibrate ({configurations} configurations)",
+            env!("CARGO_PKG_VERSION"),
+        );
+        let t = train_with_progress(
+            &solved.corrections,
+            architecture,
+            geometry,
+            pipeline,
+            source,
+        )?;
+        let name = arch_name(architecture);
+        t.model.save(&dir.join(format!("model-{name}.hxm")))?;
+        write_selection_plot(
+            &t,
+            architecture,
+            &dir.join(format!("model-{name}.selection.svg")),
+        )?;
+        print_selection(&t, architecture);
+        stages.record(
+            if architecture == Architecture::Coupled {
+                "train coupled"
+            } else {
+                "train decoupled"
+            },
+            start,
+        );
+        trained.push((architecture, t));
+    }
+    Ok(trained)
+}
+
+/// On fresh poses of the virtual machine: the pose errors uncompensated, with the identified
+/// geometry (the model-based baseline) and with each trained model.
+fn check_on_fresh_poses(
+    geometry: &Geometry,
+    platform: &VirtualPlatform,
+    measurements: &[MeasurementRow],
+    trained: &[(Architecture, Trained)],
+    args: &CalibrateArgs,
+) -> anyhow::Result<Table<4>> {
+    let poses = WorkspaceSampler::new(
+        geometry,
+        args.seed.wrapping_add(1000),
+        SamplerOptions::default(),
+    )?
+    .samples(args.validation.max(1))?;
+    let identified = identify(geometry, measurements, &IdentifyOptions::default())?.geometry;
+    let stats = |command: &dyn Fn(&hexacomp_core::Pose) -> [f64; 6]| {
+        drive(&mut platform.clone(), &poses, command).map(|e| PoseErrorStats::of(&e))
+    };
+    let mut rows = vec![
+        (
+            "uncompensated".to_string(),
+            stats(&|p| inverse_kinematics(geometry, p).lengths)?,
+        ),
+        (
+            "model-based (identified geometry)".to_string(),
+            stats(&|p| inverse_kinematics(&identified, p).lengths)?,
+        ),
+    ];
+    for (architecture, t) in trained {
+        rows.push((
+            format!("robust {}", arch_name(*architecture)),
+            stats(&|p| compensate_pose(geometry, Some(&t.model), p).legs)?,
+        ));
+    }
+    let mut table = Table::new([
+        "method",
+        "mean ‖δ_A‖ (mm)",
+        "max ‖δ_A‖ (mm)",
+        "mean ‖ε‖ (deg)",
+    ]);
+    for (name, s) in rows {
+        table.row([
+            name,
+            format!("{:.4}", s.position_mm.mean),
+            format!("{:.4}", s.position_mm.max),
+            format!("{:.4}", s.orientation_deg.mean),
+        ]);
+    }
+    Ok(table)
 }

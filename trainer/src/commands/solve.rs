@@ -10,7 +10,8 @@ use hexacomp_trainer::corrections::{Checks, Outcome, Solution, SolverOptions, so
 
 use super::write_file;
 
-/// Solve the joint corrections Δq of every measured configuration (paper Fig. 2, Eq. 5–9).
+/// Solve the joint corrections Δq of every measured configuration (paper Fig. 2: Eq. 5, Eq. 6,
+/// Eq. 7, Eq. 8, Eq. 9).
 ///
 /// From the commanded legs q⁽⁰⁾, iterate: ζ = measured − computed target points, P and T at the
 /// iterate, λ = λ0 when cond(PT) > c else 0, ρ = ((PT)ᵀPT + λI)⁻¹(PT)ᵀζ, q += ρ, until ‖ρ‖ < κ;
@@ -141,7 +142,7 @@ fn report(
     eprintln!("wrote {written} rows → {}", args.out.display());
 }
 
-/// Writes the corrections file of `outcomes` that have a solution: the DESIGN.md columns and the
+/// Writes the corrections file of `outcomes` that have a solution: the columns of docs/formats.md and the
 /// diagnostics. Returns the rows written.
 pub fn write_outcomes(path: &Path, outcomes: &[&Outcome]) -> anyhow::Result<usize> {
     let solved: Vec<(&Outcome, &Solution)> = outcomes

@@ -6,8 +6,9 @@ use anyhow::Context;
 use hexacomp_core::Geometry;
 use hexacomp_core::formats::{CorrectionRow, read_corrections};
 use hexacomp_core::model::NetworkInput;
+use hexacomp_trainer::pipeline::Pipeline;
 use hexacomp_trainer::svg::{Chart, Series};
-use hexacomp_trainer::train::{Architecture, Selection, TrainOptions, Trained, train};
+use hexacomp_trainer::train::{Architecture, Selection, TrainOptions, Trained};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use hexacomp_trainer::table::Table;
@@ -15,13 +16,13 @@ use hexacomp_trainer::table::Table;
 /// Fit the joint-correction function Δq = N(q) with three-layer networks (tanh hidden layer,
 /// linear output, inputs normalised by Eq. 13) and write a model file.
 ///
-/// Training: Levenberg–Marquardt on the mean squared error with an analytic Jacobian (Eq. 15–17),
-/// several seeded restarts keeping the best. The hidden-node count is chosen by holdout
-/// validation: a third of the configurations is held out, every size of the sweep is fitted on
-/// the rest, and the smallest size within 2 % of the best validation RMSE (Eq. 18; Eq. 21 for
-/// decoupled) wins. The final networks are then refitted on all configurations at the chosen size
-/// (--no-refit keeps the holdout fit). The selection curve (like the paper's Fig. 10/11) is
-/// printed and written as SVG beside the model.
+/// Training: Levenberg–Marquardt on the mean squared error (Eq. 15, Eq. 16, Eq. 17) with an
+/// analytic Jacobian, several seeded restarts keeping the best. The hidden-node count is chosen
+/// by holdout validation: a third of the configurations is held out, every size of the sweep is
+/// fitted on the rest, and the smallest size within 2 % of the best validation RMSE (Eq. 18;
+/// Eq. 21 for decoupled) wins. The final networks are then refitted on all configurations at the
+/// chosen size (--no-refit keeps the holdout fit). The selection curve (like the paper's
+/// Fig. 10/11) is printed and written as SVG beside the model.
 #[derive(Debug, clap::Args)]
 pub struct TrainArgs {
     /// Corrections CSV (`hexacomp-trainer solve`).
@@ -103,7 +104,11 @@ pub fn run(geometry: &Geometry, args: &TrainArgs) -> anyhow::Result<()> {
         env!("CARGO_PKG_VERSION"),
         args.corrections.display()
     );
-    let trained = train_with_progress(&rows, args.arch.into(), geometry, &options, source)?;
+    let pipeline = Pipeline {
+        train: options,
+        ..Default::default()
+    };
+    let trained = train_with_progress(&rows, args.arch.into(), geometry, &pipeline, source)?;
     trained.model.save(&args.out)?;
     let plot = args.out.with_extension("selection.svg");
     print_selection(&trained, args.arch.into());
@@ -125,9 +130,10 @@ pub fn train_with_progress(
     rows: &[CorrectionRow],
     architecture: Architecture,
     geometry: &Geometry,
-    options: &TrainOptions,
+    pipeline: &Pipeline,
     source: String,
 ) -> anyhow::Result<Trained> {
+    let options = &pipeline.train;
     let networks = match architecture {
         Architecture::Coupled => 1,
         Architecture::Decoupled => 6,
@@ -139,10 +145,9 @@ pub fn train_with_progress(
             .progress_chars("=> "),
     );
     bar.set_message(format!("training {} networks", arch_name(architecture)));
-    let mut trained = train(rows, architecture, geometry.fingerprint(), options, &|| {
-        bar.inc(1)
-    })
-    .context("training")?;
+    let mut trained = pipeline
+        .train(geometry, rows, architecture, &|| bar.inc(1))
+        .context("training")?;
     bar.finish_and_clear();
     trained.model.provenance.source = source;
     Ok(trained)

@@ -1,5 +1,5 @@
-//! `include/hexacomp.h` is what cbindgen generates from `src/c_api.rs` today. After changing the
-//! C API: `HEXACOMP_BLESS=1 cargo test -p hexacomp-client --test c_header` rewrites it (and fails,
+//! `include/hexacomp.h` is what cbindgen generates from `src/lib.rs` today. After changing the
+//! C API: `HEXACOMP_BLESS=1 cargo test -p hexacomp-client-c --test c_header` rewrites it (and fails,
 //! so that the next run, without it, checks the result); where `CI` is set it is refused.
 
 use std::path::Path;
@@ -13,7 +13,7 @@ fn the_committed_c_header_is_the_generated_one() {
         .with_crate(crate_dir)
         .with_config(config)
         .generate()
-        .expect("cbindgen parses src/c_api.rs")
+        .expect("cbindgen parses src/lib.rs")
         .write(&mut generated);
     let generated = String::from_utf8(generated).unwrap();
     let path = crate_dir.join("include/hexacomp.h");
@@ -33,7 +33,7 @@ fn the_committed_c_header_is_the_generated_one() {
         );
     }
     panic!(
-        "{} is out of date{}: run HEXACOMP_BLESS=1 cargo test -p hexacomp-client --test c_header \
+        "{} is out of date{}: run HEXACOMP_BLESS=1 cargo test -p hexacomp-client-c --test c_header \
          outside CI",
         path.display(),
         if bless {

@@ -1,7 +1,7 @@
 #ifndef HEXACOMP_H
 #define HEXACOMP_H
 
-/* Generated from client/src/c_api.rs by cbindgen: do not edit. Regenerate with HEXACOMP_BLESS=1 cargo test -p hexacomp-client --test c_header. */
+/* Generated from client-c/src/lib.rs by cbindgen: do not edit. Regenerate with HEXACOMP_BLESS=1 cargo test -p hexacomp-client-c --test c_header. */
 
 #include <stdint.h>
 #include <stddef.h>

@@ -1,13 +1,16 @@
-//! `hexacomp-client`: a small CLI over the client library.
+//! `hexacomp-client`: a small CLI over the client library: the service's status, and the
+//! compensation of a CSV file of poses or legs through the service (the same file formats as
+//! `hexacomp-trainer predict`, which is why this binary, unlike the library, links core).
 
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Duration;
 
 use clap::{Parser, Subcommand};
-use hexacomp_client::wire::{MAX_BATCH, RequestKind};
-use hexacomp_client::{Client, ClientOptions, CompensatedPoint, DEFAULT_INSTANCE};
-use hexacomp_core::compensator::Compensated;
+use hexacomp_client::{
+    Client, ClientOptions, CompensatedPoint, DEFAULT_INSTANCE, MAX_BATCH, PointStatus, RequestKind,
+};
+use hexacomp_core::compensator::{self, Compensated};
 use hexacomp_core::formats::{CompensatedRow, read_joints, read_poses, write_compensated};
 
 /// Talk to a running hexacomp-service.
@@ -121,7 +124,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     point: Compensated {
                         legs: r.legs,
                         corrections: r.corrections,
-                        status: r.status,
+                        status: compensator_status(r.status),
                     },
                 })
                 .collect();
@@ -137,4 +140,17 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         }
     }
     Ok(())
+}
+
+/// The compensator's status for a status read from the wire (the same six values: the
+/// service sends `status as u8`, and its tests tie the two enums together).
+fn compensator_status(status: PointStatus) -> compensator::PointStatus {
+    match status {
+        PointStatus::Ok => compensator::PointStatus::Ok,
+        PointStatus::OutOfStroke => compensator::PointStatus::OutOfStroke,
+        PointStatus::OutsideTrainedRange => compensator::PointStatus::OutsideTrainedRange,
+        PointStatus::Clamped => compensator::PointStatus::Clamped,
+        PointStatus::InvalidInput => compensator::PointStatus::InvalidInput,
+        PointStatus::NoModel => compensator::PointStatus::NoModel,
+    }
 }

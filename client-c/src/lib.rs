@@ -1,5 +1,9 @@
-//! The C ABI of the client, for NC kernels written in C (`include/hexacomp.h`, generated from
-//! this file by cbindgen; `libhexacomp_client.a` / `.so`).
+//! # hexacomp-client-c
+//!
+//! The C ABI of the hexacomp client, for NC kernels written in C: `libhexacomp.a` and
+//! `libhexacomp.so`, the header `include/hexacomp.h` (generated from this file by cbindgen and
+//! compared with it by a test) and the pkg-config file `hexacomp.pc` (from `hexacomp.pc.in`).
+//! It links the Rust client and the wire contract only: no geometry, networks or file formats.
 //!
 //! Every function returns a [`HexacompError`] code (`HEXACOMP_OK` = 0) and writes its results
 //! through out-pointers; [`hexacomp_error_message`] names a code, and
@@ -15,8 +19,9 @@ use std::ffi::{CStr, CString, c_char, c_int};
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::time::Duration;
 
-use crate::wire::{MAX_BATCH, RequestKind};
-use crate::{Client, ClientOptions, CompensatedPoint, Error};
+use hexacomp_client::{
+    Client, ClientOptions, CompensatedPoint, Error, MAX_BATCH, PointStatus, RequestKind,
+};
 
 /// Outcome of a call. The numeric values are part of the ABI. [`hexacomp_error_message`] takes
 /// the value as a plain `int`, so that any integer a C caller passes is defined.
@@ -65,7 +70,6 @@ pub const HEXACOMP_STATUS_INVALID_INPUT: u8 = 4;
 pub const HEXACOMP_STATUS_NO_MODEL: u8 = 5;
 // cbindgen writes literals only: tie each value to the status it mirrors.
 const _: () = {
-    use hexacomp_core::compensator::PointStatus;
     assert!(HEXACOMP_STATUS_OK == PointStatus::Ok as u8);
     assert!(HEXACOMP_STATUS_OUT_OF_STROKE == PointStatus::OutOfStroke as u8);
     assert!(HEXACOMP_STATUS_OUTSIDE_TRAINED_RANGE == PointStatus::OutsideTrainedRange as u8);

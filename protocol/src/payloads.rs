@@ -1,5 +1,5 @@
-//! The wire contract: fixed-layout `#[repr(C)]` payloads shared by the service and every client,
-//! loaned from shared memory (no serialisation on the hot path), and the service names.
+//! The fixed-layout `#[repr(C)]` payloads shared by the service and every client, loaned from
+//! shared memory (no serialisation on the hot path), and the limits that size them.
 //!
 //! Compensation: `request_response::<[PointRequest], [PointResponse]>` with a
 //! [`RequestHeader`] and a [`ResponseHeader`]. Status: `u64 → StatusReport`. Deploy:
@@ -102,7 +102,7 @@ pub struct PointResponse {
     pub corrections: [f64; 6],
     /// Generation of the model that computed the point.
     pub generation: u64,
-    /// `hexacomp_core::compensator::PointStatus` as `u8`.
+    /// [`PointStatus`](crate::PointStatus) as `u8`.
     pub status: u8,
     /// Padding, zero.
     pub reserved: [u8; 7],
@@ -179,4 +179,18 @@ pub fn text_field(text: &str) -> [u8; TEXT_BYTES] {
 pub fn field_text(field: &[u8; TEXT_BYTES]) -> String {
     let end = field.iter().position(|b| *b == 0).unwrap_or(TEXT_BYTES);
     String::from_utf8_lossy(&field[..end]).into_owned()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn text_fields_round_trip_and_cut_at_character_boundaries() {
+        assert_eq!(field_text(&text_field("geometry ‖δ‖")), "geometry ‖δ‖");
+        let long = "é".repeat(200);
+        let cut = field_text(&text_field(&long));
+        assert!(cut.len() <= TEXT_BYTES && cut.len() >= TEXT_BYTES - 1);
+        assert!(cut.chars().all(|c| c == 'é'));
+    }
 }

@@ -1,0 +1,145 @@
+//! Opening the endpoints of an instance with the limits both sides must agree on: the service
+//! serves them ([`Role::Serve`]: open or create, one server, [`MAX_CLIENTS`] clients), clients
+//! and tools use them ([`Role::Use`]: open only, so a missing service is an error, not a new
+//! empty endpoint).
+
+use iceoryx2::prelude::*;
+use iceoryx2::service::port_factory::{event, request_response};
+
+use crate::{
+    DeployReply, Endpoint, Error, MAX_CLIENTS, MAX_NODES, MAX_REQUESTS_IN_FLIGHT, PointRequest,
+    PointResponse, RequestHeader, ResponseHeader, StatusReport, iceoryx_name,
+};
+
+/// The compensation endpoint: a slice of [`PointRequest`] with a [`RequestHeader`] in, a slice
+/// of [`PointResponse`] with a [`ResponseHeader`] out.
+pub type CompensateEndpoint = request_response::PortFactory<
+    ipc::Service,
+    [PointRequest],
+    RequestHeader,
+    [PointResponse],
+    ResponseHeader,
+>;
+/// The status endpoint: any `u64` in, a [`StatusReport`] out.
+pub type StatusEndpoint = request_response::PortFactory<ipc::Service, u64, (), StatusReport, ()>;
+/// The deploy endpoint: a model file's bytes in, a [`DeployReply`] out.
+pub type DeployEndpoint = request_response::PortFactory<ipc::Service, [u8], (), DeployReply, ()>;
+/// The wake endpoint: clients notify it after each request when the service waits on events.
+pub type WakeEndpoint = event::PortFactory<ipc::Service>;
+
+/// Which side of an endpoint a node is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Role {
+    /// The service: opens the endpoint or creates it. Opening matters after a crash: clients
+    /// still hold the endpoint of a killed server, whose dead node is cleaned up when the new
+    /// one is created, which frees the one server slot.
+    Serve,
+    /// A client or tool: opens an existing endpoint, [`Error::Absent`] when there is none.
+    Use,
+}
+
+/// How an endpoint failed to open, as this crate's error.
+fn failure(instance: &str, endpoint: Endpoint, role: Role, cause: impl std::fmt::Debug) -> Error {
+    match role {
+        Role::Use => Error::Absent {
+            instance: instance.to_string(),
+            endpoint,
+        },
+        Role::Serve => Error::Serve {
+            instance: instance.to_string(),
+            endpoint,
+            cause: format!("{cause:?}"),
+        },
+    }
+}
+
+/// Opens (or, serving, creates) the compensation endpoint of `instance`.
+pub fn compensate(
+    node: &Node<ipc::Service>,
+    instance: &str,
+    role: Role,
+) -> Result<CompensateEndpoint, Error> {
+    let endpoint = Endpoint::Compensate;
+    let builder = node
+        .service_builder(&iceoryx_name(instance, endpoint)?)
+        .request_response::<[PointRequest], [PointResponse]>()
+        .request_user_header::<RequestHeader>()
+        .response_user_header::<ResponseHeader>();
+    match role {
+        Role::Use => builder
+            .open()
+            .map_err(|e| failure(instance, endpoint, role, e)),
+        Role::Serve => builder
+            .max_clients(MAX_CLIENTS)
+            .max_servers(1)
+            .max_active_requests_per_client(MAX_REQUESTS_IN_FLIGHT)
+            .max_nodes(MAX_NODES)
+            .open_or_create()
+            .map_err(|e| failure(instance, endpoint, role, e)),
+    }
+}
+
+/// Opens (or, serving, creates) the status endpoint of `instance`.
+pub fn status(
+    node: &Node<ipc::Service>,
+    instance: &str,
+    role: Role,
+) -> Result<StatusEndpoint, Error> {
+    let endpoint = Endpoint::Status;
+    let builder = node
+        .service_builder(&iceoryx_name(instance, endpoint)?)
+        .request_response::<u64, StatusReport>();
+    match role {
+        Role::Use => builder
+            .open()
+            .map_err(|e| failure(instance, endpoint, role, e)),
+        Role::Serve => builder
+            .max_clients(MAX_CLIENTS)
+            .max_servers(1)
+            .max_nodes(MAX_NODES)
+            .open_or_create()
+            .map_err(|e| failure(instance, endpoint, role, e)),
+    }
+}
+
+/// Opens (or, serving, creates) the deploy endpoint of `instance`.
+pub fn deploy(
+    node: &Node<ipc::Service>,
+    instance: &str,
+    role: Role,
+) -> Result<DeployEndpoint, Error> {
+    let endpoint = Endpoint::Deploy;
+    let builder = node
+        .service_builder(&iceoryx_name(instance, endpoint)?)
+        .request_response::<[u8], DeployReply>();
+    match role {
+        Role::Use => builder
+            .open()
+            .map_err(|e| failure(instance, endpoint, role, e)),
+        Role::Serve => builder
+            .max_clients(MAX_CLIENTS)
+            .max_servers(1)
+            .max_nodes(MAX_NODES)
+            .open_or_create()
+            .map_err(|e| failure(instance, endpoint, role, e)),
+    }
+}
+
+/// Opens (or, serving, creates) the wake endpoint of `instance`.
+pub fn wake(node: &Node<ipc::Service>, instance: &str, role: Role) -> Result<WakeEndpoint, Error> {
+    let endpoint = Endpoint::Wake;
+    let builder = node
+        .service_builder(&iceoryx_name(instance, endpoint)?)
+        .event();
+    match role {
+        Role::Use => builder
+            .open()
+            .map_err(|e| failure(instance, endpoint, role, e)),
+        Role::Serve => builder
+            .max_notifiers(MAX_CLIENTS)
+            .max_listeners(1)
+            .max_nodes(MAX_NODES)
+            .open_or_create()
+            .map_err(|e| failure(instance, endpoint, role, e)),
+    }
+}

@@ -1,0 +1,67 @@
+//! The status of one compensated point, as it travels in [`PointResponse::status`].
+//!
+//! [`PointResponse::status`]: crate::PointResponse::status
+
+/// How a point was compensated. The numeric values are the wire values: a service sends
+/// `status as u8`, a client reads it back with [`PointStatus::from_u8`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[repr(u8)]
+pub enum PointStatus {
+    /// Compensated inside the trained range.
+    Ok = 0,
+    /// A nominal or corrected leg is outside the stroke: the legs returned are uncorrected.
+    OutOfStroke = 1,
+    /// Compensated, but the legs lie outside the range the model was trained on.
+    OutsideTrainedRange = 2,
+    /// A correction exceeded the model's bounds and was clamped to them.
+    Clamped = 3,
+    /// A non-finite input, or a non-finite output of the model: no correction applied, the legs
+    /// returned are the input.
+    InvalidInput = 4,
+    /// No model loaded: the legs returned are the nominal ones.
+    NoModel = 5,
+}
+
+impl PointStatus {
+    /// Every status, in numeric order.
+    pub const ALL: [PointStatus; 6] = [
+        PointStatus::Ok,
+        PointStatus::OutOfStroke,
+        PointStatus::OutsideTrainedRange,
+        PointStatus::Clamped,
+        PointStatus::InvalidInput,
+        PointStatus::NoModel,
+    ];
+
+    /// The status's name, as in the `status` column of compensated-point files.
+    pub fn name(self) -> &'static str {
+        match self {
+            PointStatus::Ok => "ok",
+            PointStatus::OutOfStroke => "out_of_stroke",
+            PointStatus::OutsideTrainedRange => "outside_trained_range",
+            PointStatus::Clamped => "clamped",
+            PointStatus::InvalidInput => "invalid_input",
+            PointStatus::NoModel => "no_model",
+        }
+    }
+
+    /// The status of a wire value, if it is one.
+    pub fn from_u8(value: u8) -> Option<Self> {
+        Self::ALL.get(value as usize).copied()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn wire_values_round_trip_and_unknown_values_are_none() {
+        for (value, status) in PointStatus::ALL.iter().enumerate() {
+            assert_eq!(*status as u8 as usize, value);
+            assert_eq!(PointStatus::from_u8(value as u8), Some(*status));
+        }
+        assert_eq!(PointStatus::from_u8(6), None);
+        assert_eq!(PointStatus::from_u8(u8::MAX), None);
+    }
+}

@@ -1,0 +1,117 @@
+//! The calibration pipeline as one type: plan → acquire → solve → train. `calibrate` and
+//! `evaluate` (commands and library), the bench and the tests all run it through
+//! [`Pipeline`], so that its stages cannot drift apart between them.
+//!
+//! Units: mm and degrees in the rows (as in the files), mm in the corrections.
+
+use hexacomp_core::Geometry;
+use hexacomp_core::formats::{CorrectionRow, MeasurementRow, PoseRow};
+use hexacomp_core::virtual_platform::VirtualPlatform;
+
+use crate::acquire::measure_plan;
+use crate::corrections::{Checks, Outcome, SolverOptions, solve_all};
+use crate::error::Result;
+use crate::plan::{PlanOptions, numbered_rows, plan};
+use crate::train::{Architecture, TrainOptions, Trained, train};
+
+/// The settings of every stage of a calibration.
+#[derive(Debug, Clone, Default)]
+pub struct Pipeline {
+    /// The measuring plan (configurations, seed) for a calibration on the virtual platform.
+    pub plan: PlanOptions,
+    /// The joint-correction solve (robust by default, Fig. 2).
+    pub solver: SolverOptions,
+    /// What makes a configuration's corrections suspect.
+    pub checks: Checks,
+    /// Network training and hidden-node selection.
+    pub train: TrainOptions,
+}
+
+/// What the solve stage produced.
+#[derive(Debug, Clone)]
+pub struct Solved {
+    /// Every configuration's outcome, in the measurements' order (solution or error, flags).
+    pub outcomes: Vec<Outcome>,
+    /// The correction rows of the configurations that have a solution: the training data.
+    pub corrections: Vec<CorrectionRow>,
+}
+
+/// What a whole calibration produced.
+#[derive(Debug, Clone)]
+pub struct Calibration {
+    /// The solve stage.
+    pub solved: Solved,
+    /// One trained model per architecture asked for, in that order.
+    pub models: Vec<(Architecture, Trained)>,
+}
+
+impl Calibration {
+    /// The model with the lowest holdout validation RMSE, if any was trained.
+    pub fn best(&self) -> Option<&(Architecture, Trained)> {
+        self.models
+            .iter()
+            .min_by(|a, b| a.1.validation_rmse_mm.total_cmp(&b.1.validation_rmse_mm))
+    }
+}
+
+impl Pipeline {
+    /// Plans [`Pipeline::plan`] over the platform's nominal workspace and measures every
+    /// configuration on `platform`: the planned poses (ids 1, 2, …) and their measurements.
+    pub fn measure_virtual(
+        &self,
+        platform: &mut VirtualPlatform,
+    ) -> Result<(Vec<PoseRow>, Vec<MeasurementRow>)> {
+        let rows = numbered_rows(&plan(platform.nominal(), &self.plan)?);
+        let measurements = measure_plan(platform, &rows)?;
+        Ok((rows, measurements))
+    }
+
+    /// Solves the joint corrections of every measured configuration.
+    pub fn solve(&self, geometry: &Geometry, measurements: &[MeasurementRow]) -> Result<Solved> {
+        let outcomes = solve_all(geometry, measurements, &self.solver, &self.checks)?;
+        let corrections = outcomes.iter().filter_map(|o| o.correction_row()).collect();
+        Ok(Solved {
+            outcomes,
+            corrections,
+        })
+    }
+
+    /// Trains networks of `architecture` on `corrections` for `geometry`; `fit_done` is called
+    /// after each fit of the hidden-size sweep (for progress bars).
+    pub fn train(
+        &self,
+        geometry: &Geometry,
+        corrections: &[CorrectionRow],
+        architecture: Architecture,
+        fit_done: &(dyn Fn() + Sync),
+    ) -> Result<Trained> {
+        train(
+            corrections,
+            architecture,
+            geometry.fingerprint(),
+            &self.train,
+            fit_done,
+        )
+    }
+
+    /// Solves `measurements` and trains each of `architectures` on the corrections;
+    /// `fit_done(architecture)` after each fit.
+    pub fn calibrate(
+        &self,
+        geometry: &Geometry,
+        measurements: &[MeasurementRow],
+        architectures: &[Architecture],
+        fit_done: &(dyn Fn(Architecture) + Sync),
+    ) -> Result<Calibration> {
+        let solved = self.solve(geometry, measurements)?;
+        let models = architectures
+            .iter()
+            .map(|&architecture| {
+                let fit = || fit_done(architecture);
+                self.train(geometry, &solved.corrections, architecture, &fit)
+                    .map(|trained| (architecture, trained))
+            })
+            .collect::<Result<_>>()?;
+        Ok(Calibration { solved, models })
+    }
+}
