@@ -5,8 +5,10 @@
 //!
 //! 1. `r_Pc = f(q⁽ˡ⁾)`: the target points of the nominal forward kinematics, `ζ = r_Pm − r_Pc`
 //!    (Eq. 4);
-//! 2. `P` (Eq. 4) and `T = W⁻ᵀ` (Eq. 3) at that iterate; `λ = λ₀` if `cond(PT) > c`, else 0;
-//! 3. `ρ⁽ˡ⁾ = ((PT)ᵀ(PT) + λI)⁻¹(PT)ᵀζ` (Eq. 7), `q⁽ˡ⁺¹⁾ = q⁽ˡ⁾ + ρ⁽ˡ⁾` (Eq. 8);
+//! 2. `P` (Eq. 4) and `T = W⁻ᵀ` (Eq. 3) at that iterate, hence the linearised model `ζ = PTρ`
+//!    (Eq. 5); `λ = λ₀` if `cond(PT) > c`, else 0;
+//! 3. `ρ⁽ˡ⁾ = ((PT)ᵀ(PT) + λI)⁻¹(PT)ᵀζ` (Eq. 7, the minimiser of Eq. 6's
+//!    `Φ(ρ) = ‖ζ − PTρ‖² + λ‖ρ‖²`), `q⁽ˡ⁺¹⁾ = q⁽ˡ⁾ + ρ⁽ˡ⁾` (Eq. 8);
 //!
 //! until `‖ρ⁽ˡ⁾‖ < κ`. The joint corrections are `Δq = q⁽⁰⁾ − q⁽ᴸ⁾` (Eq. 9): the machine
 //! commanded with `q⁽⁰⁾` behaves like the nominal model at `q⁽ᴸ⁾`, so commanding `q⁽⁰⁾ + Δq`
@@ -27,7 +29,8 @@ use crate::error::{Error, Result};
 /// Settings of the joint-correction iteration. Defaults are the paper's (Sec. 4.2).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SolverOptions {
-    /// Regularisation `λ₀` applied when `cond(PT) > c` (Eq. 6–7), mm²/mm² (dimensionless).
+    /// Regularisation `λ₀` applied when `cond(PT) > c` (the `λ` of Eq. 6 and Eq. 7), mm²/mm²
+    /// (dimensionless).
     pub lambda0: f64,
     /// Condition-number threshold `c` of `PT`.
     pub cond_threshold: f64,
@@ -76,7 +79,7 @@ impl SolverOptions {
 /// The result of the iteration for one configuration.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Solution {
-    /// Joint corrections `Δq = q⁽⁰⁾ − q⁽ᴸ⁾`, mm.
+    /// Joint corrections `Δq = q⁽⁰⁾ − q⁽ᴸ⁾` (Eq. 9), mm.
     pub corrections: [f64; LEGS],
     /// The equivalent legs `q⁽ᴸ⁾` at which the nominal model reproduces the measurement, mm.
     pub equivalent_legs: [f64; LEGS],
@@ -96,8 +99,14 @@ pub struct Solution {
 /// target points `measured` (base frame, mm), `seed` a pose near the configuration (normally the
 /// commanded pose) for forward kinematics.
 ///
+/// Each iterate forms `PT` of the linearised model `ζ = PTρ` (Eq. 5), takes the regularised step
+/// of Eq. 7 (`regularised_step`), and updates `q⁽ˡ⁺¹⁾ = q⁽ˡ⁾ + ρ⁽ˡ⁾` (Eq. 8); the result's
+/// corrections are `Δq = q⁽⁰⁾ − q⁽ᴸ⁾` (Eq. 9).
+///
 /// Fails when forward kinematics fails at an iterate (a leg leaves the stroke, a singular
-/// Jacobian): the measurement cannot be explained by leg corrections inside the stroke.
+/// Jacobian) — the measurement cannot be explained by leg corrections inside the stroke — when
+/// `W` is singular at an iterate (`T` does not exist), or when the normal equations of a step
+/// cannot be solved ([`Error::SingularNormalEquations`]).
 pub fn solve(
     geometry: &Geometry,
     commanded: &[f64; LEGS],
@@ -114,9 +123,12 @@ pub fn solve(
     let mut converged = false;
     while iterations < options.max_iterations {
         let zeta = misfit(geometry, &pose, measured);
-        let t = ActuationScrews::at(geometry, &pose)
+        let screws = ActuationScrews::at(geometry, &pose);
+        let t = screws
             .motion_jacobian()
-            .ok_or(hexacomp_core::Error::SingularJacobian { ratio: 0.0 })?;
+            .ok_or_else(|| hexacomp_core::Error::SingularJacobian {
+                ratio: screws.singular_value_ratio(),
+            })?;
         let pt = point_matrix(geometry, &pose) * t;
         let cond = condition_number(&pt);
         max_cond_pt = max_cond_pt.max(cond);
@@ -126,7 +138,7 @@ pub fn solve(
         } else {
             0.0
         };
-        let rho = regularised_step(&pt.transpose(), &(pt.transpose() * pt), &zeta, lambda)?;
+        let rho = regularised_step(&pt.transpose(), &(pt.transpose() * pt), &zeta, lambda, cond)?;
         for (q, r) in legs.iter_mut().zip(rho.iter()) {
             *q += r;
         }
@@ -154,12 +166,15 @@ fn misfit(geometry: &Geometry, pose: &Pose, measured: &[DVec3; TARGETS]) -> SVec
     SVector::<f64, 9>::from_fn(|k, _| measured[k / 3][k % 3] - computed[k / 3][k % 3])
 }
 
-/// `ρ = (AᵀA + λI)⁻¹Aᵀζ` (Eq. 7) with `Aᵀ` and `AᵀA` given.
+/// `ρ = (AᵀA + λI)⁻¹Aᵀζ` (Eq. 7) with `Aᵀ` and `AᵀA` given (`A = PT`): the minimiser of
+/// `Φ(ρ) = ‖ζ − Aρ‖² + λ‖ρ‖²` (Eq. 6). `cond_a` (`cond(A)`, as computed for the λ switch) is
+/// what a singular `AᵀA + λI` is reported with.
 fn regularised_step(
     at: &nalgebra::SMatrix<f64, 6, 9>,
     ata: &Matrix6<f64>,
     zeta: &SVector<f64, 9>,
     lambda: f64,
+    cond_a: f64,
 ) -> Result<Vector6<f64>> {
     let normal = ata + Matrix6::identity() * lambda;
     let rhs = at * zeta;
@@ -167,7 +182,10 @@ fn regularised_step(
         .cholesky()
         .map(|c| c.solve(&rhs))
         .or_else(|| normal.lu().solve(&rhs))
-        .ok_or_else(|| hexacomp_core::Error::SingularJacobian { ratio: 0.0 }.into())
+        .ok_or(Error::SingularNormalEquations {
+            cond_pt: cond_a,
+            lambda,
+        })
 }
 
 /// Why a configuration's corrections deserve a look before training on them.
@@ -315,5 +333,27 @@ fn solve_row(
         commanded: row.legs,
         solution,
         flags,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_singular_step_reports_the_conditioning_and_lambda_it_met() {
+        let at = nalgebra::SMatrix::<f64, 6, 9>::from_fn(|i, k| (i + k) as f64);
+        let zeta = SVector::<f64, 9>::from_fn(|k, _| k as f64 - 4.0);
+        let zero = Matrix6::zeros();
+        assert_eq!(
+            regularised_step(&at, &zero, &zeta, 0.0, f64::INFINITY),
+            Err(Error::SingularNormalEquations {
+                cond_pt: f64::INFINITY,
+                lambda: 0.0,
+            })
+        );
+        // With λ > 0 the same step is solvable: (0 + λI)⁻¹Aᵀζ = Aᵀζ / λ.
+        let rho = regularised_step(&at, &zero, &zeta, 0.5, f64::INFINITY).unwrap();
+        assert!((rho - (at * zeta) / 0.5).norm() < 1e-12 * (at * zeta).norm());
     }
 }

@@ -23,6 +23,20 @@ pub enum Error {
         message: String,
     },
 
+    /// The normal equations of a correction step (`(PT)ᵀ(PT) + λI`, Eq. 7) cannot be solved: the
+    /// measured target points do not determine the six leg corrections at this configuration.
+    #[error(
+        "the normal equations (PT)ᵀ(PT) + λI of the correction step are singular (cond(PT) = \
+         {cond_pt:.3e}, λ = {lambda:e}): the targets cannot determine six leg corrections here \
+         (targets on one line? enable the robust solve to regularise)"
+    )]
+    SingularNormalEquations {
+        /// `cond(PT)` at the iterate, as computed (infinite when `PT` is rank-deficient).
+        cond_pt: f64,
+        /// The regularisation `λ` applied at the iterate (0: none).
+        lambda: f64,
+    },
+
     /// The data cannot support the requested computation (too few configurations, none usable).
     #[error("insufficient data: {0}")]
     InsufficientData(String),
