@@ -24,9 +24,11 @@ it resumes by itself when the service answers again.
 """;
 
 notes """
-The module connects when it is loaded and, while no service answers a connection, retries once a
-second from the servo thread (a connection attempt takes milliseconds: on a real-time kernel, start
-the service before LinuxCNC). A connected component survives restarts of the service.
+Each instance connects from a helper thread of its own (not real-time, normal scheduling): at
+load, then once a second while no service answers. Connecting creates shared-memory ports and
+waits for the service's status answer, which a real-time thread must never do; the servo thread
+only picks up a connection the helper has made, and faults (holding the corrections) until then.
+A connected component survives restarts of the service.
 The service and LinuxCNC must run as the same user (iceoryx2's files are private to it).
 """;
 
@@ -54,8 +56,8 @@ param rw u32 wait_us = 200 "Longest wait for the service's answer in a servo per
 modparam dummy instance "Name of the hexacomp-service instance to use (default: default)";
 
 variable void *connection;
+variable void *connector;
 variable double held[6];
-variable double retry_in;
 
 option extra_setup yes;
 option extra_cleanup yes;
@@ -65,58 +67,128 @@ function _ "Compensate the six joints (add to the servo thread after motion-cont
 license "Apache-2.0";
 author "hexacomp developers";
 ;;
+#include <errno.h>
+#include <pthread.h>
+#include <stdlib.h>
+#include <time.h>
 #include "hexacomp.h"
 
 static char *instance = "default";
 RTAPI_MP_STRING(instance, "Name of the hexacomp-service instance to use");
 
 /* Seconds between connection attempts while no service answers. */
-#define RETRY_INTERVAL_S 1.0
+#define RETRY_INTERVAL_S 1
+/* Deadline of one connection attempt (the service's status answer), microseconds. */
+#define CONNECT_TIMEOUT_US 1000000u
 
-static int try_connect(struct __comp_state *__comp_inst) {
-    HexacompClient *client = 0;
-    HexacompError result = hexacomp_connect(instance, wait_us, &client);
-    if (result != HEXACOMP_OK) {
-        last_error = result;
-        return 0;
+/* The helper thread of one instance and what it hands to the servo thread. The servo thread
+   reads `ready` and `error` with atomic loads and takes `ready` with an atomic exchange; nothing
+   else is shared. */
+struct connecting_helper {
+    pthread_t thread;
+    int stop;                 /* set by cleanup: the helper returns */
+    HexacompClient *ready;    /* a connection made, not yet taken by the servo thread */
+    int taken;                /* the servo thread took a connection: the helper's job is done */
+    int error;                /* HexacompError of the latest attempt */
+};
+
+/* Sleeps `seconds` in 50 ms steps, returning early once `stop` is set. */
+static void pause_unless_stopped(struct connecting_helper *c, int seconds) {
+    struct timespec step = {0, 50 * 1000 * 1000};
+    int i;
+    for (i = 0; i < seconds * 20 && !__atomic_load_n(&c->stop, __ATOMIC_ACQUIRE); i++)
+        nanosleep(&step, 0);
+}
+
+/* The helper: connects until a connection is taken or cleanup stops it. */
+static void *connect_in_background(void *arg) {
+    struct connecting_helper *c = arg;
+    int reported = 0;
+    while (!__atomic_load_n(&c->stop, __ATOMIC_ACQUIRE) &&
+           !__atomic_load_n(&c->taken, __ATOMIC_ACQUIRE)) {
+        if (!__atomic_load_n(&c->ready, __ATOMIC_ACQUIRE)) {
+            HexacompClient *client = 0;
+            HexacompError result = hexacomp_connect(instance, CONNECT_TIMEOUT_US, &client);
+            __atomic_store_n(&c->error, (int)result, __ATOMIC_RELEASE);
+            if (result == HEXACOMP_OK) {
+                __atomic_store_n(&c->ready, client, __ATOMIC_RELEASE);
+                rtapi_print_msg(RTAPI_MSG_INFO, "hexacomp: connected to instance '%s'\n",
+                                instance);
+            } else if (!reported) {
+                rtapi_print_msg(RTAPI_MSG_ERR,
+                                "hexacomp: no hexacomp-service for instance '%s' (%s); "
+                                "retrying every %d s\n",
+                                instance, hexacomp_error_message(result), RETRY_INTERVAL_S);
+                reported = 1;
+            }
+        }
+        pause_unless_stopped(c, RETRY_INTERVAL_S);
     }
-    connection = client;
-    rtapi_print_msg(RTAPI_MSG_INFO, "hexacomp: connected to instance '%s'\n", instance);
-    return 1;
+    return 0;
 }
 
 EXTRA_SETUP() {
+    struct connecting_helper *c = calloc(1, sizeof *c);
+    pthread_attr_t attr;
+    struct sched_param normal = {0};
+    int failed;
     connection = 0;
-    retry_in = RETRY_INTERVAL_S;
-    if (!try_connect(__comp_inst)) {
-        rtapi_print_msg(RTAPI_MSG_ERR,
-                        "hexacomp: no hexacomp-service for instance '%s' (%s); retrying every %.0f s\n",
-                        instance, hexacomp_error_message(last_error), RETRY_INTERVAL_S);
+    connector = 0;
+    if (!c) return -ENOMEM;
+    /* Normal (not real-time) scheduling, whatever the loading thread runs with. */
+    pthread_attr_init(&attr);
+    pthread_attr_setinheritsched(&attr, PTHREAD_EXPLICIT_SCHED);
+    pthread_attr_setschedpolicy(&attr, SCHED_OTHER);
+    pthread_attr_setschedparam(&attr, &normal);
+    failed = pthread_create(&c->thread, &attr, connect_in_background, c);
+    pthread_attr_destroy(&attr);
+    if (failed) {
+        rtapi_print_msg(RTAPI_MSG_ERR, "hexacomp: cannot start the connecting thread (%d)\n",
+                        failed);
+        free(c);
+        return -failed;
     }
+    connector = c;
     return 0;
 }
 
 EXTRA_CLEANUP() {
     struct __comp_state *__comp_inst;
     for (__comp_inst = __comp_first_inst; __comp_inst; __comp_inst = __comp_inst->_next) {
+        struct connecting_helper *c = connector;
+        if (c) {
+            __atomic_store_n(&c->stop, 1, __ATOMIC_RELEASE);
+            pthread_join(c->thread, 0);
+            if (c->ready) hexacomp_close(c->ready);
+            free(c);
+        }
+        connector = 0;
         if (connection) hexacomp_close((HexacompClient *)connection);
         connection = 0;
     }
 }
 
+/* Takes the connection the helper made, if there is one yet; never blocks. */
+static int take_connection(struct __comp_state *__comp_inst) {
+    struct connecting_helper *c = connector;
+    HexacompClient *ready = __atomic_exchange_n(&c->ready, (HexacompClient *)0, __ATOMIC_ACQ_REL);
+    if (!ready) {
+        last_error = __atomic_load_n(&c->error, __ATOMIC_ACQUIRE);
+        return 0;
+    }
+    __atomic_store_n(&c->taken, 1, __ATOMIC_RELEASE);
+    connection = ready;
+    return 1;
+}
+
 /* Asks the service for the corrections of the current nominal joints; returns 1 and updates
    held[] only for an ok answer. */
-static int ask_service(struct __comp_state *__comp_inst, long period) {
+static int ask_service(struct __comp_state *__comp_inst) {
     double legs_mm[6];
     HexacompPoint answer;
     HexacompError result;
     int i;
-    if (!connection) {
-        retry_in -= period * 1e-9;
-        if (retry_in > 0) return 0;
-        retry_in = RETRY_INTERVAL_S;
-        if (!try_connect(__comp_inst)) return 0;
-    }
+    if (!connection && !take_connection(__comp_inst)) return 0;
     /* wait-us may change at run time; setting it is a field store. */
     hexacomp_set_timeout((HexacompClient *)connection, wait_us);
     for (i = 0; i < 6; i++) legs_mm[i] = joint_in(i) * mm_per_unit;
@@ -134,7 +206,7 @@ FUNCTION(_) {
     int i;
     double step = ramp_time > 0 ? period * 1e-9 / ramp_time : 1.0;
     double target = enable && homed ? 1.0 : 0.0;
-    int ok = homed ? ask_service(__comp_inst, period) : 1;
+    int ok = homed ? ask_service(__comp_inst) : 1;
     fault = !ok;
     if (!ok) fault_count++;
     if (blend < target) blend = blend + step > target ? target : blend + step;

@@ -9,6 +9,11 @@ E-stop, switches the machine on, homes, enables world (teleop) mode, then, as th
   "mdi": [[x, y, z, a, b, c], ...]         moves to each pose by MDI G0 and records the joints;
   "program": FILE                          runs the G-code program to its end;
   "started": FILE                          is created once the program runs;
+  "without_service": {"seconds": S, "measured": FILE, "restarted": FILE}
+                                           after homing, counts the periods the component
+                                           faults in S seconds with no service answering,
+                                           creates "measured", waits for the test to create
+                                           "restarted" and then for the component to connect;
 and writes "results" (JSON): homing, the recorded poses and joints, the program's outcome and
 every message of LinuxCNC's error channel. Its own failures also end up in the results.
 """
@@ -121,6 +126,25 @@ def run_program(path, started_marker):
     }
 
 
+def without_service(settings):
+    """The servo thread must run on while no service answers (the component connects from a
+    helper thread of its own), and pick up the connection once the service is back."""
+    def pin(name):
+        return hal.get_value("hexacomp.0." + name)
+    began, faulted = time.time(), pin("fault-count")
+    time.sleep(settings["seconds"])
+    report = RESULTS["without_service"] = {
+        "seconds": time.time() - began,
+        "faulted": pin("fault-count") - faulted,
+        "last_error": pin("last-error"),
+    }
+    open(settings["measured"], "w").close()
+    wait_until(lambda: os.path.exists(settings["restarted"]), 120, "the service restarted")
+    began = time.time()
+    wait_until(lambda: not pin("fault"), 30, f"the component connected; {component_state()}")
+    report["connected_after"] = time.time() - began
+
+
 class Recorder(threading.Thread):
     """Copies the sampler FIFO to a file until stopped, then drains it."""
 
@@ -159,6 +183,8 @@ def main():
         component.ready()
         prepare_machine()
         move_to_poses(PLAN.get("mdi", []))
+        if "without_service" in PLAN:
+            without_service(PLAN["without_service"])
         if "program" in PLAN:
             run_program(PLAN["program"], PLAN.get("started"))
         time.sleep(0.2)
