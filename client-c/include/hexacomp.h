@@ -108,7 +108,9 @@ typedef enum HexacompKind {
 } HexacompKind;
 
 /**
- * A connection to one service instance (opaque).
+ * A connection to one service instance (opaque). Never used by two threads at once; it may be
+ * handed to another thread when the hand-over orders the two (a release store of the pointer,
+ * an acquire load of it).
  */
 typedef struct HexacompClient HexacompClient;
 

@@ -11,8 +11,15 @@
 //! the boundary: one is caught and returned as `HEXACOMP_ERROR_INTERNAL`. Units as in the Rust
 //! API: poses `[x, y, z, a, b, c]` in mm and degrees, legs and corrections in mm.
 //!
-//! A `HexacompClient` is used by one thread at a time; it owns shared-memory ports and is
-//! released with [`hexacomp_close`].
+//! A `HexacompClient` is never used by two threads at once. It may be handed from one thread to
+//! another (created on a helper thread, used on the servo thread, closed on the loading thread,
+//! as the LinuxCNC component does) when the hand-over orders the two, e.g. a release store of
+//! the pointer and an acquire load of it: its iceoryx2 ports keep their shared state in
+//! single-threaded reference counts, all of them inside the client, so moving the whole client
+//! is sound and sharing it is not. It owns shared-memory ports and is released with
+//! [`hexacomp_close`].
+
+#![warn(missing_docs)]
 
 use std::cell::RefCell;
 use std::ffi::{CStr, CString, c_char, c_int};
@@ -123,7 +130,9 @@ pub struct HexacompStatus {
     pub uptime_ns: u64,
 }
 
-/// A connection to one service instance (opaque).
+/// A connection to one service instance (opaque). Never used by two threads at once; it may be
+/// handed to another thread when the hand-over orders the two (a release store of the pointer,
+/// an acquire load of it).
 pub struct HexacompClient {
     client: Client,
 }
@@ -217,7 +226,8 @@ unsafe fn client_mut<'a>(
     client: *mut HexacompClient,
 ) -> Result<&'a mut HexacompClient, (HexacompError, String)> {
     // SAFETY: the caller guarantees `client` is null (refused here) or a live client from
-    // `hexacomp_connect`, used by this thread only.
+    // `hexacomp_connect` that no other thread uses meanwhile (a hand-over between threads is
+    // ordered by the caller, see the module documentation).
     unsafe { client.as_mut() }.ok_or_else(|| invalid("client is null"))
 }
 

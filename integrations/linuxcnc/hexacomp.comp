@@ -82,8 +82,9 @@ RTAPI_MP_STRING(instance, "Name of the hexacomp-service instance to use");
 #define CONNECT_TIMEOUT_US 1000000u
 
 /* The helper thread of one instance and what it hands to the servo thread. The servo thread
-   reads `ready` and `error` with atomic loads and takes `ready` with an atomic exchange; nothing
-   else is shared. */
+   reads `ready` and `error` with atomic loads, marks `taken` and then clears `ready`; the helper
+   reads `ready` before `taken`, so it never sees both empty once a connection was handed over
+   and never opens a second one. */
 struct connecting_helper {
     pthread_t thread;
     int stop;                 /* set by cleanup: the helper returns */
@@ -91,6 +92,13 @@ struct connecting_helper {
     int taken;                /* the servo thread took a connection: the helper's job is done */
     int error;                /* HexacompError of the latest attempt */
 };
+
+/* Every helper started, whether or not its instance was completed: halcompile runs EXTRA_SETUP
+   before it creates the instance's pins and adds it to the instance list, so cleanup must not
+   rely on that list to stop them. Setup and cleanup both run on the loading thread. */
+#define MAX_HELPERS 16
+static struct connecting_helper *helpers[MAX_HELPERS];
+static int helper_count;
 
 /* Sleeps `seconds` in 50 ms steps, returning early once `stop` is set. */
 static void pause_unless_stopped(struct connecting_helper *c, int seconds) {
@@ -104,9 +112,13 @@ static void pause_unless_stopped(struct connecting_helper *c, int seconds) {
 static void *connect_in_background(void *arg) {
     struct connecting_helper *c = arg;
     int reported = 0;
-    while (!__atomic_load_n(&c->stop, __ATOMIC_ACQUIRE) &&
-           !__atomic_load_n(&c->taken, __ATOMIC_ACQUIRE)) {
-        if (!__atomic_load_n(&c->ready, __ATOMIC_ACQUIRE)) {
+    while (!__atomic_load_n(&c->stop, __ATOMIC_ACQUIRE)) {
+        if (__atomic_load_n(&c->ready, __ATOMIC_ACQUIRE)) {
+            pause_unless_stopped(c, RETRY_INTERVAL_S);
+            continue;
+        }
+        if (__atomic_load_n(&c->taken, __ATOMIC_ACQUIRE)) break;
+        {
             HexacompClient *client = 0;
             HexacompError result = hexacomp_connect(instance, CONNECT_TIMEOUT_US, &client);
             __atomic_store_n(&c->error, (int)result, __ATOMIC_RELEASE);
@@ -114,7 +126,9 @@ static void *connect_in_background(void *arg) {
                 __atomic_store_n(&c->ready, client, __ATOMIC_RELEASE);
                 rtapi_print_msg(RTAPI_MSG_INFO, "hexacomp: connected to instance '%s'\n",
                                 instance);
-            } else if (!reported) {
+                continue;
+            }
+            if (!reported) {
                 rtapi_print_msg(RTAPI_MSG_ERR,
                                 "hexacomp: no hexacomp-service for instance '%s' (%s); "
                                 "retrying every %d s\n",
@@ -128,40 +142,54 @@ static void *connect_in_background(void *arg) {
 }
 
 EXTRA_SETUP() {
-    struct connecting_helper *c = calloc(1, sizeof *c);
+    struct connecting_helper *c;
     pthread_attr_t attr;
     struct sched_param normal = {0};
     int failed;
     connection = 0;
     connector = 0;
-    if (!c) return -ENOMEM;
-    /* Normal (not real-time) scheduling, whatever the loading thread runs with. */
-    pthread_attr_init(&attr);
-    pthread_attr_setinheritsched(&attr, PTHREAD_EXPLICIT_SCHED);
-    pthread_attr_setschedpolicy(&attr, SCHED_OTHER);
-    pthread_attr_setschedparam(&attr, &normal);
-    failed = pthread_create(&c->thread, &attr, connect_in_background, c);
-    pthread_attr_destroy(&attr);
-    if (failed) {
-        rtapi_print_msg(RTAPI_MSG_ERR, "hexacomp: cannot start the connecting thread (%d)\n",
-                        failed);
-        free(c);
-        return -failed;
+    if (helper_count == MAX_HELPERS) {
+        rtapi_print_msg(RTAPI_MSG_ERR, "hexacomp: at most %d instances\n", MAX_HELPERS);
+        return -EINVAL;
     }
+    c = calloc(1, sizeof *c);
+    if (!c) return -ENOMEM;
+    c->error = HEXACOMP_ERROR_SERVICE_ABSENT;
+    /* Normal (not real-time) scheduling, whatever the loading thread runs with. */
+    failed = pthread_attr_init(&attr);
+    if (!failed) {
+        failed = pthread_attr_setinheritsched(&attr, PTHREAD_EXPLICIT_SCHED)
+              || pthread_attr_setschedpolicy(&attr, SCHED_OTHER)
+              || pthread_attr_setschedparam(&attr, &normal)
+              || pthread_create(&c->thread, &attr, connect_in_background, c);
+        pthread_attr_destroy(&attr);
+    }
+    if (failed) {
+        rtapi_print_msg(RTAPI_MSG_ERR, "hexacomp: cannot start the connecting thread\n");
+        free(c);
+        return -EAGAIN;
+    }
+    helpers[helper_count++] = c;
     connector = c;
     return 0;
 }
 
+/* Stops and frees every helper (the servo thread must be stopped before the module is
+   unloaded, as for any HAL component), then closes the connections the instances hold. */
 EXTRA_CLEANUP() {
     struct __comp_state *__comp_inst;
+    int i;
+    for (i = 0; i < helper_count; i++) __atomic_store_n(&helpers[i]->stop, 1, __ATOMIC_RELEASE);
+    for (i = 0; i < helper_count; i++) {
+        HexacompClient *unused;
+        pthread_join(helpers[i]->thread, 0);
+        unused = __atomic_exchange_n(&helpers[i]->ready, (HexacompClient *)0, __ATOMIC_ACQ_REL);
+        if (unused) hexacomp_close(unused);
+        free(helpers[i]);
+        helpers[i] = 0;
+    }
+    helper_count = 0;
     for (__comp_inst = __comp_first_inst; __comp_inst; __comp_inst = __comp_inst->_next) {
-        struct connecting_helper *c = connector;
-        if (c) {
-            __atomic_store_n(&c->stop, 1, __ATOMIC_RELEASE);
-            pthread_join(c->thread, 0);
-            if (c->ready) hexacomp_close(c->ready);
-            free(c);
-        }
         connector = 0;
         if (connection) hexacomp_close((HexacompClient *)connection);
         connection = 0;
@@ -171,12 +199,16 @@ EXTRA_CLEANUP() {
 /* Takes the connection the helper made, if there is one yet; never blocks. */
 static int take_connection(struct __comp_state *__comp_inst) {
     struct connecting_helper *c = connector;
-    HexacompClient *ready = __atomic_exchange_n(&c->ready, (HexacompClient *)0, __ATOMIC_ACQ_REL);
+    HexacompClient *ready;
+    if (!c) return 0;
+    ready = __atomic_load_n(&c->ready, __ATOMIC_ACQUIRE);
     if (!ready) {
         last_error = __atomic_load_n(&c->error, __ATOMIC_ACQUIRE);
         return 0;
     }
+    /* `taken` before clearing `ready`: the helper then sees one or the other. */
     __atomic_store_n(&c->taken, 1, __ATOMIC_RELEASE);
+    __atomic_store_n(&c->ready, (HexacompClient *)0, __ATOMIC_RELEASE);
     connection = ready;
     return 1;
 }

@@ -3,8 +3,8 @@
 //! The wire contract between `hexacomp-service` and every client: the fixed-layout payloads
 //! ([`payloads`]), the status of a compensated point ([`PointStatus`]), the versioned service
 //! names ([`names`]) and the functions that open the endpoints with the limits both sides agree
-//! on ([`endpoints`]). It depends on iceoryx2 only: a client links no geometry, networks or file
-//! formats.
+//! on ([`endpoints`]). It depends on iceoryx2 (and thiserror) only: a client links no geometry,
+//! networks or file formats.
 //!
 //! Units on the wire: poses `[x, y, z, a, b, c]` in mm and degrees (LinuxCNC's convention, the
 //! base frame of the machine), leg lengths and corrections in mm.

@@ -82,9 +82,9 @@ fn default_state_dir(instance: &str) -> PathBuf {
 /// state directory, instance already served).
 pub fn run(args: Args) -> Result<(), Error> {
     let geometry = match &args.geometry {
-        Some(path) => Geometry::load(path).map_err(|source| Error::Geometry {
+        Some(path) => Geometry::load(path).map_err(|cause| Error::Geometry {
             path: path.clone(),
-            source,
+            cause,
         })?,
         None => Geometry::prototype(),
     };

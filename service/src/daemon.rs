@@ -12,8 +12,9 @@ use crate::control::{self, ControlSetup, summarise};
 use crate::serving::{self, ServingSetup, WaitMode};
 use crate::{Counters, Error, Generation, admission, realtime, state, validate};
 
-/// How to run one service instance.
+/// How to run one service instance ([`ServiceOptions::new`], then set what differs).
 #[derive(Debug, Clone)]
+#[non_exhaustive]
 pub struct ServiceOptions {
     /// The instance name (one per machine tool); part of every endpoint's name.
     pub instance: String,
@@ -98,7 +99,10 @@ impl Service {
         let stop = Arc::new(AtomicBool::new(false));
         let (to_serving, incoming) = crossbeam_channel::bounded(1);
         let (retired_tx, retired_rx) = crossbeam_channel::bounded(4);
-        let (ready_tx, ready_rx) = crossbeam_channel::bounded(2);
+        // One "ready" channel per thread, its only sender moved into the thread: a thread that
+        // ends before it is ready (a panic) drops it, which ends the wait with an error.
+        let (serving_ready, serving_ready_rx) = crossbeam_channel::bounded(1);
+        let (control_ready, control_ready_rx) = crossbeam_channel::bounded(1);
         let setup = ServingSetup {
             instance: instance.clone(),
             geometry: geometry.clone(),
@@ -110,14 +114,15 @@ impl Service {
             wait,
             client_budget,
         };
-        let serving = spawn("serving", {
-            let ready = ready_tx.clone();
-            move || {
-                schedule_serving_thread(cpu, realtime);
-                serving::serve(setup, ready)
-            }
+        let serving = spawn("serving", move || {
+            schedule_serving_thread(cpu, realtime);
+            serving::serve(setup, serving_ready)
         })?;
-        await_ready("serving", &ready_rx)?;
+        if let Err(e) = await_ready("serving", &serving_ready_rx) {
+            stop.store(true, Ordering::Relaxed);
+            let _ = serving.join();
+            return Err(e);
+        }
         let setup = ControlSetup {
             instance: instance.clone(),
             geometry,
@@ -130,8 +135,8 @@ impl Service {
             initial_generation,
             wait_mode: wait.wire_value(),
         };
-        let control = match spawn("control", move || control::run(setup, ready_tx))
-            .and_then(|control| await_ready("control", &ready_rx).map(|()| control))
+        let control = match spawn("control", move || control::run(setup, control_ready))
+            .and_then(|control| await_ready("control", &control_ready_rx).map(|()| control))
         {
             Ok(control) => control,
             Err(e) => {
@@ -175,9 +180,9 @@ fn start_model(
     geometry: &Geometry,
     state_dir: &std::path::Path,
 ) -> Result<hexacomp_core::model::Model, Error> {
-    let bytes = std::fs::read(path).map_err(|source| Error::ReadModel {
+    let bytes = std::fs::read(path).map_err(|cause| Error::ReadModel {
         path: path.to_path_buf(),
-        source,
+        cause,
     })?;
     let model = validate::validate(&bytes, geometry).map_err(|refusal| Error::ModelRefused {
         path: path.to_path_buf(),

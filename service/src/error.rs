@@ -10,28 +10,28 @@ pub enum Error {
     #[error(transparent)]
     Protocol(#[from] hexacomp_protocol::Error),
     /// The geometry file cannot be used.
-    #[error("geometry {}: {source}", path.display())]
+    #[error("{cause}")]
     Geometry {
         /// The file.
         path: PathBuf,
-        /// Why.
-        source: hexacomp_core::Error,
+        /// Why (its message names the file).
+        cause: hexacomp_core::Error,
     },
     /// The state directory cannot be created or restricted to its owner.
-    #[error("state directory {}: {source}", path.display())]
+    #[error("state directory {}: {cause}", path.display())]
     StateDir {
         /// The directory.
         path: PathBuf,
         /// Why.
-        source: std::io::Error,
+        cause: std::io::Error,
     },
     /// A model file given to start with cannot be read.
-    #[error("reading {}: {source}", path.display())]
+    #[error("reading {}: {cause}", path.display())]
     ReadModel {
         /// The file.
         path: PathBuf,
         /// Why.
-        source: std::io::Error,
+        cause: std::io::Error,
     },
     /// A model file given to start with is refused.
     #[error("{}: refused: {refusal}", path.display())]
@@ -42,12 +42,12 @@ pub enum Error {
         refusal: Refusal,
     },
     /// An accepted model could not be written to the state directory.
-    #[error("writing {}: {source}", path.display())]
+    #[error("writing {}: {cause}", path.display())]
     Persist {
         /// The file that could not be replaced.
         path: PathBuf,
         /// Why.
-        source: std::io::Error,
+        cause: std::io::Error,
     },
     /// Another live service owns the instance.
     #[error("instance {instance:?} is already served by another hexacomp-service ({cause})")]

@@ -217,6 +217,7 @@ pub fn serve(setup: ServingSetup, ready: Sender<Result<(), Error>>) {
     // Stored before "ready": the status answered from then on names the serving generation.
     let mut serving = ServingLoop::new(answerer, initial, incoming, retired, &counters);
     let _ = ready.send(Ok(()));
+    drop(ready);
     // Event mode: a listener on the wake endpoint, attached to a WaitSet together with a 10 ms
     // tick that keeps stop requests and model switches prompt while no request comes.
     let wake = match wait {

@@ -23,9 +23,9 @@ pub fn prepare(dir: &Path) -> Result<(), Error> {
     use std::os::unix::fs::PermissionsExt;
     std::fs::create_dir_all(dir)
         .and_then(|()| std::fs::set_permissions(dir, std::fs::Permissions::from_mode(0o700)))
-        .map_err(|source| Error::StateDir {
+        .map_err(|cause| Error::StateDir {
             path: dir.to_path_buf(),
-            source,
+            cause,
         })
 }
 
@@ -33,7 +33,7 @@ pub fn prepare(dir: &Path) -> Result<(), Error> {
 /// durably ([`hexacomp_core::durable::replace_file`]).
 pub fn persist(dir: &Path, model_file: &[u8], generation: u64) -> Result<(), Error> {
     let replace = |path: PathBuf, bytes: &[u8]| {
-        replace_file(&path, bytes).map_err(|source| Error::Persist { path, source })
+        replace_file(&path, bytes).map_err(|cause| Error::Persist { path, cause })
     };
     replace(model_path(dir), model_file)?;
     replace(generation_path(dir), generation.to_string().as_bytes())

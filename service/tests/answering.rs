@@ -9,9 +9,12 @@ use hexacomp_protocol::{
     PROTOCOL_VERSION, PointRequest, PointResponse, RequestHeader, RequestKind, RequestOutcome,
     ResponseHeader,
 };
+use hexacomp_service::Counters;
 use hexacomp_service::answering::Answerer;
 use hexacomp_service::serving::{ServingLoop, compensation_endpoint};
-use hexacomp_service::{Counters, Generation};
+
+mod common;
+use common::generation;
 use iceoryx2::prelude::*;
 
 type ClientPort = iceoryx2::port::client::Client<
@@ -129,16 +132,10 @@ fn the_serving_loop_switches_models_between_two_requests_and_hands_the_old_one_b
     let counters = Counters::default();
     let (to_serving, incoming) = crossbeam_channel::bounded(1);
     let (retired_tx, retired) = crossbeam_channel::bounded(4);
-    let generation = |number| {
-        Box::new(Generation {
-            model: hexacomp_tests::smooth_model(number),
-            number,
-        })
-    };
     let answerer = Answerer::new(&server, &geometry, &counters, None);
     let mut serving = ServingLoop::new(
         answerer,
-        Some(generation(1)),
+        Some(generation(&geometry, 1)),
         incoming,
         retired_tx,
         &counters,
@@ -151,14 +148,8 @@ fn the_serving_loop_switches_models_between_two_requests_and_hands_the_old_one_b
     assert!(!serving.poll_once(), "no request waits yet");
     // What the answer to `send`'s pose must be with the model of `number`.
     let home = Pose::from_mm_deg([0.0, 0.0, 280.0, 0.0, 0.0, 0.0]);
-    let expected = |number| {
-        compensate_pose(
-            &geometry,
-            Some(&hexacomp_tests::smooth_model(number)),
-            &home,
-        )
-        .legs
-    };
+    let expected =
+        |number| compensate_pose(&geometry, Some(&generation(&geometry, number).model), &home).legs;
     let answer = |pending: &Pending| {
         let response = pending.receive().expect("receive").expect("answered");
         let point = response.payload()[0];
@@ -171,7 +162,7 @@ fn the_serving_loop_switches_models_between_two_requests_and_hands_the_old_one_b
     let first = send(&ports[0], 1);
     assert!(serving.poll_once());
     assert_eq!(answer(&first), (1, 1, expected(1)));
-    to_serving.send(generation(2)).unwrap();
+    to_serving.send(generation(&geometry, 2)).unwrap();
     let second = send(&ports[0], 1);
     assert!(serving.poll_once());
     assert_eq!(answer(&second), (2, 2, expected(2)));

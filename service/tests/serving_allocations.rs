@@ -17,11 +17,12 @@ use std::time::Duration;
 use hexacomp_client::RequestKind;
 use hexacomp_client::{Client, ClientOptions, CompensatedPoint};
 use hexacomp_core::Geometry;
-use hexacomp_core::model::{Model, NetworkInput, Networks, Provenance};
-use hexacomp_core::network::{Network, Normalisation};
+use hexacomp_service::Counters;
 use hexacomp_service::control::{ControlSetup, run as run_control};
 use hexacomp_service::serving::{ServingSetup, WaitMode, serve};
-use hexacomp_service::{Counters, Generation};
+
+mod common;
+use common::generation;
 
 thread_local! {
     static ON_SERVING_THREAD: Cell<bool> = const { Cell::new(false) };
@@ -57,33 +58,6 @@ unsafe impl GlobalAlloc for Counting {
 
 #[global_allocator]
 static GLOBAL: Counting = Counting;
-
-fn generation(geometry: &Geometry, number: u64) -> Box<Generation> {
-    let network = |o: usize| {
-        let n = Network::weight_count(6, o);
-        Network::from_weights(
-            6,
-            o,
-            (0..n)
-                .map(|i| ((i as u64 * number) as f64).sin() * 0.01)
-                .collect(),
-        )
-        .unwrap()
-    };
-    let model = Model {
-        networks: Networks::Decoupled((0..6).map(|_| network(1)).collect()),
-        input: NetworkInput::Equivalent,
-        normalisation: Normalisation {
-            mean: [355.0; 6],
-            span: [140.0; 6],
-        },
-        training_range: [[280.0, 430.0]; 6],
-        correction_bounds: [[-1.0, 1.0]; 6],
-        geometry: geometry.fingerprint(),
-        provenance: Provenance::default(),
-    };
-    Box::new(Generation { model, number })
-}
 
 #[test]
 fn serving_thread_allocates_only_iceoryx2s_two_objects_per_request_and_nothing_on_a_swap() {

@@ -265,8 +265,8 @@ fn a_program_runs_with_the_component_adding_the_services_corrections() {
     // build and the load tests' CPU burners): how often is then a matter of the machine, not of
     // the code, and only the handling of each fault (checked above: the correction is held)
     // decides; feed-inhibit makes the program take longer, not go wrong. What must have happened
-    // is the comparison itself: thousands of periods answered and checked against the service's
-    // numbers.
+    // is the comparison itself: thousands of periods, and at least a quarter of them, answered
+    // and checked against the service's numbers.
     let realtime = realtime_kernel();
     let answered = compensating.len() - faults;
     eprintln!(
@@ -277,7 +277,7 @@ fn a_program_runs_with_the_component_adding_the_services_corrections() {
         assert_eq!(faults, 0, "faulted periods on a realtime kernel");
     }
     assert!(
-        answered >= 2000,
+        answered >= 2000 && answered >= compensating.len() / 4,
         "only {answered} of {} periods were answered and compared",
         compensating.len()
     );

@@ -1,6 +1,8 @@
-//! The calibration pipeline as one type: plan → acquire → solve → train. `calibrate` and
-//! `evaluate` (commands and library), the bench and the tests all run it through
-//! [`Pipeline`], so that its stages cannot drift apart between them.
+//! The calibration pipeline as one type: plan → acquire → solve → train. The `calibrate`,
+//! `train` and `evaluate` commands, the evaluation library, the bench and the multi-process
+//! tests run its stages through [`Pipeline`], so that they cannot drift apart between them (the
+//! single-stage commands `plan`, `simulate` and `solve`, and tests that check one stage against
+//! an independent value, call that stage's function directly).
 //!
 //! Units: mm and degrees in the rows (as in the files), mm in the corrections.
 
@@ -43,15 +45,6 @@ pub struct Calibration {
     pub solved: Solved,
     /// One trained model per architecture asked for, in that order.
     pub models: Vec<(Architecture, Trained)>,
-}
-
-impl Calibration {
-    /// The model with the lowest holdout validation RMSE, if any was trained.
-    pub fn best(&self) -> Option<&(Architecture, Trained)> {
-        self.models
-            .iter()
-            .min_by(|a, b| a.1.validation_rmse_mm.total_cmp(&b.1.validation_rmse_mm))
-    }
 }
 
 impl Pipeline {
