@@ -245,6 +245,33 @@ pub fn raw_client(
     Ok((node, factory, client))
 }
 
+/// Sends `signal` to `child`, a child process not reaped yet.
+pub fn signal_child(child: &std::process::Child, signal: i32) {
+    let pid = libc::pid_t::try_from(child.id()).expect("a pid fits pid_t");
+    // SAFETY: kill(2) on our own child's pid; it has not been reaped (the caller holds `child`),
+    // so the pid cannot have been reused.
+    assert_eq!(
+        unsafe { libc::kill(pid, signal) },
+        0,
+        "sending signal {signal}"
+    );
+}
+
+/// Stops `child` with SIGSTOP and returns once the kernel reports it stopped (the signal is
+/// delivered asynchronously).
+pub fn pause_child(child: &std::process::Child) {
+    signal_child(child, libc::SIGSTOP);
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(10);
+    while process_state(child.id()) != Some('T') {
+        assert!(
+            std::time::Instant::now() < deadline,
+            "process {} did not stop",
+            child.id()
+        );
+        std::thread::sleep(std::time::Duration::from_millis(1));
+    }
+}
+
 /// The state letter of process `pid` in `/proc/<pid>/stat` (`T`: stopped), if it can be read.
 pub fn process_state(pid: u32) -> Option<char> {
     let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
@@ -345,37 +372,18 @@ impl ServiceProcess {
     /// Stops the service with SIGSTOP and returns once the kernel reports it stopped (the signal
     /// is delivered asynchronously): requests sent until [`ServiceProcess::resume`] wait for it.
     pub fn pause(&self) {
-        self.signal(libc::SIGSTOP);
-        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(10);
-        while process_state(self.child.id()) != Some('T') {
-            assert!(
-                std::time::Instant::now() < deadline,
-                "the service did not stop"
-            );
-            std::thread::sleep(std::time::Duration::from_millis(1));
-        }
+        pause_child(&self.child);
     }
 
     /// Continues a service stopped by [`ServiceProcess::pause`].
     pub fn resume(&self) {
-        self.signal(libc::SIGCONT);
-    }
-
-    fn signal(&self, signal: i32) {
-        let pid = libc::pid_t::try_from(self.child.id()).expect("a pid fits pid_t");
-        // SAFETY: kill(2) on our own child's pid; it has not been reaped (we own `child`), so
-        // the pid cannot have been reused.
-        assert_eq!(
-            unsafe { libc::kill(pid, signal) },
-            0,
-            "sending signal {signal}"
-        );
+        signal_child(&self.child, libc::SIGCONT);
     }
 
     /// Sends `signal` (e.g. `libc::SIGTERM`) and waits for the service to exit (30 s at most);
     /// returns its exit status and its log.
     pub fn stop_with(mut self, signal: i32) -> (std::process::ExitStatus, String) {
-        self.signal(signal);
+        signal_child(&self.child, signal);
         let deadline = std::time::Instant::now() + std::time::Duration::from_secs(30);
         let status = loop {
             if let Some(status) = self.child.try_wait().expect("waiting for the service") {

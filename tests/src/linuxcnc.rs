@@ -344,19 +344,14 @@ impl Drop for SimConfig {
 pub struct SimService(Child);
 
 impl SimService {
-    /// Sends `signal` to the service and, for SIGSTOP, waits until it is stopped.
-    pub fn signal(&self, signal: i32) {
-        let pid = self.0.id();
-        // SAFETY: kill(2) on the pid of a child this value owns and has not reaped.
-        let result = unsafe { libc::kill(pid as i32, signal) };
-        assert_eq!(result, 0, "kill({pid}, {signal})");
-        if signal == libc::SIGSTOP {
-            let deadline = Instant::now() + Duration::from_secs(10);
-            while crate::process_state(pid) != Some('T') {
-                assert!(Instant::now() < deadline, "the service did not stop");
-                std::thread::sleep(Duration::from_millis(5));
-            }
-        }
+    /// Stops the service with SIGSTOP and returns once it is stopped.
+    pub fn pause(&self) {
+        crate::pause_child(&self.0);
+    }
+
+    /// Continues a service stopped by [`SimService::pause`].
+    pub fn resume(&self) {
+        crate::signal_child(&self.0, libc::SIGCONT);
     }
 
     /// Kills the service with SIGKILL and reaps it.

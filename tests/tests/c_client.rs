@@ -48,7 +48,9 @@ fn pkg_config(dir: &Path, args: &[&str]) -> Option<Vec<String>> {
     {
         Ok(output) => output,
         Err(e) if std::env::var_os("HEXACOMP_REQUIRE_PKG_CONFIG").is_none() => {
-            eprintln!("pkg-config not found ({e}): hexacomp.pc is not checked, fixed flags used");
+            eprintln!(
+                "pkg-config not found ({e}): hexacomp.pc is not checked, the template's Libs.private and fixed paths used"
+            );
             return None;
         }
         Err(e) => panic!("running pkg-config (Debian: apt-get install pkg-config): {e}"),
@@ -65,6 +67,17 @@ fn pkg_config(dir: &Path, args: &[&str]) -> Option<Vec<String>> {
             .map(str::to_string)
             .collect(),
     )
+}
+
+/// The template's `Libs.private` words, for a machine without pkg-config: the one list of what
+/// the static library needs from the system.
+fn libs_private() -> Vec<String> {
+    let template = std::fs::read_to_string(workspace().join("client-c/hexacomp.pc.in")).unwrap();
+    let line = template
+        .lines()
+        .find_map(|l| l.strip_prefix("Libs.private:"))
+        .expect("hexacomp.pc.in has a Libs.private line");
+    line.split_whitespace().map(str::to_string).collect()
 }
 
 /// Compiles `tests/c/client_test.c` against the static or the shared library, with the flags
@@ -93,18 +106,9 @@ fn compile(out: &Path, shared: bool) -> PathBuf {
     } else {
         // The archive itself, then what it needs from the system (`Libs.private`).
         cc.arg(library_dir().join("libhexacomp.a"));
-        let system = [
-            "-lgcc_s",
-            "-lutil",
-            "-lrt",
-            "-lpthread",
-            "-ldl",
-            "-lc",
-            "-lm",
-        ];
         cc.args(
             pkg_config(out, &["--static", "--libs-only-l"])
-                .unwrap_or_else(|| system.map(String::from).to_vec())
+                .unwrap_or_else(libs_private)
                 .into_iter()
                 .filter(|flag| flag != "-lhexacomp"),
         );

@@ -399,7 +399,7 @@ fn while_connecting_hangs_the_servo_thread_runs_on_and_picks_up_the_connection_l
     )
     .unwrap();
     let service = sim.start_service("service.log");
-    service.signal(libc::SIGSTOP);
+    service.pause();
     let mut run = sim.start_linuxcnc(json!({
         "without_service": {"seconds": 5, "measured": sim.path("measured"),
                             "restarted": sim.path("restarted")},
@@ -409,7 +409,7 @@ fn while_connecting_hangs_the_servo_thread_runs_on_and_picks_up_the_connection_l
         assert!(std::time::Instant::now() < deadline, "no measurement");
         std::thread::sleep(Duration::from_millis(20));
     }
-    service.signal(libc::SIGCONT);
+    service.resume();
     std::fs::write(sim.path("restarted"), "").unwrap();
     let results = run.finish(SESSION);
     assert!(results["failure"].is_null(), "{results}");
