@@ -4,9 +4,9 @@
 
 use hexacomp_client::CompensatedPoint;
 use hexacomp_core::stats::{PoseErrorNorm, PoseErrorStats};
-use hexacomp_core::virtual_platform::VirtualPlatform;
 use hexacomp_core::{Pose, inverse_kinematics};
 use hexacomp_trainer::svg::{Chart, Series};
+use hexacomp_virtual::VirtualPlatform;
 
 /// The path errors before and after compensation.
 #[derive(Debug, Clone)]

@@ -5,10 +5,10 @@
 use anyhow::Context;
 use hexacomp_core::Geometry;
 use hexacomp_core::model::Model;
-use hexacomp_core::virtual_platform::{ErrorModel, ErrorVariant, VirtualPlatform};
 use hexacomp_trainer::pipeline::Pipeline;
 use hexacomp_trainer::plan::PlanOptions;
 use hexacomp_trainer::train::{Architecture, TrainOptions};
+use hexacomp_virtual::{ErrorModel, ErrorVariant, VirtualPlatform};
 use indicatif::{ProgressBar, ProgressStyle};
 
 /// The virtual machine a benchmark drives: drawn from `machine_seed` with the paper's error

@@ -6,8 +6,8 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 use hexacomp_core::Geometry;
 use hexacomp_core::model::Model;
-use hexacomp_core::virtual_platform::DEFAULT_MACHINE_SEED;
-use hexacomp_core::virtual_platform::VirtualPlatform;
+use hexacomp_virtual::DEFAULT_MACHINE_SEED;
+use hexacomp_virtual::VirtualPlatform;
 
 use crate::calibration::{calibrate, virtual_platform};
 use crate::children::{ChildServer, ServiceOptions, fresh_instance};

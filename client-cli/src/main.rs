@@ -11,7 +11,8 @@ use hexacomp_client::{
     Client, ClientOptions, CompensatedPoint, DEFAULT_INSTANCE, MAX_BATCH, PointStatus, RequestKind,
 };
 use hexacomp_core::compensator::{self, Compensated};
-use hexacomp_core::formats::{CompensatedRow, read_joints, read_poses, write_compensated};
+use hexacomp_core::records::NamedCompensation;
+use hexacomp_formats::{read_joints, read_poses, write_compensated};
 
 /// Talk to a running hexacomp-service.
 #[derive(Debug, Parser)]
@@ -116,10 +117,10 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             for (chunk, out) in points.chunks(MAX_BATCH).zip(results.chunks_mut(MAX_BATCH)) {
                 client.compensate_batch(kind, chunk, out)?;
             }
-            let rows: Vec<CompensatedRow> = ids
+            let rows: Vec<NamedCompensation> = ids
                 .into_iter()
                 .zip(&results)
-                .map(|(id, r)| CompensatedRow {
+                .map(|(id, r)| NamedCompensation {
                     id,
                     point: Compensated {
                         legs: r.legs,
@@ -128,7 +129,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     },
                 })
                 .collect();
-            let file = hexacomp_core::formats::create_file(&output)?;
+            let file = hexacomp_formats::create_file(&output)?;
             write_compensated(file, &rows)?;
             let generations: std::collections::BTreeSet<u64> =
                 results.iter().map(|r| r.generation).collect();

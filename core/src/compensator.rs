@@ -7,54 +7,7 @@ use crate::kinematics::{LegStatus, inverse_kinematics, stroke_status};
 use crate::model::Model;
 use crate::pose::Pose;
 
-/// How a point was compensated. The service sends it as `status as u8`: the values and names
-/// are those of `hexacomp_protocol::PointStatus` (a test in the service ties the two).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-#[repr(u8)]
-pub enum PointStatus {
-    /// Compensated inside the trained range.
-    Ok = 0,
-    /// A nominal or corrected leg is outside the stroke: the legs returned are uncorrected.
-    OutOfStroke = 1,
-    /// Compensated, but the legs lie outside the range the model was trained on.
-    OutsideTrainedRange = 2,
-    /// A correction exceeded the model's bounds and was clamped to them.
-    Clamped = 3,
-    /// A non-finite input, or a non-finite output of the model: no correction applied, the legs
-    /// returned are the input (for a non-finite pose, its non-finite inverse kinematics).
-    InvalidInput = 4,
-    /// No model loaded: the legs returned are the nominal ones.
-    NoModel = 5,
-}
-
-impl PointStatus {
-    /// Every status, in numeric order.
-    pub const ALL: [PointStatus; 6] = [
-        PointStatus::Ok,
-        PointStatus::OutOfStroke,
-        PointStatus::OutsideTrainedRange,
-        PointStatus::Clamped,
-        PointStatus::InvalidInput,
-        PointStatus::NoModel,
-    ];
-
-    /// The status's name in files (`status` column).
-    pub fn name(self) -> &'static str {
-        match self {
-            PointStatus::Ok => "ok",
-            PointStatus::OutOfStroke => "out_of_stroke",
-            PointStatus::OutsideTrainedRange => "outside_trained_range",
-            PointStatus::Clamped => "clamped",
-            PointStatus::InvalidInput => "invalid_input",
-            PointStatus::NoModel => "no_model",
-        }
-    }
-
-    /// The status of a wire value, if it is one.
-    pub fn from_u8(value: u8) -> Option<Self> {
-        Self::ALL.get(value as usize).copied()
-    }
-}
+pub use hexacomp_point_status::PointStatus;
 
 /// One compensated point.
 #[derive(Debug, Clone, Copy, PartialEq)]

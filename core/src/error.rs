@@ -72,19 +72,6 @@ pub enum Error {
         attempts: usize,
     },
 
-    /// A data file (CSV) could not be read, or one of its rows or columns is invalid.
-    #[error("{file}:{line}: {}{message}", column.as_ref().map(|c| format!("column {c}: ")).unwrap_or_default())]
-    Format {
-        /// The file's path as given.
-        file: String,
-        /// 1-based line number (1 is the header); 0 when the problem is the file as a whole.
-        line: u64,
-        /// The column concerned, when one is.
-        column: Option<String>,
-        /// What is wrong.
-        message: String,
-    },
-
     /// A model (network, normalisation, bounds) is inconsistent or not finite.
     #[error("invalid model: {0}")]
     InvalidModel(String),

@@ -9,9 +9,9 @@
 //! - [`kinematics`]: allocation-free inverse kinematics and Newton forward kinematics;
 //! - [`screw`]: the paper's matrices `W`, `T = W⁻ᵀ` (Eq. 3), `P` (Eq. 4) and `cond(PT)`;
 //! - [`sampling`]: seeded uniform poses over the task workspace;
-//! - [`virtual_platform`]: a simulated real machine with realistic error sources and a simulated
-//!   point-measuring device;
 //! - [`network`], [`model`]: the trained networks, their normalisation and the model file;
+//! - [`records`]: planned poses, measured configurations and joint corrections with their ids,
+//!   independent of any file format;
 //! - [`compensator`]: run-time compensation with a status per point (Eq. 19, Eq. 20);
 //! - [`stats`]: max/mean/std summaries of pose errors (the paper's Table 2 layout);
 //! - [`durable`]: files replaced whole or not at all, durable across a power loss.
@@ -24,16 +24,15 @@
 pub mod compensator;
 pub mod durable;
 pub mod error;
-pub mod formats;
 pub mod geometry;
 pub mod kinematics;
 pub mod model;
 pub mod network;
 pub mod pose;
+pub mod records;
 pub mod sampling;
 pub mod screw;
 pub mod stats;
-pub mod virtual_platform;
 
 pub use error::{Error, Result};
 pub use geometry::{Fingerprint, Geometry, LEGS, TARGETS, Workspace};

@@ -1,4 +1,4 @@
-//! Fuzzing every reader of outside input: model files, the CSV files, geometry TOML, and the
+//! Fuzzing every reader of outside input in core: model files, geometry TOML, and the
 //! compensator. Random bytes, and mutations of valid inputs (so that most cases get past the
 //! first check). No input may panic; every refusal has a message. The compensator gets any bit
 //! pattern of a point and, mostly, points inside the stroke, where its promises about computed
@@ -7,92 +7,17 @@
 //! beside this file and replayed first on every run.
 
 mod common;
-
-use std::path::Path;
+#[path = "common/edits.rs"]
+mod edits;
 
 use common::model;
+use edits::{Edit, apply, edit};
 use hexacomp_core::compensator::{Compensated, PointStatus, compensate_legs, compensate_pose};
-use hexacomp_core::formats::{read_corrections, read_joints, read_measurements, read_poses};
 use hexacomp_core::model::{Model, Networks};
 use hexacomp_core::network::Network;
 use hexacomp_core::{Geometry, Pose};
 use proptest::prelude::*;
 use proptest::test_runner::{Config, TestRunner};
-
-/// One edit of a text or byte string: where (as a fraction of its length) and what.
-#[derive(Debug, Clone)]
-enum Edit {
-    Delete(f64, usize),
-    Insert(f64, Vec<u8>),
-    Replace(f64, u8),
-    Truncate(f64),
-}
-
-/// Fragments that readers find hard: separators, comments, non-numbers, huge and tiny numbers,
-/// multi-byte characters, NUL.
-const FRAGMENTS: &[&str] = &[
-    ",",
-    "\n",
-    "\r\n",
-    "#",
-    " ",
-    "NaN",
-    "inf",
-    "-inf",
-    "1e999",
-    "-0",
-    "1e-320",
-    "\u{feff}",
-    "é",
-    "\0",
-    "\"",
-    "=",
-    "[",
-    "]",
-    "{",
-    "id",
-    "q1",
-    "x",
-    "0x10",
-    "",
-    "9999999999999999999999",
-];
-
-fn edit() -> impl Strategy<Value = Edit> {
-    prop_oneof![
-        (0.0..1.0f64, 1..8usize).prop_map(|(at, n)| Edit::Delete(at, n)),
-        (0.0..1.0f64, prop::sample::select(FRAGMENTS))
-            .prop_map(|(at, f)| Edit::Insert(at, f.as_bytes().to_vec())),
-        (0.0..1.0f64, any::<u8>()).prop_map(|(at, b)| Edit::Replace(at, b)),
-        (0.0..1.0f64).prop_map(Edit::Truncate),
-    ]
-}
-
-fn apply(bytes: &[u8], edits: &[Edit]) -> Vec<u8> {
-    let mut out = bytes.to_vec();
-    for edit in edits {
-        let at = |f: f64, len: usize| ((f * len as f64) as usize).min(len);
-        match edit {
-            Edit::Delete(f, n) => {
-                let start = at(*f, out.len());
-                let end = (start + n).min(out.len());
-                out.drain(start..end);
-            }
-            Edit::Insert(f, fragment) => {
-                let i = at(*f, out.len());
-                out.splice(i..i, fragment.iter().copied());
-            }
-            Edit::Replace(f, b) => {
-                if !out.is_empty() {
-                    let i = at(*f, out.len() - 1);
-                    out[i] = *b;
-                }
-            }
-            Edit::Truncate(f) => out.truncate(at(*f, out.len())),
-        }
-    }
-    out
-}
 
 /// A model file's bytes with the length field and checksum recomputed after `edits` to its
 /// payload, so that the edits reach the decoder instead of stopping at the checksum.
@@ -157,28 +82,6 @@ fn assert_status_promises(model: &Model, q: &[f64; 6], c: &Compensated) {
     }
 }
 
-fn write(dir: &Path, name: &str, bytes: &[u8]) -> std::path::PathBuf {
-    let path = dir.join(name);
-    std::fs::write(&path, bytes).unwrap();
-    path
-}
-
-const POSES: &str = "id,x,y,z,a,b,c\np1,1.5,-2,280,0.5,-1,3\np2,0,0,300,0,0,0\n";
-const JOINTS: &str = "id,q1,q2,q3,q4,q5,q6\nj1,350,351,352,353,354,355\n";
-const CORRECTIONS: &str =
-    "id,q1,q2,q3,q4,q5,q6,dq1,dq2,dq3,dq4,dq5,dq6\nc1,350,351,352,353,354,355,0.1,0,0,0,0,-0.2\n";
-const MEASUREMENTS: &str = "id,x,y,z,a,b,c,q1,q2,q3,q4,q5,q6,p1x,p1y,p1z,p2x,p2y,p2z,p3x,p3y,p3z\n\
-m1,0,0,280,0,0,0,350,351,352,353,354,355,1,2,3,4,5,6,7,8,9\n";
-
-/// Reads `bytes` as every CSV kind.
-fn read_as_every_csv(dir: &Path, bytes: &[u8]) {
-    let path = write(dir, "input.csv", bytes);
-    assert_refusal_has_a_message(read_poses(&path));
-    assert_refusal_has_a_message(read_joints(&path));
-    assert_refusal_has_a_message(read_corrections(&path));
-    assert_refusal_has_a_message(read_measurements(&path));
-}
-
 proptest! {
     #[test]
     fn model_reader_takes_any_bytes(bytes in prop::collection::vec(any::<u8>(), 0..2048)) {
@@ -201,22 +104,6 @@ proptest! {
             let _ = model.raw_corrections(&[355.0; 6]);
             let _ = model.max_slope();
         }
-    }
-
-    #[test]
-    fn csv_readers_take_any_bytes(bytes in prop::collection::vec(any::<u8>(), 0..512)) {
-        let dir = tempfile::tempdir().unwrap();
-        read_as_every_csv(dir.path(), &bytes);
-    }
-
-    #[test]
-    fn csv_readers_take_any_edit_of_a_valid_file(
-        which in 0..4usize,
-        edits in prop::collection::vec(edit(), 1..6),
-    ) {
-        let dir = tempfile::tempdir().unwrap();
-        let valid = [POSES, JOINTS, CORRECTIONS, MEASUREMENTS][which];
-        read_as_every_csv(dir.path(), &apply(valid.as_bytes(), &edits));
     }
 
     #[test]

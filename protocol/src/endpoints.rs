@@ -2,6 +2,11 @@
 //! serves them ([`Role::Serve`]: open or create, one server, [`MAX_CLIENTS`] clients), clients
 //! and tools use them ([`Role::Use`]: open only, so a missing service is an error, not a new
 //! empty endpoint).
+//!
+//! The four openers repeat the same open / open-or-create split on purpose: iceoryx2 0.10
+//! implements `open` and `open_or_create` separately for each combination of sized and slice
+//! payloads (`u64 → StatusReport`, `[u8] → DeployReply`, `[PointRequest] → [PointResponse]`) and
+//! for events, so no single generic function can call them for every endpoint.
 
 use iceoryx2::prelude::*;
 use iceoryx2::service::port_factory::{event, request_response};

@@ -3,7 +3,7 @@
 //! The wire contract between `hexacomp-service` and every client: the fixed-layout payloads
 //! ([`payloads`]), the status of a compensated point ([`PointStatus`]), the versioned service
 //! names ([`names`]) and the functions that open the endpoints with the limits both sides agree
-//! on ([`endpoints`]). It depends on iceoryx2 (and thiserror) only: a client links no geometry,
+//! on ([`endpoints`]). It depends on iceoryx2, thiserror and the dependency-free `hexacomp-point-status` only: a client links no geometry,
 //! networks or file formats.
 //!
 //! Units on the wire: poses `[x, y, z, a, b, c]` in mm and degrees (LinuxCNC's convention, the
@@ -19,9 +19,8 @@ pub mod endpoints;
 mod error;
 pub mod names;
 pub mod payloads;
-mod status;
 
 pub use error::Error;
+pub use hexacomp_point_status::PointStatus;
 pub use names::{DEFAULT_INSTANCE, Endpoint, iceoryx_name, service_name};
 pub use payloads::*;
-pub use status::PointStatus;

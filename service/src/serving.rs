@@ -293,20 +293,3 @@ fn wake_listener(
         .map_err(|e| Error::Iceoryx(format!("wake listener: {e:?}")))?;
     Ok((service, listener))
 }
-
-#[cfg(test)]
-mod tests {
-    use hexacomp_core::compensator;
-    use hexacomp_protocol::PointStatus;
-
-    /// `compute_point` sends the compensator's status as `u8`; clients read it as the
-    /// protocol's status. The two enums must agree value for value and name for name.
-    #[test]
-    fn the_compensators_statuses_are_the_wire_statuses() {
-        assert_eq!(compensator::PointStatus::ALL.len(), PointStatus::ALL.len());
-        for status in compensator::PointStatus::ALL {
-            let wire = PointStatus::from_u8(status as u8).expect("a wire status");
-            assert_eq!(wire.name(), status.name());
-        }
-    }
-}

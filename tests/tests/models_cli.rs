@@ -91,7 +91,7 @@ fn predict_returns_exactly_the_library_compensation() {
     ]);
     let g = Geometry::prototype();
     let model = Model::load(&model_path, &g).unwrap();
-    let poses = hexacomp_core::formats::read_poses(&d.join("poses.csv")).unwrap();
+    let poses = hexacomp_formats::read_poses(&d.join("poses.csv")).unwrap();
     let written = std::fs::read_to_string(&out).unwrap();
     let mut lines = written.lines();
     assert_eq!(
@@ -129,7 +129,7 @@ fn predict_returns_exactly_the_library_compensation() {
         "--out",
         p(&out2),
     ]);
-    let legs = hexacomp_core::formats::read_joints(&d.join("joints.csv")).unwrap();
+    let legs = hexacomp_formats::read_joints(&d.join("joints.csv")).unwrap();
     let written = std::fs::read_to_string(&out2).unwrap();
     assert_eq!(written.lines().count(), 1 + legs.len());
     for (line, row) in written.lines().skip(1).zip(&legs) {

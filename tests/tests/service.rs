@@ -10,12 +10,12 @@ use hexacomp_core::compensator::{compensate_legs, compensate_pose};
 use hexacomp_core::model::Model;
 use hexacomp_core::sampling::{SamplerOptions, WorkspaceSampler};
 use hexacomp_core::stats::PoseErrorNorm;
-use hexacomp_core::virtual_platform::{DEFAULT_MACHINE_SEED, ErrorModel, VirtualPlatform};
 use hexacomp_core::{Geometry, Pose, inverse_kinematics};
 use hexacomp_tests::{ServiceProcess, unique_instance};
 use hexacomp_trainer::pipeline::Pipeline;
 use hexacomp_trainer::plan::PlanOptions;
 use hexacomp_trainer::train::{Architecture, TrainOptions};
+use hexacomp_virtual::{DEFAULT_MACHINE_SEED, ErrorModel, VirtualPlatform};
 
 /// A small decoupled model of the default virtual machine, trained with `seed`, saved in `dir`.
 fn small_model(dir: &Path, seed: u64) -> (Model, PathBuf) {

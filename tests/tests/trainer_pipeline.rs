@@ -3,12 +3,10 @@
 //! measurement files.
 
 use hexacomp_core::Geometry;
-use hexacomp_core::formats::{read_corrections, read_measurements, read_poses};
 use hexacomp_core::stats::PoseErrorNorm;
-use hexacomp_core::virtual_platform::{
-    DEFAULT_MACHINE_SEED, ErrorModel, ErrorVariant, VirtualPlatform,
-};
+use hexacomp_formats::{read_corrections, read_measurements, read_poses};
 use hexacomp_tests::run;
+use hexacomp_virtual::{DEFAULT_MACHINE_SEED, ErrorModel, ErrorVariant, VirtualPlatform};
 
 fn text(bytes: &[u8]) -> String {
     String::from_utf8_lossy(bytes).into_owned()

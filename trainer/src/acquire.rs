@@ -1,8 +1,7 @@
 //! Acquisition on the virtual platform: what a measuring arm would have recorded for a plan.
 
-use hexacomp_core::formats::MeasurementRow;
-use hexacomp_core::formats::PoseRow;
-use hexacomp_core::virtual_platform::VirtualPlatform;
+use hexacomp_core::records::{MeasuredConfiguration, NamedPose};
+use hexacomp_virtual::VirtualPlatform;
 
 use crate::error::Result;
 
@@ -11,15 +10,13 @@ use crate::error::Result;
 /// exactly as planned.
 pub fn measure_plan(
     platform: &mut VirtualPlatform,
-    plan: &[PoseRow],
-) -> Result<Vec<MeasurementRow>> {
+    plan: &[NamedPose],
+) -> Result<Vec<MeasuredConfiguration>> {
     plan.iter()
-        .enumerate()
-        .map(|(index, row)| {
+        .map(|row| {
             let m = platform.measure(&row.pose())?;
-            Ok(MeasurementRow {
+            Ok(MeasuredConfiguration {
                 id: row.id.clone(),
-                line: index as u64 + 2,
                 pose_mm_deg: row.pose_mm_deg,
                 legs: m.commanded_legs,
                 targets: m.targets,

@@ -16,8 +16,8 @@
 //! same iteration with `λ = 0` always.
 
 use glam::DVec3;
-use hexacomp_core::formats::{CorrectionRow, MeasurementRow};
 use hexacomp_core::kinematics::target_points;
+use hexacomp_core::records::{JointCorrection, MeasuredConfiguration};
 use hexacomp_core::screw::{ActuationScrews, condition_number, point_matrix};
 use hexacomp_core::{
     ForwardOptions, Geometry, LEGS, Pose, TARGETS, forward_kinematics, inverse_kinematics,
@@ -259,8 +259,6 @@ impl Default for Checks {
 pub struct Outcome {
     /// The configuration's id.
     pub id: String,
-    /// Its line in the measurements file.
-    pub line: u64,
     /// The commanded legs `q⁽⁰⁾`, mm.
     pub commanded: [f64; LEGS],
     /// The solution, or why there is none.
@@ -271,8 +269,8 @@ pub struct Outcome {
 
 impl Outcome {
     /// The corrections row, when the configuration was solved.
-    pub fn correction_row(&self) -> Option<CorrectionRow> {
-        self.solution.as_ref().ok().map(|s| CorrectionRow {
+    pub fn joint_correction(&self) -> Option<JointCorrection> {
+        self.solution.as_ref().ok().map(|s| JointCorrection {
             id: self.id.clone(),
             legs: self.commanded,
             corrections: s.corrections,
@@ -283,7 +281,7 @@ impl Outcome {
 /// Solves every row of a measurements file and checks each result.
 pub fn solve_all(
     geometry: &Geometry,
-    rows: &[MeasurementRow],
+    rows: &[MeasuredConfiguration],
     options: &SolverOptions,
     checks: &Checks,
 ) -> Result<Vec<Outcome>> {
@@ -296,7 +294,7 @@ pub fn solve_all(
 
 fn solve_row(
     geometry: &Geometry,
-    row: &MeasurementRow,
+    row: &MeasuredConfiguration,
     options: &SolverOptions,
     checks: &Checks,
 ) -> Outcome {
@@ -329,7 +327,6 @@ fn solve_row(
     }
     Outcome {
         id: row.id.clone(),
-        line: row.line,
         commanded: row.legs,
         solution,
         flags,

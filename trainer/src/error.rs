@@ -6,9 +6,13 @@ use thiserror::Error;
 #[derive(Debug, Clone, PartialEq, Error)]
 #[non_exhaustive]
 pub enum Error {
-    /// An error of the core numerics or file formats.
+    /// An error of the core numerics.
     #[error(transparent)]
     Core(#[from] hexacomp_core::Error),
+
+    /// A CSV file could not be read or written, or one of its rows is invalid.
+    #[error(transparent)]
+    Format(#[from] hexacomp_formats::Error),
 
     /// A setting is out of its valid range.
     #[error("invalid setting: {0}")]

@@ -7,12 +7,12 @@
 //! errors actually reached are compared.
 
 use hexacomp_core::compensator::compensate_pose;
-use hexacomp_core::formats::CorrectionRow;
 use hexacomp_core::model::NetworkInput;
+use hexacomp_core::records::JointCorrection;
 use hexacomp_core::sampling::{SamplerOptions, WorkspaceSampler};
 use hexacomp_core::stats::{PoseErrorNorm, PoseErrorStats};
-use hexacomp_core::virtual_platform::{ErrorModel, VirtualPlatform};
 use hexacomp_core::{Geometry, Pose, inverse_kinematics};
+use hexacomp_virtual::{ErrorModel, VirtualPlatform};
 
 use crate::corrections::SolverOptions;
 use crate::error::{Error, Result};
@@ -161,17 +161,17 @@ pub fn evaluate(
         .filter_map(|o| o.solution.as_ref().ok())
         .filter(|s| s.max_cond_pt > robust_pipeline.solver.cond_threshold)
         .count();
-    let rows = |outcomes: &[crate::corrections::Outcome], n: usize| -> Vec<CorrectionRow> {
+    let rows = |outcomes: &[crate::corrections::Outcome], n: usize| -> Vec<JointCorrection> {
         outcomes[..n]
             .iter()
-            .filter_map(|o| o.correction_row())
+            .filter_map(|o| o.joint_correction())
             .collect()
     };
     let validation =
         WorkspaceSampler::new(geometry, options.validation_seed, SamplerOptions::default())?
             .samples(options.validation_count)?;
 
-    let fit = |corrections: &[CorrectionRow], architecture, input| {
+    let fit = |corrections: &[JointCorrection], architecture, input| {
         let pipeline = Pipeline {
             train: TrainOptions {
                 input,

@@ -13,8 +13,8 @@
 //! a fraction of the largest: parameter combinations the measurements cannot see stay at their
 //! nominal values. Compensation is then the identified geometry's inverse kinematics.
 
-use hexacomp_core::formats::MeasurementRow;
 use hexacomp_core::kinematics::target_points;
+use hexacomp_core::records::MeasuredConfiguration;
 use hexacomp_core::screw::{ActuationScrews, point_matrix};
 use hexacomp_core::{ForwardOptions, Geometry, LEGS, Pose, forward_kinematics};
 use nalgebra::{DMatrix, DVector, SMatrix};
@@ -67,7 +67,7 @@ pub struct Identification {
 /// Identifies the geometric parameters of `nominal` from measured configurations.
 pub fn identify(
     nominal: &Geometry,
-    rows: &[MeasurementRow],
+    rows: &[MeasuredConfiguration],
     options: &IdentifyOptions,
 ) -> Result<Identification> {
     // 9 equations per configuration; 42 unknowns need at least 5 configurations, and far more
@@ -79,7 +79,7 @@ pub fn identify(
         )));
     }
     let mut geometry = nominal.clone();
-    let mut poses: Vec<Pose> = rows.iter().map(MeasurementRow::pose).collect();
+    let mut poses: Vec<Pose> = rows.iter().map(MeasuredConfiguration::pose).collect();
     let mut rms_before = None;
     let mut rms_previous = f64::INFINITY;
     let mut rank = 0;
@@ -134,7 +134,7 @@ fn ill_conditioned(error: Error, rank: usize) -> Error {
 /// to the model's poses (and seed the next call).
 fn linearise(
     geometry: &Geometry,
-    rows: &[MeasurementRow],
+    rows: &[MeasuredConfiguration],
     poses: &mut [Pose],
 ) -> Result<(DMatrix<f64>, DVector<f64>)> {
     let mut jacobian = DMatrix::zeros(9 * rows.len(), PARAMETERS);
@@ -143,8 +143,8 @@ fn linearise(
     for (k, (row, pose)) in rows.iter().zip(poses.iter_mut()).enumerate() {
         *pose = forward_kinematics(geometry, &row.legs, pose, &fk).map_err(|e| {
             Error::InsufficientData(format!(
-                "configuration {} (line {}): forward kinematics of the identified geometry: {e}",
-                row.id, row.line
+                "configuration {}: forward kinematics of the identified geometry: {e}",
+                row.id
             ))
         })?;
         let screws = ActuationScrews::at(geometry, pose);
@@ -190,20 +190,19 @@ fn apply(geometry: &mut Geometry, step: &DVector<f64>) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use hexacomp_core::virtual_platform::{ErrorModel, ErrorVariant, VirtualPlatform};
+    use hexacomp_virtual::{ErrorModel, ErrorVariant, VirtualPlatform};
 
     /// `count` measurements of one and the same configuration: whatever their number, they
     /// determine only the six parameter combinations that move the platform at that pose.
-    fn repeated_configuration(variant: ErrorVariant, count: usize) -> Vec<MeasurementRow> {
+    fn repeated_configuration(variant: ErrorVariant, count: usize) -> Vec<MeasuredConfiguration> {
         let g = Geometry::prototype();
         let mut platform = VirtualPlatform::new(&g, &ErrorModel::variant(variant), 18, 1).unwrap();
         let pose = Pose::from_mm_deg([10.0, -20.0, 300.0, 4.0, -3.0, 5.0]);
         (0..count)
             .map(|k| {
                 let m = platform.measure(&pose).unwrap();
-                MeasurementRow {
+                MeasuredConfiguration {
                     id: (k + 1).to_string(),
-                    line: k as u64 + 2,
                     pose_mm_deg: pose.to_mm_deg(),
                     legs: m.commanded_legs,
                     targets: m.targets,
@@ -240,7 +239,7 @@ mod tests {
         // …by the smallest parameter change that explains them: nothing moves along the 36
         // directions the data cannot see (the null space of ∂r_Pc/∂θ at the nominal geometry).
         let delta = parameter_change(&result.geometry, &g);
-        let mut poses: Vec<Pose> = rows.iter().map(MeasurementRow::pose).collect();
+        let mut poses: Vec<Pose> = rows.iter().map(MeasuredConfiguration::pose).collect();
         let (jacobian, _) = linearise(&g, &rows, &mut poses).unwrap();
         let svd = jacobian.svd(false, true);
         let v_t = svd.v_t.unwrap();

@@ -7,8 +7,8 @@
 //! Units: mm and degrees in the rows (as in the files), mm in the corrections.
 
 use hexacomp_core::Geometry;
-use hexacomp_core::formats::{CorrectionRow, MeasurementRow, PoseRow};
-use hexacomp_core::virtual_platform::VirtualPlatform;
+use hexacomp_core::records::{JointCorrection, MeasuredConfiguration, NamedPose};
+use hexacomp_virtual::VirtualPlatform;
 
 use crate::acquire::measure_plan;
 use crate::corrections::{Checks, Outcome, SolverOptions, solve_all};
@@ -35,7 +35,7 @@ pub struct Solved {
     /// Every configuration's outcome, in the measurements' order (solution or error, flags).
     pub outcomes: Vec<Outcome>,
     /// The correction rows of the configurations that have a solution: the training data.
-    pub corrections: Vec<CorrectionRow>,
+    pub corrections: Vec<JointCorrection>,
 }
 
 /// What a whole calibration produced.
@@ -53,16 +53,23 @@ impl Pipeline {
     pub fn measure_virtual(
         &self,
         platform: &mut VirtualPlatform,
-    ) -> Result<(Vec<PoseRow>, Vec<MeasurementRow>)> {
+    ) -> Result<(Vec<NamedPose>, Vec<MeasuredConfiguration>)> {
         let rows = numbered_rows(&plan(platform.nominal(), &self.plan)?);
         let measurements = measure_plan(platform, &rows)?;
         Ok((rows, measurements))
     }
 
     /// Solves the joint corrections of every measured configuration.
-    pub fn solve(&self, geometry: &Geometry, measurements: &[MeasurementRow]) -> Result<Solved> {
+    pub fn solve(
+        &self,
+        geometry: &Geometry,
+        measurements: &[MeasuredConfiguration],
+    ) -> Result<Solved> {
         let outcomes = solve_all(geometry, measurements, &self.solver, &self.checks)?;
-        let corrections = outcomes.iter().filter_map(|o| o.correction_row()).collect();
+        let corrections = outcomes
+            .iter()
+            .filter_map(|o| o.joint_correction())
+            .collect();
         Ok(Solved {
             outcomes,
             corrections,
@@ -74,7 +81,7 @@ impl Pipeline {
     pub fn train(
         &self,
         geometry: &Geometry,
-        corrections: &[CorrectionRow],
+        corrections: &[JointCorrection],
         architecture: Architecture,
         fit_done: &(dyn Fn() + Sync),
     ) -> Result<Trained> {
@@ -92,7 +99,7 @@ impl Pipeline {
     pub fn calibrate(
         &self,
         geometry: &Geometry,
-        measurements: &[MeasurementRow],
+        measurements: &[MeasuredConfiguration],
         architectures: &[Architecture],
         fit_done: &(dyn Fn(Architecture) + Sync),
     ) -> Result<Calibration> {

@@ -6,7 +6,7 @@
 //! farthest from those already chosen, in coordinates normalised by the workspace's extent. The
 //! result is still random and uniform in density, but evenly spread.
 
-use hexacomp_core::formats::PoseRow;
+use hexacomp_core::records::NamedPose;
 use hexacomp_core::sampling::{SamplerOptions, WorkspaceSampler};
 use hexacomp_core::{Geometry, Pose};
 
@@ -68,11 +68,11 @@ pub fn plan(geometry: &Geometry, options: &PlanOptions) -> Result<Vec<Pose>> {
 }
 
 /// Poses as rows of a poses file, with ids 1, 2, … in order.
-pub fn numbered_rows(poses: &[Pose]) -> Vec<PoseRow> {
+pub fn numbered_rows(poses: &[Pose]) -> Vec<NamedPose> {
     poses
         .iter()
         .enumerate()
-        .map(|(i, pose)| PoseRow {
+        .map(|(i, pose)| NamedPose {
             id: (i + 1).to_string(),
             pose_mm_deg: pose.to_mm_deg(),
         })

@@ -11,9 +11,9 @@
 
 use std::time::Instant;
 
-use hexacomp_core::formats::CorrectionRow;
 use hexacomp_core::model::{Model, NetworkInput, Networks, Provenance};
 use hexacomp_core::network::{Network, Normalisation};
+use hexacomp_core::records::JointCorrection;
 use hexacomp_core::{Fingerprint, LEGS};
 use nalgebra::{DMatrix, DVector};
 use rand::{RngExt, SeedableRng};
@@ -112,7 +112,7 @@ pub struct Trained {
 }
 
 /// Inputs (network input legs, mm) and targets (corrections, mm) of training rows.
-fn samples(rows: &[CorrectionRow], input: NetworkInput) -> (Vec<[f64; LEGS]>, Vec<[f64; LEGS]>) {
+fn samples(rows: &[JointCorrection], input: NetworkInput) -> (Vec<[f64; LEGS]>, Vec<[f64; LEGS]>) {
     let x = rows
         .iter()
         .map(|r| match input {
@@ -167,7 +167,7 @@ fn correction_bounds(targets: &[[f64; LEGS]]) -> [[f64; 2]; LEGS] {
 /// Trains a model on corrections rows for the geometry with fingerprint `geometry`.
 /// `progress` is called once per fit of the sweep (for progress bars), from worker threads.
 pub fn train(
-    rows: &[CorrectionRow],
+    rows: &[JointCorrection],
     architecture: Architecture,
     geometry: Fingerprint,
     options: &TrainOptions,
@@ -187,61 +187,16 @@ pub fn train(
     }
     let (inputs, targets) = samples(rows, options.input);
     let normalisation = Normalisation::of(&inputs)?;
-    let x: Vec<[f64; LEGS]> = inputs.iter().map(|q| normalisation.apply(q)).collect();
-
-    let order = shuffled(rows.len(), options.seed);
-    let validation_count = ((rows.len() as f64 * options.validation_fraction).round() as usize)
-        .clamp(1, rows.len() - 1);
-    let (validation, training) = order.split_at(validation_count);
-
+    let split = Split::new(&inputs, &targets, &normalisation, options);
     let outputs: Vec<Vec<usize>> = match architecture {
         Architecture::Coupled => vec![(0..LEGS).collect()],
         Architecture::Decoupled => (0..LEGS).map(|leg| vec![leg]).collect(),
     };
-    let targets = &targets;
-    let data = |indices: &[usize], legs: &[usize]| Data {
-        x: indices.iter().map(|&k| x[k]).collect(),
-        y: indices
-            .iter()
-            .flat_map(|&k| legs.iter().map(move |&l| targets[k][l]))
-            .collect(),
-        outputs: legs.len(),
-    };
-
-    let mut selections = Vec::new();
-    let mut networks = Vec::new();
-    for (net_index, legs) in outputs.iter().enumerate() {
-        let (train_data, validation_data) = (data(training, legs), data(validation, legs));
-        let sweep = sweep(
-            &train_data,
-            &validation_data,
-            options,
-            net_index as u64,
-            progress,
-        );
-        let best = sweep
-            .iter()
-            .map(|p| p.validation_rmse_mm)
-            .fold(f64::INFINITY, f64::min);
-        let chosen = sweep
-            .iter()
-            .find(|p| p.validation_rmse_mm <= 1.02 * best)
-            .expect("non-empty sweep")
-            .hidden;
-        let final_data = if options.refit_on_all {
-            data(&order, legs)
-        } else {
-            train_data
-        };
-        let (network, _) = fit(
-            &final_data,
-            chosen,
-            options,
-            seed_for(options.seed, net_index as u64, chosen),
-        );
-        networks.push(network);
-        selections.push(Selection { sweep, chosen });
-    }
+    let (mut networks, selections): (Vec<Network>, Vec<Selection>) = outputs
+        .iter()
+        .enumerate()
+        .map(|(net_index, legs)| select_and_fit(&split, legs, options, net_index, progress))
+        .unzip();
     // Eq. 21 (for a coupled model, the one network's Eq. 18 validation RMSE).
     let validation_rmse_mm = selections
         .iter()
@@ -254,7 +209,7 @@ pub fn train(
     };
     let commanded: Vec<[f64; LEGS]> = rows.iter().map(|r| r.legs).collect();
     let training_range = training_range(&inputs, &commanded);
-    let correction_bounds = correction_bounds(targets);
+    let correction_bounds = correction_bounds(&targets);
     let created_unix_s = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
         .map_or(0, |d| d.as_secs());
@@ -271,9 +226,9 @@ pub fn train(
             training_samples: if options.refit_on_all {
                 rows.len()
             } else {
-                training.len()
+                split.training().len()
             },
-            validation_samples: validation.len(),
+            validation_samples: split.validation().len(),
             validation_rmse_mm,
             source: String::new(),
         },
@@ -285,6 +240,97 @@ pub fn train(
         validation_rmse_mm,
         seconds: start.elapsed().as_secs_f64(),
     })
+}
+
+/// Every configuration's normalised input and target, and their seeded split into validation
+/// and training configurations.
+struct Split<'a> {
+    x: Vec<[f64; LEGS]>,
+    targets: &'a [[f64; LEGS]],
+    order: Vec<usize>,
+    validation_count: usize,
+}
+
+impl<'a> Split<'a> {
+    fn new(
+        inputs: &[[f64; LEGS]],
+        targets: &'a [[f64; LEGS]],
+        normalisation: &Normalisation,
+        options: &TrainOptions,
+    ) -> Self {
+        let order = shuffled(inputs.len(), options.seed);
+        let validation_count = ((inputs.len() as f64 * options.validation_fraction).round()
+            as usize)
+            .clamp(1, inputs.len() - 1);
+        Self {
+            x: inputs.iter().map(|q| normalisation.apply(q)).collect(),
+            targets,
+            order,
+            validation_count,
+        }
+    }
+
+    fn validation(&self) -> &[usize] {
+        &self.order[..self.validation_count]
+    }
+
+    fn training(&self) -> &[usize] {
+        &self.order[self.validation_count..]
+    }
+
+    /// The samples `indices` for a network whose outputs are the corrections of `legs`.
+    fn data(&self, indices: &[usize], legs: &[usize]) -> Data {
+        Data {
+            x: indices.iter().map(|&k| self.x[k]).collect(),
+            y: indices
+                .iter()
+                .flat_map(|&k| legs.iter().map(move |&l| self.targets[k][l]))
+                .collect(),
+            outputs: legs.len(),
+        }
+    }
+}
+
+/// One network (outputs: the corrections of `legs`): sweeps the hidden sizes, chooses the
+/// smallest whose validation RMSE is within 2 % of the best, and fits it (on all samples when
+/// [`TrainOptions::refit_on_all`]).
+fn select_and_fit(
+    split: &Split,
+    legs: &[usize],
+    options: &TrainOptions,
+    net_index: usize,
+    progress: &(dyn Fn() + Sync),
+) -> (Network, Selection) {
+    let train_data = split.data(split.training(), legs);
+    let validation_data = split.data(split.validation(), legs);
+    let sweep = sweep(
+        &train_data,
+        &validation_data,
+        options,
+        net_index as u64,
+        progress,
+    );
+    let best = sweep
+        .iter()
+        .map(|p| p.validation_rmse_mm)
+        .fold(f64::INFINITY, f64::min);
+    let chosen = sweep
+        .iter()
+        .find(|p| p.validation_rmse_mm <= 1.02 * best)
+        .expect("non-empty sweep")
+        .hidden;
+    let final_data = if options.refit_on_all {
+        split.data(&split.order, legs)
+    } else {
+        train_data
+    };
+    let (network, _) = fit(
+        &final_data,
+        chosen,
+        options,
+        seed_for(options.seed, net_index as u64, chosen),
+    );
+    (network, Selection { sweep, chosen })
 }
 
 /// Normalised inputs and row-major targets (`outputs` per sample) of one network.

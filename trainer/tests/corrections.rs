@@ -4,9 +4,9 @@ mod common;
 
 use hexacomp_core::kinematics::target_points;
 use hexacomp_core::stats::{PoseErrorNorm, PoseErrorStats};
-use hexacomp_core::virtual_platform::{DEFAULT_MACHINE_SEED, ErrorModel, ErrorVariant};
 use hexacomp_core::{ForwardOptions, Geometry, forward_kinematics};
 use hexacomp_trainer::corrections::{Checks, Flag, SolverOptions, solve_all};
+use hexacomp_virtual::{DEFAULT_MACHINE_SEED, ErrorModel, ErrorVariant};
 
 #[test]
 fn noise_free_iteration_reproduces_the_measured_points_within_a_micrometre() {

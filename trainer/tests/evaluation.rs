@@ -9,18 +9,16 @@ mod common;
 use std::process::Command;
 
 use hexacomp_core::compensator::compensate_pose;
-use hexacomp_core::formats::{CorrectionRow, MeasurementRow};
 use hexacomp_core::model::NetworkInput;
+use hexacomp_core::records::{JointCorrection, MeasuredConfiguration};
 use hexacomp_core::sampling::{SamplerOptions, WorkspaceSampler};
 use hexacomp_core::stats::{ErrorStats, PoseErrorNorm, PoseErrorStats};
-use hexacomp_core::virtual_platform::{
-    DEFAULT_MACHINE_SEED, ErrorModel, ErrorVariant, VirtualPlatform,
-};
 use hexacomp_core::{Geometry, LEGS, Pose, inverse_kinematics};
 use hexacomp_trainer::corrections::{Checks, Outcome, SolverOptions, solve_all};
 use hexacomp_trainer::evaluate::{Evaluation, EvaluationOptions, Method, evaluate};
 use hexacomp_trainer::identify::{IdentifyOptions, identify};
 use hexacomp_trainer::train::{Architecture, TrainOptions, train};
+use hexacomp_virtual::{DEFAULT_MACHINE_SEED, ErrorModel, ErrorVariant, VirtualPlatform};
 
 fn options(sizes: Vec<usize>, error_model: ErrorModel) -> EvaluationOptions {
     EvaluationOptions {
@@ -54,7 +52,7 @@ fn redo(g: &Geometry, o: &EvaluationOptions) -> Redone {
     let planned = common::plan_rows(g, largest, o.plan_seed);
     let mut platform =
         VirtualPlatform::new(g, &o.error_model, o.machine_seed, o.noise_seed).unwrap();
-    let measurements: Vec<MeasurementRow> =
+    let measurements: Vec<MeasuredConfiguration> =
         hexacomp_trainer::acquire::measure_plan(&mut platform, &planned).unwrap();
     let robust_options = SolverOptions::default();
     let solve =
@@ -68,17 +66,17 @@ fn redo(g: &Geometry, o: &EvaluationOptions) -> Redone {
         .iter()
         .filter(|o| o.solution.as_ref().unwrap().max_cond_pt > 1e3)
         .count();
-    let first = |outcomes: &[Outcome], n: usize| -> Vec<CorrectionRow> {
+    let first = |outcomes: &[Outcome], n: usize| -> Vec<JointCorrection> {
         outcomes[..n]
             .iter()
-            .map(|o| o.correction_row().unwrap())
+            .map(|o| o.joint_correction().unwrap())
             .collect()
     };
     let validation = WorkspaceSampler::new(g, o.validation_seed, SamplerOptions::default())
         .unwrap()
         .samples(o.validation_count)
         .unwrap();
-    let fit = |rows: &[CorrectionRow], architecture, input| {
+    let fit = |rows: &[JointCorrection], architecture, input| {
         let options = TrainOptions {
             input,
             ..o.train.clone()

@@ -2,10 +2,9 @@
 //! on fresh poses that no training used.
 
 use hexacomp_core::compensator::compensate_pose;
-use hexacomp_core::formats::CorrectionRow;
+use hexacomp_core::records::JointCorrection;
 use hexacomp_core::sampling::{SamplerOptions, WorkspaceSampler};
 use hexacomp_core::stats::PoseErrorStats;
-use hexacomp_core::virtual_platform::{DEFAULT_MACHINE_SEED, ErrorModel, VirtualPlatform};
 use hexacomp_core::{Geometry, Pose, inverse_kinematics};
 use hexacomp_trainer::Error;
 use hexacomp_trainer::evaluate;
@@ -13,6 +12,7 @@ use hexacomp_trainer::identify::{IdentifyOptions, identify};
 use hexacomp_trainer::pipeline::Pipeline;
 use hexacomp_trainer::plan::PlanOptions;
 use hexacomp_trainer::train::{Architecture, TrainOptions, train};
+use hexacomp_virtual::{DEFAULT_MACHINE_SEED, ErrorModel, VirtualPlatform};
 
 #[test]
 fn robust_networks_beat_the_papers_figures_and_the_model_based_baseline() {
@@ -73,7 +73,7 @@ fn robust_networks_beat_the_papers_figures_and_the_model_based_baseline() {
 #[test]
 fn too_few_corrections_are_refused() {
     let g = Geometry::prototype();
-    let row = CorrectionRow {
+    let row = JointCorrection {
         id: "1".into(),
         legs: [350.0; 6],
         corrections: [0.1; 6],

@@ -12,9 +12,9 @@ mod common;
 
 use glam::DVec3;
 use hexacomp_core::Geometry;
-use hexacomp_core::formats::PoseRow;
-use hexacomp_core::virtual_platform::{ErrorModel, ErrorVariant};
+use hexacomp_core::records::NamedPose;
 use hexacomp_trainer::corrections::{Checks, SolverOptions, solve_all};
+use hexacomp_virtual::{ErrorModel, ErrorVariant};
 
 /// Geometric errors and the default noise, no pitch or compliance.
 fn model() -> ErrorModel {
@@ -32,7 +32,7 @@ struct PathResult {
 }
 
 /// Solves measurements along `path` (ids in path order) and summarises the corrections.
-fn solve_path(g: &Geometry, model: &ErrorModel, path: &[PoseRow], robust: bool) -> PathResult {
+fn solve_path(g: &Geometry, model: &ErrorModel, path: &[NamedPose], robust: bool) -> PathResult {
     let (_, measurements) = common::measure(g, model, 3, 4, path);
     let options = SolverOptions {
         robust,
@@ -58,10 +58,10 @@ fn solve_path(g: &Geometry, model: &ErrorModel, path: &[PoseRow], robust: bool) 
     }
 }
 
-fn path(poses: impl Iterator<Item = [f64; 6]>) -> Vec<PoseRow> {
+fn path(poses: impl Iterator<Item = [f64; 6]>) -> Vec<NamedPose> {
     poses
         .enumerate()
-        .map(|(k, pose_mm_deg)| PoseRow {
+        .map(|(k, pose_mm_deg)| NamedPose {
             id: k.to_string(),
             pose_mm_deg,
         })

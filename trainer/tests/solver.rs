@@ -5,8 +5,8 @@
 //! (Tikhonov filter factors `σ/(σ² + λ)`).
 
 use glam::DVec3;
-use hexacomp_core::formats::MeasurementRow;
 use hexacomp_core::kinematics::target_points;
+use hexacomp_core::records::MeasuredConfiguration;
 use hexacomp_core::screw::{ActuationScrews, condition_number, point_matrix};
 use hexacomp_core::{
     ForwardOptions, Geometry, LEGS, Pose, TARGETS, forward_kinematics, inverse_kinematics,
@@ -22,20 +22,19 @@ fn pose() -> Pose {
 /// A measurements row of `pose` on a machine whose real legs are the nominal ones plus `offsets`
 /// (mm): the targets are where the nominal model puts them at `q⁽⁰⁾ + offsets`, exactly. The
 /// true corrections are therefore `Δq = −offsets`.
-fn row_with_leg_offsets(g: &Geometry, pose: &Pose, offsets: [f64; LEGS]) -> MeasurementRow {
+fn row_with_leg_offsets(g: &Geometry, pose: &Pose, offsets: [f64; LEGS]) -> MeasuredConfiguration {
     let legs = inverse_kinematics(g, pose).lengths;
     let real: [f64; LEGS] = std::array::from_fn(|i| legs[i] + offsets[i]);
     let reached = forward_kinematics(g, &real, pose, &ForwardOptions::default()).unwrap();
-    MeasurementRow {
+    MeasuredConfiguration {
         id: "1".into(),
-        line: 2,
         pose_mm_deg: pose.to_mm_deg(),
         legs,
         targets: target_points(g, &reached),
     }
 }
 
-fn solve_one(g: &Geometry, row: &MeasurementRow, options: &SolverOptions) -> Solution {
+fn solve_one(g: &Geometry, row: &MeasuredConfiguration, options: &SolverOptions) -> Solution {
     solve(g, &row.legs, &row.targets, &row.pose(), options).unwrap()
 }
 
@@ -166,7 +165,7 @@ fn poorly_observed() -> Geometry {
 }
 
 /// Leg errors plus a 30 µm misreading of one target (so that `ζ` is not a rigid motion).
-fn row_with_a_misread_target(g: &Geometry) -> MeasurementRow {
+fn row_with_a_misread_target(g: &Geometry) -> MeasuredConfiguration {
     let mut row = row_with_leg_offsets(g, &pose(), [0.4, -0.3, 0.2, 0.5, -0.1, 0.3]);
     row.targets[1] += DVec3::new(0.03, -0.02, 0.01);
     row
@@ -174,7 +173,11 @@ fn row_with_a_misread_target(g: &Geometry) -> MeasurementRow {
 
 /// `cond(PT)` and the first step `ρ⁽⁰⁾ = Σ_k v_k · σ_k/(σ_k² + λ) · u_kᵀζ` at `q⁽⁰⁾`, computed
 /// from the SVD of `PT` (not from the normal equations the solver uses).
-fn first_step_by_svd(g: &Geometry, row: &MeasurementRow, lambda: f64) -> (f64, Vector6<f64>) {
+fn first_step_by_svd(
+    g: &Geometry,
+    row: &MeasuredConfiguration,
+    lambda: f64,
+) -> (f64, Vector6<f64>) {
     let pose = forward_kinematics(g, &row.legs, &row.pose(), &ForwardOptions::default()).unwrap();
     let t = ActuationScrews::at(g, &pose).motion_jacobian().unwrap();
     let pt = point_matrix(g, &pose) * t;
@@ -193,7 +196,7 @@ fn first_step_by_svd(g: &Geometry, row: &MeasurementRow, lambda: f64) -> (f64, V
     (condition_number(&pt), rho)
 }
 
-fn first_step(g: &Geometry, row: &MeasurementRow, options: SolverOptions) -> Solution {
+fn first_step(g: &Geometry, row: &MeasuredConfiguration, options: SolverOptions) -> Solution {
     solve_one(
         g,
         row,
@@ -204,7 +207,7 @@ fn first_step(g: &Geometry, row: &MeasurementRow, options: SolverOptions) -> Sol
     )
 }
 
-fn step_of(row: &MeasurementRow, solution: &Solution) -> [f64; LEGS] {
+fn step_of(row: &MeasuredConfiguration, solution: &Solution) -> [f64; LEGS] {
     std::array::from_fn(|i| solution.equivalent_legs[i] - row.legs[i])
 }
 
@@ -363,14 +366,14 @@ fn a_solved_configuration_gives_its_corrections_row_and_an_unsolvable_one_none()
         &Checks::default(),
     )
     .unwrap();
-    let row = outcomes[0].correction_row().unwrap();
+    let row = outcomes[0].joint_correction().unwrap();
     let solution = outcomes[0].solution.as_ref().unwrap();
     assert_eq!(row.id, "A7");
     assert_eq!(row.legs, good.legs);
     assert_eq!(row.corrections, solution.corrections);
     assert!(largest_difference(&row.corrections, &[-0.3, 0.2, -0.1, 0.0, -0.4, 0.1]) < 1e-4);
     assert!(outcomes[1].solution.is_err());
-    assert_eq!(outcomes[1].correction_row(), None);
+    assert_eq!(outcomes[1].joint_correction(), None);
 }
 
 #[test]

@@ -7,8 +7,8 @@
 //! tests find it from the outside — a network fitted only on the training part does not change
 //! when a held-out row's corrections change.
 
-use hexacomp_core::formats::CorrectionRow;
 use hexacomp_core::model::{Model, NetworkInput, Networks};
+use hexacomp_core::records::JointCorrection;
 use hexacomp_core::{Fingerprint, LEGS};
 use hexacomp_trainer::train::{Architecture, TrainOptions, Trained, train};
 use rand::{RngExt, SeedableRng};
@@ -28,13 +28,13 @@ fn corrections_of(q: &[f64; LEGS], amplitude: f64, scale_mm: f64) -> [f64; LEGS]
 
 /// `n` rows with legs uniform in 300–410 mm and the corrections above (amplitude 1, varying
 /// over 50 mm), plus uniform noise of ±`noise_mm`.
-fn rows(n: usize, seed: u64, noise_mm: f64) -> Vec<CorrectionRow> {
+fn rows(n: usize, seed: u64, noise_mm: f64) -> Vec<JointCorrection> {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     (0..n)
         .map(|k| {
             let legs: [f64; LEGS] = std::array::from_fn(|_| rng.random_range(300.0..410.0));
             let clean = corrections_of(&legs, 1.0, 50.0);
-            CorrectionRow {
+            JointCorrection {
                 id: (k + 1).to_string(),
                 legs,
                 corrections: clean.map(|c| c + noise_mm * rng.random_range(-1.0..1.0)),
@@ -54,13 +54,13 @@ fn small(hidden_sizes: Vec<usize>, input: NetworkInput, refit_on_all: bool) -> T
     }
 }
 
-fn fit(rows: &[CorrectionRow], architecture: Architecture, options: &TrainOptions) -> Trained {
+fn fit(rows: &[JointCorrection], architecture: Architecture, options: &TrainOptions) -> Trained {
     train(rows, architecture, Fingerprint(7), options, &|| {}).unwrap()
 }
 
 /// Indices of the rows whose corrections can change without changing the trained networks.
 fn rows_the_networks_ignore(
-    rows: &[CorrectionRow],
+    rows: &[JointCorrection],
     architecture: Architecture,
     options: &TrainOptions,
 ) -> Vec<usize> {
@@ -75,7 +75,7 @@ fn rows_the_networks_ignore(
 }
 
 /// RMSE of Eq. 18 of `model` over `indices` (commanded input): `√(1/K Σ_k ‖Δq_k − N(q_k)‖²)`.
-fn rmse_over(model: &Model, rows: &[CorrectionRow], indices: &[usize]) -> f64 {
+fn rmse_over(model: &Model, rows: &[JointCorrection], indices: &[usize]) -> f64 {
     assert_eq!(model.input, NetworkInput::Commanded);
     let sum: f64 = indices
         .iter()
@@ -90,7 +90,7 @@ fn rmse_over(model: &Model, rows: &[CorrectionRow], indices: &[usize]) -> f64 {
 }
 
 /// Like [`rmse_over`] for the single output `leg` of a decoupled model.
-fn leg_rmse_over(model: &Model, rows: &[CorrectionRow], indices: &[usize], leg: usize) -> f64 {
+fn leg_rmse_over(model: &Model, rows: &[JointCorrection], indices: &[usize], leg: usize) -> f64 {
     let sum: f64 = indices
         .iter()
         .map(|&k| (rows[k].corrections[leg] - model.raw_corrections(&rows[k].legs)[leg]).powi(2))
@@ -226,10 +226,10 @@ fn training_with_commanded_input_learns_the_corrections_as_a_function_of_the_com
     // the equivalent legs differ enough for the two inputs to give clearly different networks.
     let mut rng = ChaCha8Rng::seed_from_u64(11);
     let steep = |q: &[f64; LEGS]| corrections_of(q, 3.0, 30.0);
-    let data: Vec<CorrectionRow> = (0..80)
+    let data: Vec<JointCorrection> = (0..80)
         .map(|k| {
             let legs: [f64; LEGS] = std::array::from_fn(|_| rng.random_range(300.0..410.0));
-            CorrectionRow {
+            JointCorrection {
                 id: k.to_string(),
                 legs,
                 corrections: steep(&legs),
@@ -292,7 +292,7 @@ fn training_with_commanded_input_learns_the_corrections_as_a_function_of_the_com
 }
 
 /// `[min, max]` of `pick(row)` over the rows.
-fn range_of(rows: &[CorrectionRow], pick: impl Fn(&CorrectionRow) -> f64) -> [f64; 2] {
+fn range_of(rows: &[JointCorrection], pick: impl Fn(&JointCorrection) -> f64) -> [f64; 2] {
     let values: Vec<f64> = rows.iter().map(pick).collect();
     [
         values.iter().copied().fold(f64::INFINITY, f64::min),

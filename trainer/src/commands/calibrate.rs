@@ -5,19 +5,18 @@ use std::time::Instant;
 
 use anyhow::Context;
 use hexacomp_core::compensator::compensate_pose;
-use hexacomp_core::formats::{MeasurementRow, read_measurements, write_measurements, write_poses};
+use hexacomp_core::records::MeasuredConfiguration;
 use hexacomp_core::sampling::{SamplerOptions, WorkspaceSampler};
 use hexacomp_core::stats::PoseErrorStats;
-use hexacomp_core::virtual_platform::{
-    DEFAULT_MACHINE_SEED, ErrorModel, ErrorVariant, VirtualPlatform,
-};
 use hexacomp_core::{Geometry, inverse_kinematics};
+use hexacomp_formats::{Records, read_measurements, write_measurements, write_poses};
 use hexacomp_trainer::corrections::Outcome;
 use hexacomp_trainer::evaluate::drive;
 use hexacomp_trainer::identify::{IdentifyOptions, identify};
 use hexacomp_trainer::pipeline::{Pipeline, Solved};
 use hexacomp_trainer::plan::PlanOptions;
 use hexacomp_trainer::train::{Architecture, TrainOptions, Trained};
+use hexacomp_virtual::{DEFAULT_MACHINE_SEED, ErrorModel, ErrorVariant, VirtualPlatform};
 
 use super::solve::{print_problems, write_outcomes};
 use super::train::{
@@ -107,7 +106,7 @@ pub fn run(geometry: &Geometry, args: &CalibrateArgs) -> anyhow::Result<()> {
 
     let start = Instant::now();
     let solved = pipeline.solve(geometry, &measurements)?;
-    print_problems(&solved.outcomes, " (kept)");
+    print_problems(&solved.outcomes, &measurements, " (kept)");
     let all: Vec<&Outcome> = solved.outcomes.iter().collect();
     write_outcomes(&dir.join("corrections.csv"), &all)?;
     stages.record("solve corrections", start);
@@ -178,21 +177,21 @@ pub fn run(geometry: &Geometry, args: &CalibrateArgs) -> anyhow::Result<()> {
 }
 
 /// The measurements: read from --measurements, or the plan measured on the virtual platform
-/// (both written to the output folder).
+/// (both written to the output folder, and the measurements read back from it, so that what is
+/// solved is what the folder holds).
 fn acquire(
     args: &CalibrateArgs,
     pipeline: &Pipeline,
     platform: &mut VirtualPlatform,
-) -> anyhow::Result<Vec<MeasurementRow>> {
+) -> anyhow::Result<Records<MeasuredConfiguration>> {
     if let Some(path) = &args.measurements {
         return Ok(read_measurements(path)?);
     }
     let (poses, measured) = pipeline.measure_virtual(platform)?;
+    let written = args.out_dir.join("measurements.csv");
     write_file(&args.out_dir.join("poses.csv"), |w| write_poses(w, &poses))?;
-    write_file(&args.out_dir.join("measurements.csv"), |w| {
-        write_measurements(w, &measured)
-    })?;
-    Ok(measured)
+    write_file(&written, |w| write_measurements(w, &measured))?;
+    Ok(read_measurements(&written)?)
 }
 
 /// Trains the coupled and the decoupled networks on the solved corrections, writing each model
@@ -245,7 +244,7 @@ fn train_both(
 fn check_on_fresh_poses(
     geometry: &Geometry,
     platform: &VirtualPlatform,
-    measurements: &[MeasurementRow],
+    measurements: &[MeasuredConfiguration],
     trained: &[(Architecture, Trained)],
     args: &CalibrateArgs,
 ) -> anyhow::Result<Table<4>> {

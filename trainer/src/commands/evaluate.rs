@@ -5,10 +5,10 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 use hexacomp_core::Geometry;
 use hexacomp_core::stats::{ErrorStats, PoseErrorStats};
-use hexacomp_core::virtual_platform::{DEFAULT_MACHINE_SEED, ErrorModel, ErrorVariant};
 use hexacomp_trainer::evaluate::{Evaluation, EvaluationOptions, Method, evaluate};
 use hexacomp_trainer::svg::{Chart, Series};
 use hexacomp_trainer::train::TrainOptions;
+use hexacomp_virtual::{DEFAULT_MACHINE_SEED, ErrorModel, ErrorVariant};
 
 use super::train::InputArg;
 use hexacomp_trainer::table::Table;

@@ -3,8 +3,8 @@
 use std::path::PathBuf;
 
 use anyhow::Context;
-use hexacomp_core::formats::read_measurements;
 use hexacomp_core::{Geometry, LEGS};
+use hexacomp_formats::read_measurements;
 use hexacomp_trainer::identify::{IdentifyOptions, PARAMETERS, identify};
 
 /// Identify the platform's geometric parameters from point measurements (the paper's model-based

@@ -20,8 +20,8 @@ use anyhow::Context;
 /// Writes a file through `write`, reporting the path on failure.
 pub fn write_file(
     path: &Path,
-    write: impl FnOnce(std::io::BufWriter<std::fs::File>) -> hexacomp_core::Result<()>,
+    write: impl FnOnce(std::io::BufWriter<std::fs::File>) -> hexacomp_formats::Result<()>,
 ) -> anyhow::Result<()> {
-    let file = hexacomp_core::formats::create_file(path)?;
+    let file = hexacomp_formats::create_file(path)?;
     write(file).with_context(|| format!("writing {}", path.display()))
 }

@@ -3,8 +3,8 @@
 use std::path::PathBuf;
 
 use hexacomp_core::Geometry;
-use hexacomp_core::formats::write_poses;
 use hexacomp_core::sampling::SamplerOptions;
+use hexacomp_formats::write_poses;
 use hexacomp_trainer::plan::{PlanOptions, numbered_rows, plan};
 
 use super::write_file;

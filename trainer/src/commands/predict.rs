@@ -4,8 +4,9 @@ use std::path::PathBuf;
 
 use hexacomp_core::Geometry;
 use hexacomp_core::compensator::{PointStatus, compensate_legs, compensate_pose};
-use hexacomp_core::formats::{CompensatedRow, read_joints, read_poses, write_compensated};
 use hexacomp_core::model::Model;
+use hexacomp_core::records::NamedCompensation;
+use hexacomp_formats::{read_joints, read_poses, write_compensated};
 
 use super::write_file;
 
@@ -38,17 +39,17 @@ pub struct PredictArgs {
 
 pub fn run(geometry: &Geometry, args: &PredictArgs) -> anyhow::Result<()> {
     let model = Model::load(&args.model, geometry)?;
-    let rows: Vec<CompensatedRow> = match (&args.poses, &args.joints) {
+    let rows: Vec<NamedCompensation> = match (&args.poses, &args.joints) {
         (Some(path), _) => read_poses(path)?
             .into_iter()
-            .map(|r| CompensatedRow {
+            .map(|r| NamedCompensation {
                 point: compensate_pose(geometry, Some(&model), &r.pose()),
                 id: r.id,
             })
             .collect(),
         (None, Some(path)) => read_joints(path)?
             .into_iter()
-            .map(|r| CompensatedRow {
+            .map(|r| NamedCompensation {
                 point: compensate_legs(geometry, Some(&model), &r.legs),
                 id: r.id,
             })

@@ -3,11 +3,9 @@
 use std::path::PathBuf;
 
 use hexacomp_core::Geometry;
-use hexacomp_core::formats::{read_poses, write_measurements};
-use hexacomp_core::virtual_platform::{
-    DEFAULT_MACHINE_SEED, ErrorModel, ErrorVariant, VirtualPlatform,
-};
+use hexacomp_formats::{read_poses, write_measurements};
 use hexacomp_trainer::acquire::measure_plan;
+use hexacomp_virtual::{DEFAULT_MACHINE_SEED, ErrorModel, ErrorVariant, VirtualPlatform};
 
 use super::write_file;
 

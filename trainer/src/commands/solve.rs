@@ -5,7 +5,8 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use hexacomp_core::Geometry;
-use hexacomp_core::formats::{read_measurements, write_corrections};
+use hexacomp_core::records::MeasuredConfiguration;
+use hexacomp_formats::{Records, read_measurements, write_corrections};
 use hexacomp_trainer::corrections::{Checks, Outcome, Solution, SolverOptions, solve_all};
 
 use super::write_file;
@@ -87,7 +88,14 @@ pub fn run(geometry: &Geometry, args: &SolveArgs) -> anyhow::Result<()> {
         .filter(|o| o.solution.is_ok() && (o.flags.is_empty() || !args.exclude_flagged))
         .collect();
     let written = write_outcomes(&args.out, &kept)?;
-    report(&outcomes, &options, elapsed.as_secs_f64(), written, args);
+    report(
+        &outcomes,
+        &rows,
+        &options,
+        elapsed.as_secs_f64(),
+        written,
+        args,
+    );
     anyhow::ensure!(
         written > 0,
         "no configuration could be solved; nothing to train on"
@@ -97,6 +105,7 @@ pub fn run(geometry: &Geometry, args: &SolveArgs) -> anyhow::Result<()> {
 
 fn report(
     outcomes: &[Outcome],
+    measurements: &Records<MeasuredConfiguration>,
     options: &SolverOptions,
     seconds: f64,
     written: usize,
@@ -127,7 +136,7 @@ fn report(
         options.cond_threshold,
         mean_residual,
     );
-    print_problems(outcomes, "");
+    print_problems(outcomes, measurements, "");
     let flagged = outcomes.iter().filter(|o| !o.flags.is_empty()).count();
     if flagged > 0 {
         eprintln!(
@@ -151,7 +160,7 @@ pub fn write_outcomes(path: &Path, outcomes: &[&Outcome]) -> anyhow::Result<usiz
         .collect();
     let corrections: Vec<_> = solved
         .iter()
-        .filter_map(|(o, _)| o.correction_row())
+        .filter_map(|(o, _)| o.joint_correction())
         .collect();
     let diagnostics: Vec<Vec<String>> = solved
         .iter()
@@ -176,19 +185,25 @@ pub fn write_outcomes(path: &Path, outcomes: &[&Outcome]) -> anyhow::Result<usiz
 }
 
 /// Prints every configuration that could not be solved (as an error) or was flagged (as a
-/// warning, followed by `flag_note`).
-pub fn print_problems(outcomes: &[Outcome], flag_note: &str) {
-    for o in outcomes {
+/// warning, followed by `flag_note`), with its line in `measurements` (the file the outcomes,
+/// in the same order, were solved from).
+pub fn print_problems(
+    outcomes: &[Outcome],
+    measurements: &Records<MeasuredConfiguration>,
+    flag_note: &str,
+) {
+    for (index, o) in outcomes.iter().enumerate() {
+        let line = measurements.line(index);
         if let Err(e) = &o.solution {
             eprintln!(
-                "error: configuration {} (line {}): cannot be solved: {e}",
-                o.id, o.line
+                "error: configuration {} (line {line}): cannot be solved: {e}",
+                o.id
             );
         }
         for flag in &o.flags {
             eprintln!(
-                "warning: configuration {} (line {}): {flag}{flag_note}",
-                o.id, o.line
+                "warning: configuration {} (line {line}): {flag}{flag_note}",
+                o.id
             );
         }
     }

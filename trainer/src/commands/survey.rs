@@ -4,7 +4,7 @@
 use hexacomp_core::Geometry;
 use hexacomp_core::sampling::{SamplerOptions, WorkspaceSampler};
 use hexacomp_core::stats::{ErrorStats, PoseErrorStats};
-use hexacomp_core::virtual_platform::{
+use hexacomp_virtual::{
     DEFAULT_MACHINE_SEED, DEFAULT_NOISE_SEED, ErrorModel, ErrorVariant, VirtualPlatform,
 };
 

@@ -4,8 +4,9 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use hexacomp_core::Geometry;
-use hexacomp_core::formats::{CorrectionRow, read_corrections};
 use hexacomp_core::model::NetworkInput;
+use hexacomp_core::records::JointCorrection;
+use hexacomp_formats::read_corrections;
 use hexacomp_trainer::pipeline::Pipeline;
 use hexacomp_trainer::svg::{Chart, Series};
 use hexacomp_trainer::train::{Architecture, Selection, TrainOptions, Trained};
@@ -127,7 +128,7 @@ pub fn run(geometry: &Geometry, args: &TrainArgs) -> anyhow::Result<()> {
 
 /// Trains with a progress bar over the sweep, recording `source` in the provenance.
 pub fn train_with_progress(
-    rows: &[CorrectionRow],
+    rows: &[JointCorrection],
     architecture: Architecture,
     geometry: &Geometry,
     pipeline: &Pipeline,

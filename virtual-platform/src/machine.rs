@@ -7,11 +7,11 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 
 use super::error_model::ErrorModel;
-use crate::error::Result;
-use crate::geometry::{Geometry, LEGS};
-use crate::kinematics::{ForwardOptions, forward_kinematics};
-use crate::pose::Pose;
-use crate::screw::ActuationScrews;
+use hexacomp_core::error::Result;
+use hexacomp_core::geometry::{Geometry, LEGS};
+use hexacomp_core::kinematics::{ForwardOptions, forward_kinematics};
+use hexacomp_core::pose::Pose;
+use hexacomp_core::screw::ActuationScrews;
 
 /// Standard gravity, m/s².
 const GRAVITY: f64 = 9.806_65;

@@ -5,7 +5,7 @@ use std::str::FromStr;
 
 use glam::DVec3;
 
-use crate::error::{Error, Result};
+use hexacomp_core::error::{Error, Result};
 
 /// Lead-screw errors of each leg: the difference between the length the encoder reports and the
 /// real length, a nonlinear function of the leg length `q`. With `u = (q − q_mid)/(stroke/2)`:

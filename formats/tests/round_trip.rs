@@ -1,10 +1,11 @@
 //! The CSV formats: exact round trips and strict refusal naming file, line and column.
 
 use glam::DVec3;
-use hexacomp_core::Error;
-use hexacomp_core::formats::{
-    CorrectionRow, MeasurementRow, PoseRow, read_corrections, read_measurements, read_poses,
-    write_corrections, write_measurements, write_poses,
+use hexacomp_core::records::{JointCorrection, MeasuredConfiguration, NamedPose};
+use hexacomp_formats::Error;
+use hexacomp_formats::{
+    read_corrections, read_measurements, read_poses, write_corrections, write_measurements,
+    write_poses,
 };
 
 fn write(dir: &tempfile::TempDir, name: &str, text: &str) -> std::path::PathBuf {
@@ -32,11 +33,11 @@ const MEASUREMENT_HEADER: &str =
 fn poses_round_trip_to_the_bit() {
     let dir = tempfile::tempdir().unwrap();
     let rows = vec![
-        PoseRow {
+        NamedPose {
             id: "1".into(),
             pose_mm_deg: [0.1, -2.0 / 3.0, 280.0, 1e-7, -3.3, 9.9],
         },
-        PoseRow {
+        NamedPose {
             id: "p-2".into(),
             pose_mm_deg: [1.0, 2.0, 3.0, 4.0, 5.0, 6.0],
         },
@@ -45,15 +46,14 @@ fn poses_round_trip_to_the_bit() {
     write_poses(std::fs::File::create(&path).unwrap(), &rows).unwrap();
     let text = std::fs::read_to_string(&path).unwrap();
     assert!(text.starts_with("id,x,y,z,a,b,c\n"), "{text}");
-    assert_eq!(read_poses(&path).unwrap(), rows);
+    assert_eq!(read_poses(&path).unwrap().items, rows);
 }
 
 #[test]
 fn measurements_and_corrections_round_trip() {
     let dir = tempfile::tempdir().unwrap();
-    let m = vec![MeasurementRow {
+    let m = vec![MeasuredConfiguration {
         id: "7".into(),
-        line: 2,
         pose_mm_deg: [1.5, 2.5, 290.0, 3.0, -4.0, 5.0],
         legs: [350.1, 351.2, 352.3, 353.4, 354.5, 355.6],
         targets: [
@@ -72,9 +72,9 @@ fn measurements_and_corrections_round_trip() {
             .unwrap(),
         MEASUREMENT_HEADER
     );
-    assert_eq!(read_measurements(&path).unwrap(), m);
+    assert_eq!(read_measurements(&path).unwrap().items, m);
 
-    let c = vec![CorrectionRow {
+    let c = vec![JointCorrection {
         id: "7".into(),
         legs: [350.1, 351.2, 352.3, 353.4, 354.5, 355.6],
         corrections: [0.1, -0.2, 0.3, -0.4, 0.5, -0.6],
@@ -92,7 +92,7 @@ fn measurements_and_corrections_round_trip() {
         text.starts_with("id,q1,q2,q3,q4,q5,q6,dq1,dq2,dq3,dq4,dq5,dq6,cond_pt\n"),
         "{text}"
     );
-    assert_eq!(read_corrections(&path).unwrap(), c);
+    assert_eq!(read_corrections(&path).unwrap().items, c);
 }
 
 #[test]
@@ -177,4 +177,19 @@ fn wrong_width_text_and_empty_files_are_refused() {
             .to_string()
             .contains("missing.csv")
     );
+}
+
+#[test]
+fn records_keep_the_line_the_editor_shows_past_comments_and_blank_lines() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write(
+        &dir,
+        "poses.csv",
+        "# planned on Monday\nid,x,y,z,a,b,c\n\np1,0,0,280,0,0,0\n# moved\np2,1,0,280,0,0,0\n",
+    );
+    let records = read_poses(&path).unwrap();
+    let ids: Vec<&str> = records.iter().map(|r| r.id.as_str()).collect();
+    assert_eq!(ids, ["p1", "p2"]);
+    assert_eq!((records.line(0), records.line(1)), (4, 6));
+    assert_eq!(records.file, path.display().to_string());
 }

@@ -5,11 +5,11 @@ use glam::DVec3;
 use hexacomp_core::kinematics::target_points;
 use hexacomp_core::sampling::{SamplerOptions, WorkspaceSampler};
 use hexacomp_core::stats::PoseErrorStats;
-use hexacomp_core::virtual_platform::{
+use hexacomp_core::{Geometry, Pose, inverse_kinematics};
+use hexacomp_virtual::{
     DEFAULT_MACHINE_SEED, DEFAULT_NOISE_SEED, ErrorModel, ErrorVariant, TrueMachine,
     VirtualPlatform,
 };
-use hexacomp_core::{Geometry, Pose, inverse_kinematics};
 
 /// The paper's Table 2, "before compensation": mean ‖δ_A‖ (mm) and mean ‖ε‖ (deg).
 const PAPER_POSITION_MEAN_MM: f64 = 0.642;

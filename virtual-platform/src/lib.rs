@@ -5,6 +5,11 @@
 //! that depends on the configuration, and random repeatability noise on every move. The device
 //! measures the three target points in the base frame with a set uncertainty. Both are seeded:
 //! the machine by `machine_seed`, the noise stream by `noise_seed`.
+//!
+//! Units: mm and radians; points in the base frame. Errors are `hexacomp-core`'s
+//! [`hexacomp_core::Error`]: settings out of range, and the kinematics of the simulated machine.
+
+#![warn(missing_docs)]
 
 mod error_model;
 mod machine;
@@ -16,11 +21,11 @@ use glam::DVec3;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
-use crate::error::Result;
-use crate::geometry::{Geometry, LEGS, TARGETS};
-use crate::kinematics::{inverse_kinematics, target_points};
-use crate::pose::Pose;
-use crate::stats::PoseErrorNorm;
+use hexacomp_core::error::Result;
+use hexacomp_core::geometry::{Geometry, LEGS, TARGETS};
+use hexacomp_core::kinematics::{inverse_kinematics, target_points};
+use hexacomp_core::pose::Pose;
+use hexacomp_core::stats::PoseErrorNorm;
 use machine::{normal, normal3};
 
 /// The default machine seed. Machines drawn with the default [`ErrorModel`] scatter around the

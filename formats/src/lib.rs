@@ -1,4 +1,7 @@
-//! The CSV files of docs/formats.md: poses, measurements and joint corrections.
+//! # hexacomp-formats
+//!
+//! The CSV files of docs/formats.md: poses, measurements, joint corrections, joints and
+//! compensated output, read into and written from the records of [`hexacomp_core::records`].
 //!
 //! Every file has a header row, one configuration per row, `,` separators and `#` comment lines.
 //! Readers are strict: a missing column, a row of the wrong width, an empty or duplicate id, or a
@@ -7,19 +10,23 @@
 //! diagnostics after a corrections file's required ones) are allowed. Writers print numbers in
 //! their shortest exact form, so a written file reads back to the same bits.
 //!
-//! Units: mm and degrees in the files and in the rows (kept exactly as written); the rows'
-//! `pose()` methods convert to [`Pose`] (mm, radians).
+//! Units: mm and degrees in the files and in the records, kept exactly as written.
+
+#![warn(missing_docs)]
+
+mod error;
 
 use std::collections::HashMap;
 use std::io::{Read, Write};
 use std::path::Path;
 
 use glam::DVec3;
+use hexacomp_core::geometry::{LEGS, TARGETS};
+use hexacomp_core::records::{
+    JointCorrection, MeasuredConfiguration, NamedCompensation, NamedLegs, NamedPose,
+};
 
-use crate::compensator::Compensated;
-use crate::error::{Error, Result};
-use crate::geometry::{LEGS, TARGETS};
-use crate::pose::Pose;
+pub use error::{Error, Result};
 
 /// Pose columns after `id`: `x, y, z` (mm), `a, b, c` (deg).
 pub const POSE_COLUMNS: [&str; 6] = ["x", "y", "z", "a", "b", "c"];
@@ -32,72 +39,55 @@ pub const TARGET_COLUMNS: [&str; 3 * TARGETS] = [
     "p1x", "p1y", "p1z", "p2x", "p2y", "p2z", "p3x", "p3y", "p3z",
 ];
 
-/// One row of a poses file: `id,x,y,z,a,b,c`.
+/// The records of one file, in file order, with the line each came from (for messages).
 #[derive(Debug, Clone, PartialEq)]
-pub struct PoseRow {
-    /// The configuration's id, unique in its file.
-    pub id: String,
-    /// The pose `[x, y, z, a, b, c]` exactly as in the file, mm and degrees.
-    pub pose_mm_deg: [f64; 6],
+pub struct Records<T> {
+    /// The file's path as given.
+    pub file: String,
+    /// The records, in file order.
+    pub items: Vec<T>,
+    lines: Vec<u64>,
 }
 
-impl PoseRow {
-    /// The row's pose (mm, rad).
-    pub fn pose(&self) -> Pose {
-        Pose::from_mm_deg(self.pose_mm_deg)
+impl<T> Records<T> {
+    /// The 1-based line of record `index` in the file (the header is line 1).
+    ///
+    /// # Panics
+    /// If `index` is not below `items.len()`.
+    pub fn line(&self, index: usize) -> u64 {
+        self.lines[index]
+    }
+
+    /// The records without their lines.
+    pub fn into_items(self) -> Vec<T> {
+        self.items
     }
 }
 
-/// One row of a measurements file: commanded pose, the nominal legs commanded for it, and the
-/// three measured target points in the base frame.
-#[derive(Debug, Clone, PartialEq)]
-pub struct MeasurementRow {
-    /// The configuration's id.
-    pub id: String,
-    /// Line of the row in its file (for messages).
-    pub line: u64,
-    /// The commanded pose `[x, y, z, a, b, c]` exactly as in the file, mm and degrees.
-    pub pose_mm_deg: [f64; 6],
-    /// The nominal leg lengths that were commanded, mm.
-    pub legs: [f64; LEGS],
-    /// The measured target points `P_1..P_3` in the base frame, mm.
-    pub targets: [DVec3; TARGETS],
-}
+impl<T> std::ops::Deref for Records<T> {
+    type Target = [T];
 
-impl MeasurementRow {
-    /// The commanded pose (mm, rad).
-    pub fn pose(&self) -> Pose {
-        Pose::from_mm_deg(self.pose_mm_deg)
+    fn deref(&self) -> &[T] {
+        &self.items
     }
 }
 
-/// One row of a corrections file: nominal legs `q` and joint corrections `dq` (mm).
-#[derive(Debug, Clone, PartialEq)]
-pub struct CorrectionRow {
-    /// The configuration's id.
-    pub id: String,
-    /// Nominal (commanded) leg lengths `q⁽⁰⁾`, mm.
-    pub legs: [f64; LEGS],
-    /// Joint corrections `Δq = q⁽⁰⁾ − q⁽ᴸ⁾` (Eq. 9), mm.
-    pub corrections: [f64; LEGS],
+impl<'a, T> IntoIterator for &'a Records<T> {
+    type Item = &'a T;
+    type IntoIter = std::slice::Iter<'a, T>;
+
+    fn into_iter(self) -> Self::IntoIter {
+        self.items.iter()
+    }
 }
 
-/// One row of a joints file: `id,q1..q6` (nominal leg lengths, mm).
-#[derive(Debug, Clone, PartialEq)]
-pub struct JointsRow {
-    /// The point's id.
-    pub id: String,
-    /// Nominal leg lengths, mm.
-    pub legs: [f64; LEGS],
-}
+impl<T> IntoIterator for Records<T> {
+    type Item = T;
+    type IntoIter = std::vec::IntoIter<T>;
 
-/// One row of a compensated-output file: the legs to command, the corrections and a status.
-#[derive(Debug, Clone, PartialEq)]
-pub struct CompensatedRow {
-    /// The point's id.
-    pub id: String,
-    /// The compensated point.
-    pub point: Compensated,
+    fn into_iter(self) -> Self::IntoIter {
+        self.items.into_iter()
+    }
 }
 
 /// A parsed CSV file: header, and each data row with its line number.
@@ -281,80 +271,81 @@ impl Table {
     }
 }
 
+impl Table {
+    /// `make(row)` for every row, collected with the rows' lines.
+    fn records<T>(self, make: impl Fn(&Self, usize) -> Result<T>) -> Result<Records<T>> {
+        let items = (0..self.rows.len())
+            .map(|row| make(&self, row))
+            .collect::<Result<Vec<T>>>()?;
+        Ok(Records {
+            lines: self.rows.iter().map(|(line, _)| *line).collect(),
+            file: self.file,
+            items,
+        })
+    }
+}
+
 /// Reads a poses file (`id,x,y,z,a,b,c`).
-pub fn read_poses(path: &Path) -> Result<Vec<PoseRow>> {
+pub fn read_poses(path: &Path) -> Result<Records<NamedPose>> {
     let table = Table::read(path)?;
     let ids = table.ids()?;
     let pose_cols = table.require(POSE_COLUMNS)?;
-    ids.into_iter()
-        .enumerate()
-        .map(|(row, id)| {
-            Ok(PoseRow {
-                id,
-                pose_mm_deg: table.numbers(row, POSE_COLUMNS, pose_cols)?,
-            })
+    table.records(|table, row| {
+        Ok(NamedPose {
+            id: ids[row].clone(),
+            pose_mm_deg: table.numbers(row, POSE_COLUMNS, pose_cols)?,
         })
-        .collect()
+    })
 }
 
 /// Reads a measurements file (`id,x,y,z,a,b,c,q1..q6,p1x..p3z`).
-pub fn read_measurements(path: &Path) -> Result<Vec<MeasurementRow>> {
+pub fn read_measurements(path: &Path) -> Result<Records<MeasuredConfiguration>> {
     let table = Table::read(path)?;
     let ids = table.ids()?;
     let pose_cols = table.require(POSE_COLUMNS)?;
     let leg_cols = table.require(LEG_COLUMNS)?;
     let target_cols = table.require(TARGET_COLUMNS)?;
-    ids.into_iter()
-        .enumerate()
-        .map(|(row, id)| {
-            let p = table.numbers(row, TARGET_COLUMNS, target_cols)?;
-            Ok(MeasurementRow {
-                id,
-                line: table.rows[row].0,
-                pose_mm_deg: table.numbers(row, POSE_COLUMNS, pose_cols)?,
-                legs: table.numbers(row, LEG_COLUMNS, leg_cols)?,
-                targets: std::array::from_fn(|j| DVec3::new(p[3 * j], p[3 * j + 1], p[3 * j + 2])),
-            })
+    table.records(|table, row| {
+        let p = table.numbers(row, TARGET_COLUMNS, target_cols)?;
+        Ok(MeasuredConfiguration {
+            id: ids[row].clone(),
+            pose_mm_deg: table.numbers(row, POSE_COLUMNS, pose_cols)?,
+            legs: table.numbers(row, LEG_COLUMNS, leg_cols)?,
+            targets: std::array::from_fn(|j| DVec3::new(p[3 * j], p[3 * j + 1], p[3 * j + 2])),
         })
-        .collect()
+    })
 }
 
 /// Reads a corrections file (`id,q1..q6,dq1..dq6`, diagnostic columns ignored).
-pub fn read_corrections(path: &Path) -> Result<Vec<CorrectionRow>> {
+pub fn read_corrections(path: &Path) -> Result<Records<JointCorrection>> {
     let table = Table::read(path)?;
     let ids = table.ids()?;
     let leg_cols = table.require(LEG_COLUMNS)?;
     let dq_cols = table.require(CORRECTION_COLUMNS)?;
-    ids.into_iter()
-        .enumerate()
-        .map(|(row, id)| {
-            Ok(CorrectionRow {
-                id,
-                legs: table.numbers(row, LEG_COLUMNS, leg_cols)?,
-                corrections: table.numbers(row, CORRECTION_COLUMNS, dq_cols)?,
-            })
+    table.records(|table, row| {
+        Ok(JointCorrection {
+            id: ids[row].clone(),
+            legs: table.numbers(row, LEG_COLUMNS, leg_cols)?,
+            corrections: table.numbers(row, CORRECTION_COLUMNS, dq_cols)?,
         })
-        .collect()
+    })
 }
 
 /// Reads a joints file (`id,q1..q6`).
-pub fn read_joints(path: &Path) -> Result<Vec<JointsRow>> {
+pub fn read_joints(path: &Path) -> Result<Records<NamedLegs>> {
     let table = Table::read(path)?;
     let ids = table.ids()?;
     let leg_cols = table.require(LEG_COLUMNS)?;
-    ids.into_iter()
-        .enumerate()
-        .map(|(row, id)| {
-            Ok(JointsRow {
-                id,
-                legs: table.numbers(row, LEG_COLUMNS, leg_cols)?,
-            })
+    table.records(|table, row| {
+        Ok(NamedLegs {
+            id: ids[row].clone(),
+            legs: table.numbers(row, LEG_COLUMNS, leg_cols)?,
         })
-        .collect()
+    })
 }
 
 /// Writes a compensated-output file: `id,q1..q6` (the legs to command), `dq1..dq6`, `status`.
-pub fn write_compensated<W: Write>(writer: W, rows: &[CompensatedRow]) -> Result<()> {
+pub fn write_compensated<W: Write>(writer: W, rows: &[NamedCompensation]) -> Result<()> {
     let mut head = header(&[&LEG_COLUMNS, &CORRECTION_COLUMNS]);
     head.push("status");
     write_rows(
@@ -401,7 +392,7 @@ fn header<'a>(parts: &[&[&'a str]]) -> Vec<&'a str> {
 }
 
 /// Writes a poses file.
-pub fn write_poses<W: Write>(writer: W, rows: &[PoseRow]) -> Result<()> {
+pub fn write_poses<W: Write>(writer: W, rows: &[NamedPose]) -> Result<()> {
     write_rows(
         writer,
         &header(&[&POSE_COLUMNS]),
@@ -414,7 +405,7 @@ pub fn write_poses<W: Write>(writer: W, rows: &[PoseRow]) -> Result<()> {
 }
 
 /// Writes a measurements file.
-pub fn write_measurements<W: Write>(writer: W, rows: &[MeasurementRow]) -> Result<()> {
+pub fn write_measurements<W: Write>(writer: W, rows: &[MeasuredConfiguration]) -> Result<()> {
     write_rows(
         writer,
         &header(&[&POSE_COLUMNS, &LEG_COLUMNS, &TARGET_COLUMNS]),
@@ -433,7 +424,7 @@ pub fn write_measurements<W: Write>(writer: W, rows: &[MeasurementRow]) -> Resul
 /// `diagnostic_columns` whose cells come from `diagnostics` (one `Vec` per row).
 pub fn write_corrections<W: Write>(
     writer: W,
-    rows: &[CorrectionRow],
+    rows: &[JointCorrection],
     diagnostic_columns: &[&str],
     diagnostics: &[Vec<String>],
 ) -> Result<()> {

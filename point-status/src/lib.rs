@@ -1,6 +1,11 @@
-//! The status of one compensated point, as it travels in [`PointResponse::status`].
+//! # hexacomp-point-status
 //!
-//! [`PointResponse::status`]: crate::PointResponse::status
+//! The status of one compensated point: what the compensator (`hexacomp-core`) computes and what
+//! travels on the wire (`hexacomp-protocol`'s `PointResponse::status`, as `u8`). One definition
+//! for both, in a crate without dependencies, so that neither of the two needs the other.
+
+#![no_std]
+#![warn(missing_docs)]
 
 /// How a point was compensated. The numeric values are the wire values: a service sends
 /// `status as u8`, a client reads it back with [`PointStatus::from_u8`].
@@ -16,7 +21,7 @@ pub enum PointStatus {
     /// A correction exceeded the model's bounds and was clamped to them.
     Clamped = 3,
     /// A non-finite input, or a non-finite output of the model: no correction applied, the legs
-    /// returned are the input.
+    /// returned are the input (for a non-finite pose, its non-finite inverse kinematics).
     InvalidInput = 4,
     /// No model loaded: the legs returned are the nominal ones.
     NoModel = 5,

@@ -1,0 +1,24 @@
+//! The one error type of `hexacomp-formats`.
+
+use thiserror::Error;
+
+/// A CSV file that could not be read or written, or one of its rows or columns that is invalid.
+#[derive(Debug, Clone, PartialEq, Error)]
+#[non_exhaustive]
+pub enum Error {
+    /// The file, or one of its rows or columns, is invalid, or it could not be read or created.
+    #[error("{file}:{line}: {}{message}", column.as_ref().map(|c| format!("column {c}: ")).unwrap_or_default())]
+    Format {
+        /// The file's path as given (`<output>` for a writer without a path).
+        file: String,
+        /// 1-based line number (1 is the header); 0 when the problem is the file as a whole.
+        line: u64,
+        /// The column concerned, when one is.
+        column: Option<String>,
+        /// What is wrong.
+        message: String,
+    },
+}
+
+/// `Result` with the formats [`enum@Error`].
+pub type Result<T> = std::result::Result<T, Error>;
