@@ -3,12 +3,14 @@
 //! process so that one `cargo run` is enough for the demo.
 
 use std::path::PathBuf;
+use std::time::Duration;
 
 use clap::Parser;
 use hexacomp_core::Geometry;
 use hexacomp_protocol::DEFAULT_INSTANCE;
 
 use crate::serving::WaitMode;
+use crate::termination::{TerminationSignals, signal_name};
 use crate::{Error, Service, ServiceOptions};
 
 /// Serve joint compensation for one hexapod over iceoryx2 shared memory.
@@ -103,6 +105,14 @@ pub fn run(args: Args) -> Result<(), Error> {
     options.realtime = args.realtime;
     // 0 means unlimited on the command line.
     options.client_budget = Some(args.client_budget);
-    Service::start(options)?.join();
-    Ok(())
+    // Before any thread starts, so that every thread inherits the blocked signals.
+    let signals = TerminationSignals::block()?;
+    let service = Service::start(options)?;
+    while !service.is_finished() {
+        if let Some(signal) = signals.wait(Duration::from_millis(200)) {
+            tracing::info!("{} received: stopping", signal_name(signal));
+            service.stop();
+        }
+    }
+    service.join()
 }

@@ -53,13 +53,52 @@ impl ServiceOptions {
 }
 
 /// A running service instance. [`Service::start`] returns once both threads serve;
-/// [`Service::join`] waits until it stops (on [`Service::stop`], or SIGINT/SIGTERM).
+/// [`Service::join`] waits until it stops ([`Service::stop`]). The library installs no signal
+/// handlers: the `hexacomp-service` binary turns SIGTERM and SIGINT into [`Service::stop`]
+/// ([`crate::termination`]). Dropping a `Service` without joining it stops it and waits for it.
 #[derive(Debug)]
 pub struct Service {
-    serving: JoinHandle<()>,
-    control: JoinHandle<()>,
+    /// The serving and the control thread; taken by [`Service::join`] (or `Drop`).
+    threads: Option<Threads>,
     stop: Arc<AtomicBool>,
     counters: Arc<Counters>,
+}
+
+#[derive(Debug)]
+struct Threads {
+    serving: JoinHandle<()>,
+    control: Option<JoinHandle<()>>,
+}
+
+impl Threads {
+    /// Stops and joins both threads; the first thread that panicked, as an error.
+    fn stop_and_join(self, stop: &AtomicBool) -> Result<(), Error> {
+        // The serving thread ends on `stop`, and the control thread once the serving thread is
+        // gone (or on `stop`): set it again after the serving thread ends by itself.
+        let serving = self.serving.join();
+        stop.store(true, Ordering::Relaxed);
+        let control = self.control.map(JoinHandle::join);
+        panicked("serving", serving)?;
+        match control {
+            Some(result) => panicked("control", result),
+            None => Ok(()),
+        }
+    }
+}
+
+/// `Ok` for a thread that returned, the panic's message for one that panicked.
+fn panicked(thread: &'static str, result: std::thread::Result<()>) -> Result<(), Error> {
+    result.map_err(|payload| {
+        let message = payload
+            .downcast_ref::<&str>()
+            .map(|s| s.to_string())
+            .or_else(|| payload.downcast_ref::<String>().cloned())
+            .unwrap_or_else(|| "a panic without a message".into());
+        Error::Thread {
+            thread,
+            cause: format!("panicked: {message}"),
+        }
+    })
 }
 
 impl Service {
@@ -118,40 +157,35 @@ impl Service {
             schedule_serving_thread(cpu, realtime);
             serving::serve(setup, serving_ready)
         })?;
-        if let Err(e) = await_ready("serving", &serving_ready_rx) {
-            stop.store(true, Ordering::Relaxed);
-            let _ = serving.join();
-            return Err(e);
-        }
+        // From here on, a failure stops and joins what has started (`Drop`).
+        let mut service = Self {
+            threads: Some(Threads {
+                serving,
+                control: None,
+            }),
+            stop: stop.clone(),
+            counters: counters.clone(),
+        };
+        await_ready("serving", &serving_ready_rx)?;
         let setup = ControlSetup {
             instance: instance.clone(),
             geometry,
             state_dir,
             outgoing: to_serving,
             retired: retired_rx,
-            counters: counters.clone(),
-            stop: stop.clone(),
+            counters,
+            stop,
             initial_summary,
             initial_generation,
             wait_mode: wait.wire_value(),
         };
-        let control = match spawn("control", move || control::run(setup, control_ready))
-            .and_then(|control| await_ready("control", &control_ready_rx).map(|()| control))
-        {
-            Ok(control) => control,
-            Err(e) => {
-                stop.store(true, Ordering::Relaxed);
-                let _ = serving.join();
-                return Err(e);
-            }
-        };
+        let control = spawn("control", move || control::run(setup, control_ready))?;
+        if let Some(threads) = service.threads.as_mut() {
+            threads.control = Some(control);
+        }
+        await_ready("control", &control_ready_rx)?;
         tracing::info!("serving instance {instance}");
-        Ok(Self {
-            serving,
-            control,
-            stop,
-            counters,
-        })
+        Ok(service)
     }
 
     /// The counters both threads keep (requests, points, errors, generation serving, …).
@@ -164,13 +198,35 @@ impl Service {
         self.stop.store(true, Ordering::Relaxed);
     }
 
-    /// Waits until the serving thread stops ([`Service::stop`], or a termination signal), then
-    /// stops the control thread. The iceoryx2 resources are released when this returns.
-    pub fn join(self) {
-        let _ = self.serving.join();
-        self.stop.store(true, Ordering::Relaxed);
-        let _ = self.control.join();
+    /// Whether a thread of the service has ended (after [`Service::stop`], or a panic): the
+    /// service no longer serves, and [`Service::join`] returns at once.
+    pub fn is_finished(&self) -> bool {
+        self.threads.as_ref().is_none_or(|t| {
+            t.serving.is_finished() || t.control.as_ref().is_some_and(JoinHandle::is_finished)
+        })
+    }
+
+    /// Waits until the serving thread stops ([`Service::stop`]), then stops the control thread.
+    /// The iceoryx2 resources are released when this returns. A thread that panicked is an
+    /// [`Error::Thread`] naming it and the panic's message.
+    pub fn join(mut self) -> Result<(), Error> {
+        let result = match self.threads.take() {
+            Some(threads) => threads.stop_and_join(&self.stop),
+            None => Ok(()),
+        };
         tracing::info!("stopped; iceoryx2 resources released");
+        result
+    }
+}
+
+impl Drop for Service {
+    fn drop(&mut self) {
+        if let Some(threads) = self.threads.take() {
+            self.stop.store(true, Ordering::Relaxed);
+            if let Err(e) = threads.stop_and_join(&self.stop) {
+                tracing::error!("{e}");
+            }
+        }
     }
 }
 

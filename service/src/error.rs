@@ -68,6 +68,9 @@ pub enum Error {
         /// What happened.
         cause: String,
     },
+    /// SIGTERM and SIGINT could not be blocked for the main thread to take them.
+    #[error("blocking SIGTERM and SIGINT: {0}")]
+    Signals(std::io::Error),
     /// The operating system refused CPU pinning or real-time scheduling.
     #[error("{0}")]
     Scheduling(String),

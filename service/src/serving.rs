@@ -15,8 +15,6 @@ use hexacomp_protocol::{
     RequestOutcome, ResponseHeader,
 };
 use iceoryx2::prelude::*;
-use iceoryx2::waitset::WaitSetRunResult;
-use iceoryx2_bb_posix::signal::SignalHandler;
 
 use crate::answering::Answerer;
 use crate::{Counters, Error, Generation};
@@ -188,7 +186,7 @@ impl Drop for ServingLoop<'_> {
 }
 
 /// Creates the compensation endpoint (refusing when another service owns the instance) and
-/// serves until stopped. Returns when `stop` is set or a termination signal arrives; `ready`
+/// serves until stopped. Returns when `stop` is set; `ready`
 /// gets `Ok` once the endpoint serves, or why it cannot.
 pub fn serve(setup: ServingSetup, ready: Sender<Result<(), Error>>) {
     let ServingSetup {
@@ -202,7 +200,10 @@ pub fn serve(setup: ServingSetup, ready: Sender<Result<(), Error>>) {
         wait,
         client_budget,
     } = setup;
+    // No signal handling by iceoryx2: the binary takes SIGTERM/SIGINT itself (`termination`),
+    // and iceoryx2's handler would also record SIGCONT, SIGUSR1, … as "the last signal".
     let started = NodeBuilder::new()
+        .signal_handling_mode(SignalHandlingMode::Disabled)
         .create::<ipc::Service>()
         .map_err(|e| Error::Iceoryx(format!("creating the serving thread's node: {e}")))
         .and_then(|node| Ok((compensation_endpoint(&node, &instance)?, node)));
@@ -230,9 +231,12 @@ pub fn serve(setup: ServingSetup, ready: Sender<Result<(), Error>>) {
         },
         _ => None,
     };
-    let waitset = wake
-        .as_ref()
-        .and_then(|_| WaitSetBuilder::new().create::<ipc::Service>().ok());
+    let waitset = wake.as_ref().and_then(|_| {
+        WaitSetBuilder::new()
+            .signal_handling_mode(SignalHandlingMode::Disabled)
+            .create::<ipc::Service>()
+            .ok()
+    });
     let guards = match (&wake, &waitset) {
         (Some((_, listener)), Some(waitset)) => waitset
             .attach_notification(listener)
@@ -246,16 +250,12 @@ pub fn serve(setup: ServingSetup, ready: Sender<Result<(), Error>>) {
         }
         match (&waitset, &wake, &guards) {
             (Some(waitset), Some((_, listener)), Some(_)) => {
-                let result = waitset.wait_and_process_once_with_timeout(
+                // Whatever ended the wait — a wake-up, the tick, or an interrupted epoll_wait
+                // (EINTR after SIGSTOP/SIGCONT) — the loop goes on: only `stop` ends it.
+                let _ = waitset.wait_and_process_once_with_timeout(
                     |_| CallbackProgression::Continue,
                     Duration::from_millis(100),
                 );
-                if matches!(
-                    result,
-                    Ok(WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt)
-                ) {
-                    stop.store(true, Ordering::Relaxed);
-                }
                 let _ = listener.try_wait(|_| {});
             }
             _ => {
@@ -263,12 +263,6 @@ pub fn serve(setup: ServingSetup, ready: Sender<Result<(), Error>>) {
                     std::hint::spin_loop();
                 } else {
                     std::thread::sleep(Duration::from_micros(50));
-                }
-                // Termination signals, checked while idle. Not with `node.wait(ZERO)`: its
-                // zero-length nanosleep sleeps for the timer slack (tens of µs, over 100 µs on
-                // a virtual machine) and delays the next request by as much.
-                if SignalHandler::termination_requested() {
-                    stop.store(true, Ordering::Relaxed);
                 }
             }
         }

@@ -383,20 +383,44 @@ impl ServiceProcess {
     /// Sends `signal` (e.g. `libc::SIGTERM`) and waits for the service to exit (30 s at most);
     /// returns its exit status and its log.
     pub fn stop_with(mut self, signal: i32) -> (std::process::ExitStatus, String) {
-        signal_child(&self.child, signal);
-        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(30);
-        let status = loop {
-            if let Some(status) = self.child.try_wait().expect("waiting for the service") {
-                break status;
-            }
-            assert!(
-                std::time::Instant::now() < deadline,
+        let status = self.signal_and_wait(&[signal], std::time::Duration::from_secs(30));
+        let status = status.unwrap_or_else(|| {
+            panic!(
                 "the service did not stop on signal {signal}:\n{}",
                 self.log()
-            );
-            std::thread::sleep(std::time::Duration::from_millis(10));
-        };
+            )
+        });
         (status, self.log())
+    }
+
+    /// Sends `signals` back to back, in order, and waits up to `within` for the service to
+    /// exit: its exit status, or `None` if it is still running then.
+    pub fn signal_and_wait(
+        &mut self,
+        signals: &[i32],
+        within: std::time::Duration,
+    ) -> Option<std::process::ExitStatus> {
+        for &signal in signals {
+            signal_child(&self.child, signal);
+        }
+        let deadline = std::time::Instant::now() + within;
+        loop {
+            if let Some(status) = self.child.try_wait().expect("waiting for the service") {
+                return Some(status);
+            }
+            if std::time::Instant::now() >= deadline {
+                return None;
+            }
+            std::thread::sleep(std::time::Duration::from_millis(10));
+        }
+    }
+
+    /// Whether the process is still running (not exited; it may be stopped).
+    pub fn is_running(&mut self) -> bool {
+        self.child
+            .try_wait()
+            .expect("waiting for the service")
+            .is_none()
     }
 
     /// Kills the service with SIGKILL and reaps it.

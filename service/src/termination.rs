@@ -1,0 +1,62 @@
+//! Termination requests for the `hexacomp-service` binary. SIGTERM and SIGINT are blocked in
+//! every thread of the process and taken synchronously by the main thread (`sigtimedwait`):
+//! a termination request is never lost to a later signal (systemd sends SIGCONT right after
+//! SIGTERM), and no other thread's wait is interrupted by one. Every other signal keeps its
+//! default action; SIGSTOP/SIGCONT (a debugger, strace) pause the service and never stop it.
+//!
+//! The library ([`crate::Service`]) installs nothing: a program that embeds the service decides
+//! itself what stops it.
+
+use std::time::Duration;
+
+use crate::Error;
+
+/// SIGTERM and SIGINT, blocked in the calling thread (and inherited by the threads it starts
+/// afterwards) from [`TerminationSignals::block`] on.
+#[derive(Debug)]
+pub struct TerminationSignals {
+    set: libc::sigset_t,
+}
+
+impl TerminationSignals {
+    /// Blocks SIGTERM and SIGINT in the calling thread. Call it in the main thread before any
+    /// other thread starts (before [`crate::Service::start`]), so that every thread inherits
+    /// the mask and the signals stay pending until [`TerminationSignals::wait`] takes them.
+    pub fn block() -> Result<Self, Error> {
+        // SAFETY: `set` is a plain C struct that sigemptyset initialises before any other use;
+        // the pointers passed point to it (or are null for the old mask, which is allowed).
+        unsafe {
+            let mut set: libc::sigset_t = std::mem::zeroed();
+            libc::sigemptyset(&mut set);
+            libc::sigaddset(&mut set, libc::SIGTERM);
+            libc::sigaddset(&mut set, libc::SIGINT);
+            let failed = libc::pthread_sigmask(libc::SIG_BLOCK, &set, std::ptr::null_mut());
+            if failed != 0 {
+                return Err(Error::Signals(std::io::Error::from_raw_os_error(failed)));
+            }
+            Ok(Self { set })
+        }
+    }
+
+    /// Waits up to `timeout` for SIGTERM or SIGINT: the signal's number, or `None` when none
+    /// came (or the wait was interrupted by another signal, e.g. SIGCONT).
+    pub fn wait(&self, timeout: Duration) -> Option<i32> {
+        let timeout = libc::timespec {
+            tv_sec: libc::time_t::try_from(timeout.as_secs()).unwrap_or(libc::time_t::MAX),
+            tv_nsec: libc::c_long::from(timeout.subsec_nanos()),
+        };
+        // SAFETY: `self.set` was initialised by `block`; `timeout` lives for the call; the
+        // siginfo pointer may be null.
+        let signal = unsafe { libc::sigtimedwait(&self.set, std::ptr::null_mut(), &timeout) };
+        (signal > 0).then_some(signal)
+    }
+}
+
+/// The name of a termination signal, for the log.
+pub fn signal_name(signal: i32) -> &'static str {
+    match signal {
+        libc::SIGTERM => "SIGTERM",
+        libc::SIGINT => "SIGINT",
+        _ => "a signal",
+    }
+}
