@@ -184,7 +184,10 @@ fn handle_deploy(
     if !deployer_alive() {
         return refuse("the deployer disconnected before the model was committed".into());
     }
-    let number = latest + 1;
+    let number = match crate::daemon::next_generation(Some(latest).filter(|&n| n > 0)) {
+        Ok(number) => number,
+        Err(e) => return refuse(e.to_string()),
+    };
     let line = summarise(&model);
     match setup
         .outgoing
@@ -207,7 +210,14 @@ fn handle_deploy(
             .counters
             .persist_failures
             .fetch_add(1, Ordering::Relaxed);
-        note = format!("accepted but not persisted: {e}");
+        note = format!(
+            "accepted but not persisted ({e}); a restart would serve {}",
+            match state::persisted_generation(&setup.state_dir) {
+                Ok(Some(persisted)) => format!("generation {persisted}"),
+                Ok(None) => "no model".into(),
+                Err(e) => format!("nothing: {e}"),
+            }
+        );
     }
     // The reply says the model serves: wait until the serving thread has taken it in (between
     // two requests; within its 10 ms tick when it sleeps in event mode).

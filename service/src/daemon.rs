@@ -119,9 +119,15 @@ impl Service {
         } = options;
         hexacomp_protocol::service_name(&instance, hexacomp_protocol::Endpoint::Compensate)?;
         state::prepare(&state_dir)?;
-        let initial = match &model {
-            Some(path) => Some((start_model(path, &geometry, &state_dir)?, 1)),
-            None => state::restore(&state_dir, &geometry),
+        // A start model is numbered after whatever the state directory holds, so that a number
+        // never names two models; it is persisted only once this service owns the instance.
+        let (initial, start_model_file) = match &model {
+            Some(path) => {
+                let (model, bytes) = start_model(path, &geometry)?;
+                let number = next_generation(state::persisted_generation(&state_dir)?)?;
+                (Some((model, number)), Some((bytes, number)))
+            }
+            None => (state::restore(&state_dir, &geometry)?, None),
         };
         let initial_summary = initial
             .as_ref()
@@ -167,10 +173,15 @@ impl Service {
             counters: counters.clone(),
         };
         await_ready("serving", &serving_ready_rx)?;
+        // The instance is ours (a second service stops at the line above): persist the start
+        // model now, before the control thread may number deploys after it.
+        if let Some((bytes, number)) = &start_model_file {
+            state::persist(&state_dir, bytes, *number)?;
+        }
         let setup = ControlSetup {
             instance: instance.clone(),
             geometry,
-            state_dir,
+            state_dir: state_dir.clone(),
             outgoing: to_serving,
             retired: retired_rx,
             counters,
@@ -230,12 +241,11 @@ impl Drop for Service {
     }
 }
 
-/// Reads, validates and persists (as generation 1) the model file given to start with.
+/// Reads and validates the model file given to start with: the model and the file's bytes.
 fn start_model(
     path: &std::path::Path,
     geometry: &Geometry,
-    state_dir: &std::path::Path,
-) -> Result<hexacomp_core::model::Model, Error> {
+) -> Result<(hexacomp_core::model::Model, Vec<u8>), Error> {
     let bytes = std::fs::read(path).map_err(|cause| Error::ReadModel {
         path: path.to_path_buf(),
         cause,
@@ -244,8 +254,16 @@ fn start_model(
         path: path.to_path_buf(),
         refusal,
     })?;
-    state::persist(state_dir, &bytes, 1)?;
-    Ok(model)
+    Ok((model, bytes))
+}
+
+/// The generation number after `last` (1 when nothing was numbered yet); an error once
+/// 2⁶⁴ − 1 is reached, where a new number would wrap to 0 ("no model").
+pub(crate) fn next_generation(last: Option<u64>) -> Result<u64, Error> {
+    match last {
+        None => Ok(1),
+        Some(last) => last.checked_add(1).ok_or(Error::GenerationsExhausted),
+    }
 }
 
 /// Pins the calling (serving) thread and raises its priority as asked; the operating system's

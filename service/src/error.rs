@@ -17,12 +17,21 @@ pub enum Error {
         /// Why (its message names the file).
         cause: hexacomp_core::Error,
     },
-    /// The state directory cannot be created or restricted to its owner.
+    /// The state directory cannot be created, or is not one the service may use as its own.
     #[error("state directory {}: {cause}", path.display())]
     StateDir {
         /// The directory.
         path: PathBuf,
         /// Why.
+        cause: std::io::Error,
+    },
+    /// A file of the state directory holds something the service did not write (a generation
+    /// file without a generation number, a model without its generation).
+    #[error("state file {}: {cause}", path.display())]
+    StateFile {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong with it.
         cause: std::io::Error,
     },
     /// A model file given to start with cannot be read.
@@ -41,6 +50,13 @@ pub enum Error {
         /// Why.
         refusal: Refusal,
     },
+    /// The generation numbers are used up (the last one given out is 2⁶⁴ − 1): a new number
+    /// would wrap to 0, which means "no model".
+    #[error(
+        "generation numbers are exhausted (the last one is {}): start with a new state directory",
+        u64::MAX
+    )]
+    GenerationsExhausted,
     /// An accepted model could not be written to the state directory.
     #[error("writing {}: {cause}", path.display())]
     Persist {

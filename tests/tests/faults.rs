@@ -253,10 +253,11 @@ fn a_state_directory_that_cannot_be_written_is_reported_and_serving_goes_on() {
     let state = dir.path().join("state");
     let instance = unique_instance("unwritable");
     let service = ServiceProcess::with_model(&instance, &state, &first);
-    // The model file's place is taken by a directory: writing it fails whoever we are (root
-    // ignores permission bits, not this).
-    std::fs::remove_file(state.join("model.hxm")).unwrap();
-    std::fs::create_dir(state.join("model.hxm")).unwrap();
+    // The place of the link that commits a persist (`.current.link`, renamed over `current`)
+    // is taken by a directory that is not empty: persisting fails whoever we are (root ignores
+    // permission bits, not this).
+    std::fs::create_dir(state.join(".current.link")).unwrap();
+    std::fs::write(state.join(".current.link").join("x"), b"x").unwrap();
     let mut client = service.client().unwrap();
     match client.deploy(&std::fs::read(&second).unwrap()).unwrap() {
         DeployOutcome::Accepted {
@@ -265,6 +266,10 @@ fn a_state_directory_that_cannot_be_written_is_reported_and_serving_goes_on() {
         } => {
             assert_eq!(generation, 2);
             assert!(warning.contains("not persisted"), "{warning}");
+            assert!(
+                warning.contains("a restart would serve generation 1"),
+                "{warning}"
+            );
         }
         refused => panic!("{refused:?}"),
     }
@@ -283,4 +288,11 @@ fn a_state_directory_that_cannot_be_written_is_reported_and_serving_goes_on() {
     let output = hexacomp_tests::run("hexacomp-client", &["--instance", &instance, "status"]);
     let text = String::from_utf8_lossy(&output.stdout);
     assert!(text.contains("NOT persisted"), "{text}");
+    // As the warning said, a restart serves generation 1, whole.
+    drop(client);
+    service.kill();
+    let service = ServiceProcess::start(&instance, &["--state-dir", p(&state)]);
+    let status = service.client().unwrap().status().unwrap();
+    assert_eq!(status.generation, 1);
+    assert!(status.model.contains("smooth_model(5)"), "{}", status.model);
 }
