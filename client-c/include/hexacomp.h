@@ -90,6 +90,10 @@ typedef enum HexacompError {
    * A bug in this library (a caught panic); the detail says where.
    */
   HEXACOMP_ERROR_INTERNAL = 10,
+  /**
+   * The service runs as another user whose shared memory this process may not open.
+   */
+  HEXACOMP_ERROR_PERMISSION_DENIED = 11,
 } HexacompError;
 
 /**

@@ -57,6 +57,8 @@ pub enum HexacompError {
     HexacompErrorTransport = 9,
     /// A bug in this library (a caught panic); the detail says where.
     HexacompErrorInternal = 10,
+    /// The service runs as another user whose shared memory this process may not open.
+    HexacompErrorPermissionDenied = 11,
 }
 
 /// Most points in one batch request.
@@ -150,6 +152,7 @@ fn code_of(error: &Error) -> HexacompError {
     match error {
         Error::InvalidInstance { .. } => HexacompError::HexacompErrorInvalidInstance,
         Error::ServiceAbsent { .. } => HexacompError::HexacompErrorServiceAbsent,
+        Error::PermissionDenied { .. } => HexacompError::HexacompErrorPermissionDenied,
         Error::Timeout { .. } => HexacompError::HexacompErrorTimeout,
         Error::ProtocolMismatch { .. } => HexacompError::HexacompErrorProtocolMismatch,
         Error::BatchTooLarge { .. } => HexacompError::HexacompErrorBatchTooLarge,
@@ -188,7 +191,7 @@ impl HexacompError {
     /// The code with numeric value `value`, if there is one.
     fn from_int(value: c_int) -> Option<Self> {
         use HexacompError::*;
-        const ALL: [HexacompError; 11] = [
+        const ALL: [HexacompError; 12] = [
             HexacompOk,
             HexacompErrorInvalidArgument,
             HexacompErrorInvalidInstance,
@@ -200,6 +203,7 @@ impl HexacompError {
             HexacompErrorRefused,
             HexacompErrorTransport,
             HexacompErrorInternal,
+            HexacompErrorPermissionDenied,
         ];
         ALL.into_iter().find(|code| *code as c_int == value)
     }
@@ -250,6 +254,9 @@ pub extern "C" fn hexacomp_error_message(code: c_int) -> *const c_char {
         HexacompError::HexacompErrorRefused => c"the service refused the request",
         HexacompError::HexacompErrorTransport => c"shared-memory transport failed",
         HexacompError::HexacompErrorInternal => c"internal error in hexacomp-client",
+        HexacompError::HexacompErrorPermissionDenied => {
+            c"no permission to use the service: it runs as another user"
+        }
     };
     text.as_ptr()
 }

@@ -21,8 +21,9 @@ struct Cli {
     /// Instance name of the service.
     #[arg(long, global = true, default_value = DEFAULT_INSTANCE)]
     instance: String,
-    /// Deadline of each request, milliseconds.
-    #[arg(long, global = true, default_value_t = 500)]
+    /// Deadline of each request, milliseconds (at least 1).
+    #[arg(long, global = true, default_value_t = 500,
+          value_parser = clap::value_parser!(u64).range(1..))]
     timeout_ms: u64,
     #[command(subcommand)]
     command: Command,

@@ -61,6 +61,15 @@ pub enum Error {
         /// The instance.
         instance: String,
     },
+    /// The service runs as another user whose shared memory this process may not open.
+    #[error(
+        "no permission to use the hexacomp service of instance {instance:?}: it runs as another \
+         user; add this user to the service's group"
+    )]
+    PermissionDenied {
+        /// The instance.
+        instance: String,
+    },
     /// The service did not answer within the deadline (killed, stopped or overloaded).
     #[error("the service did not answer within {timeout:?}")]
     Timeout {
@@ -109,6 +118,9 @@ impl From<hexacomp_protocol::Error> for Error {
         match e {
             hexacomp_protocol::Error::InvalidInstance { name } => Error::InvalidInstance { name },
             hexacomp_protocol::Error::Absent { instance, .. } => Error::ServiceAbsent { instance },
+            hexacomp_protocol::Error::PermissionDenied { instance, .. } => {
+                Error::PermissionDenied { instance }
+            }
             other => Error::Transport(other.to_string()),
         }
     }
@@ -227,7 +239,9 @@ impl std::fmt::Debug for Client {
 }
 
 impl Client {
-    /// Connects to the service of `instance`; fails with [`Error::ServiceAbsent`] when none runs.
+    /// Connects to the service of `instance`; fails with [`Error::ServiceAbsent`] when none runs,
+    /// [`Error::PermissionDenied`] when it runs as a user this process may not reach, and
+    /// [`Error::Transport`] with iceoryx2's reason otherwise.
     pub fn connect(instance: &str, options: &ClientOptions) -> Result<Self, Error> {
         // iceoryx2 warns on stderr when no config file exists; keep errors only unless the user
         // sets its log level in the environment.

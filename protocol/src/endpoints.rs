@@ -9,6 +9,8 @@
 //! for events, so no single generic function can call them for every endpoint.
 
 use iceoryx2::prelude::*;
+use iceoryx2::service::builder::event::EventOpenError;
+use iceoryx2::service::builder::request_response::RequestResponseOpenError;
 use iceoryx2::service::port_factory::{event, request_response};
 
 use crate::{
@@ -43,18 +45,61 @@ pub enum Role {
     Use,
 }
 
-/// How an endpoint failed to open, as this crate's error.
-fn failure(instance: &str, endpoint: Endpoint, role: Role, cause: impl std::fmt::Debug) -> Error {
-    match role {
-        Role::Use => Error::Absent {
-            instance: instance.to_string(),
-            endpoint,
-        },
-        Role::Serve => Error::Serve {
-            instance: instance.to_string(),
+/// What a failure to open an existing endpoint means for its user.
+enum OpenFailure {
+    /// No such endpoint (no service runs, or it is being cleaned up).
+    Absent,
+    /// The endpoint exists, but this process may not open it.
+    Denied,
+    /// Any other reason (iceoryx2's own words are kept).
+    Other,
+}
+
+/// The [`OpenFailure`] of iceoryx2's open errors.
+trait Classify: std::fmt::Debug {
+    fn classify(&self) -> OpenFailure;
+}
+
+impl Classify for RequestResponseOpenError {
+    fn classify(&self) -> OpenFailure {
+        match self {
+            Self::DoesNotExist | Self::IsMarkedForDestruction => OpenFailure::Absent,
+            Self::InsufficientPermissions => OpenFailure::Denied,
+            _ => OpenFailure::Other,
+        }
+    }
+}
+
+impl Classify for EventOpenError {
+    fn classify(&self) -> OpenFailure {
+        match self {
+            Self::DoesNotExist | Self::IsMarkedForDestruction => OpenFailure::Absent,
+            Self::InsufficientPermissions => OpenFailure::Denied,
+            _ => OpenFailure::Other,
+        }
+    }
+}
+
+/// A client's failure to open an endpoint, as this crate's error.
+fn use_failure(instance: &str, endpoint: Endpoint, cause: impl Classify) -> Error {
+    let instance = instance.to_string();
+    match cause.classify() {
+        OpenFailure::Absent => Error::Absent { instance, endpoint },
+        OpenFailure::Denied => Error::PermissionDenied { instance, endpoint },
+        OpenFailure::Other => Error::Open {
+            instance,
             endpoint,
             cause: format!("{cause:?}"),
         },
+    }
+}
+
+/// The service's failure to open or create an endpoint, as this crate's error.
+fn serve_failure(instance: &str, endpoint: Endpoint, cause: impl std::fmt::Debug) -> Error {
+    Error::Serve {
+        instance: instance.to_string(),
+        endpoint,
+        cause: format!("{cause:?}"),
     }
 }
 
@@ -73,14 +118,14 @@ pub fn compensate(
     match role {
         Role::Use => builder
             .open()
-            .map_err(|e| failure(instance, endpoint, role, e)),
+            .map_err(|e| use_failure(instance, endpoint, e)),
         Role::Serve => builder
             .max_clients(MAX_CLIENTS)
             .max_servers(1)
             .max_active_requests_per_client(MAX_REQUESTS_IN_FLIGHT)
             .max_nodes(MAX_NODES)
             .open_or_create()
-            .map_err(|e| failure(instance, endpoint, role, e)),
+            .map_err(|e| serve_failure(instance, endpoint, e)),
     }
 }
 
@@ -97,13 +142,13 @@ pub fn status(
     match role {
         Role::Use => builder
             .open()
-            .map_err(|e| failure(instance, endpoint, role, e)),
+            .map_err(|e| use_failure(instance, endpoint, e)),
         Role::Serve => builder
             .max_clients(MAX_CLIENTS)
             .max_servers(1)
             .max_nodes(MAX_NODES)
             .open_or_create()
-            .map_err(|e| failure(instance, endpoint, role, e)),
+            .map_err(|e| serve_failure(instance, endpoint, e)),
     }
 }
 
@@ -120,13 +165,13 @@ pub fn deploy(
     match role {
         Role::Use => builder
             .open()
-            .map_err(|e| failure(instance, endpoint, role, e)),
+            .map_err(|e| use_failure(instance, endpoint, e)),
         Role::Serve => builder
             .max_clients(MAX_CLIENTS)
             .max_servers(1)
             .max_nodes(MAX_NODES)
             .open_or_create()
-            .map_err(|e| failure(instance, endpoint, role, e)),
+            .map_err(|e| serve_failure(instance, endpoint, e)),
     }
 }
 
@@ -139,12 +184,38 @@ pub fn wake(node: &Node<ipc::Service>, instance: &str, role: Role) -> Result<Wak
     match role {
         Role::Use => builder
             .open()
-            .map_err(|e| failure(instance, endpoint, role, e)),
+            .map_err(|e| use_failure(instance, endpoint, e)),
         Role::Serve => builder
             .max_notifiers(MAX_CLIENTS)
             .max_listeners(1)
             .max_nodes(MAX_NODES)
             .open_or_create()
-            .map_err(|e| failure(instance, endpoint, role, e)),
+            .map_err(|e| serve_failure(instance, endpoint, e)),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_client_is_told_absent_denied_or_why_not_every_failure_as_absent() {
+        let failure = |cause: RequestResponseOpenError| use_failure("x", Endpoint::Status, cause);
+        assert!(matches!(
+            failure(RequestResponseOpenError::DoesNotExist),
+            Error::Absent { .. }
+        ));
+        assert!(matches!(
+            failure(RequestResponseOpenError::InsufficientPermissions),
+            Error::PermissionDenied { .. }
+        ));
+        match failure(RequestResponseOpenError::IncompatibleRequestOrResponseType) {
+            Error::Open { cause, .. } => assert!(cause.contains("Incompatible"), "{cause}"),
+            other => panic!("{other:?}"),
+        }
+        assert!(matches!(
+            use_failure("x", Endpoint::Wake, EventOpenError::InsufficientPermissions),
+            Error::PermissionDenied { .. }
+        ));
     }
 }

@@ -22,6 +22,31 @@ pub enum Error {
         /// The endpoint that could not be opened.
         endpoint: Endpoint,
     },
+    /// A client may not use the instance's endpoint: the service runs as another user whose
+    /// shared memory this process may not open.
+    #[error(
+        "no permission to use the {endpoint} endpoint of instance {instance:?}: the service runs \
+         as another user; add this user to the service's group (docs/reliability.md, permission \
+         model)"
+    )]
+    PermissionDenied {
+        /// The instance.
+        instance: String,
+        /// The endpoint that could not be opened.
+        endpoint: Endpoint,
+    },
+    /// A client found the instance's endpoint but could not open it for another reason than
+    /// absence or permissions: a service of another build with other limits, the endpoint's
+    /// node limit reached, or a corrupted endpoint.
+    #[error("cannot open the {endpoint} endpoint of instance {instance:?}: {cause}")]
+    Open {
+        /// The instance.
+        instance: String,
+        /// The endpoint.
+        endpoint: Endpoint,
+        /// iceoryx2's reason.
+        cause: String,
+    },
     /// A server could not open or create its endpoint, or its port on it.
     #[error("the {endpoint} endpoint of instance {instance:?}: {cause}")]
     Serve {

@@ -172,7 +172,7 @@ impl Service {
             stop: stop.clone(),
             counters: counters.clone(),
         };
-        await_ready("serving", &serving_ready_rx)?;
+        let effective_wait = await_ready("serving", &serving_ready_rx)?;
         // The instance is ours (a second service stops at the line above): persist the start
         // model now, before the control thread may number deploys after it.
         if let Some((bytes, number)) = &start_model_file {
@@ -188,7 +188,7 @@ impl Service {
             stop,
             initial_summary,
             initial_generation,
-            wait_mode: wait.wire_value(),
+            wait_mode: effective_wait.wire_value(),
         };
         let control = spawn("control", move || control::run(setup, control_ready))?;
         if let Some(threads) = service.threads.as_mut() {
@@ -298,10 +298,10 @@ fn spawn(
 }
 
 /// Waits for a thread's "ready" (or the reason it could not start).
-fn await_ready(
+fn await_ready<T>(
     thread: &'static str,
-    ready: &crossbeam_channel::Receiver<Result<(), Error>>,
-) -> Result<(), Error> {
+    ready: &crossbeam_channel::Receiver<Result<T, Error>>,
+) -> Result<T, Error> {
     ready.recv().map_err(|_| Error::Thread {
         thread,
         cause: "ended before it was ready".into(),

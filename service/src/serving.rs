@@ -186,9 +186,10 @@ impl Drop for ServingLoop<'_> {
 }
 
 /// Creates the compensation endpoint (refusing when another service owns the instance) and
-/// serves until stopped. Returns when `stop` is set; `ready`
-/// gets `Ok` once the endpoint serves, or why it cannot.
-pub fn serve(setup: ServingSetup, ready: Sender<Result<(), Error>>) {
+/// serves until stopped. Returns when `stop` is set; `ready` gets the wait mode in effect
+/// once the endpoint serves (event mode falls back to sleep when its wake-up cannot be set
+/// up), or why it cannot serve.
+pub fn serve(setup: ServingSetup, ready: Sender<Result<WaitMode, Error>>) {
     let ServingSetup {
         instance,
         geometry,
@@ -214,13 +215,10 @@ pub fn serve(setup: ServingSetup, ready: Sender<Result<(), Error>>) {
             return;
         }
     };
-    let answerer = Answerer::new(&server, &geometry, &counters, client_budget);
-    // Stored before "ready": the status answered from then on names the serving generation.
-    let mut serving = ServingLoop::new(answerer, initial, incoming, retired, &counters);
-    let _ = ready.send(Ok(()));
-    drop(ready);
     // Event mode: a listener on the wake endpoint, attached to a WaitSet together with a 10 ms
-    // tick that keeps stop requests and model switches prompt while no request comes.
+    // tick that keeps stop requests and model switches prompt while no request comes. Set up
+    // before "ready", so that the wait mode reported (and advertised to clients) is the one
+    // in effect.
     let wake = match wait {
         WaitMode::Event => match wake_listener(&node, &instance) {
             Ok(parts) => Some(parts),
@@ -244,6 +242,20 @@ pub fn serve(setup: ServingSetup, ready: Sender<Result<(), Error>>) {
             .zip(waitset.attach_interval(Duration::from_millis(10)).ok()),
         _ => None,
     };
+    let effective = match (wait, &guards) {
+        (WaitMode::Event, None) => {
+            if wake.is_some() {
+                tracing::error!("the wake WaitSet could not be set up; serving with --wait sleep");
+            }
+            WaitMode::Sleep
+        }
+        _ => wait,
+    };
+    let answerer = Answerer::new(&server, &geometry, &counters, client_budget);
+    // Stored before "ready": the status answered from then on names the serving generation.
+    let mut serving = ServingLoop::new(answerer, initial, incoming, retired, &counters);
+    let _ = ready.send(Ok(effective));
+    drop(ready);
     while !stop.load(Ordering::Relaxed) {
         if serving.poll_once() {
             continue;
@@ -262,6 +274,7 @@ pub fn serve(setup: ServingSetup, ready: Sender<Result<(), Error>>) {
                 if wait == WaitMode::Spin {
                     std::hint::spin_loop();
                 } else {
+                    // Sleep mode, or event mode fallen back to it (`effective`).
                     std::thread::sleep(Duration::from_micros(50));
                 }
             }

@@ -103,3 +103,23 @@ fn service_refuses_an_instance_name_that_is_not_a_service_name() {
         stderr(&output)
     );
 }
+
+#[test]
+fn a_client_timeout_of_0_ms_is_refused_before_connecting() {
+    let output = run(
+        "hexacomp-client",
+        &[
+            "--instance",
+            "no-such-instance",
+            "--timeout-ms",
+            "0",
+            "status",
+        ],
+    );
+    assert_eq!(output.status.code(), Some(2), "{}", stderr(&output));
+    assert!(
+        stderr(&output).contains("--timeout-ms"),
+        "{}",
+        stderr(&output)
+    );
+}

@@ -207,3 +207,37 @@ fn a_client_budget_of_0_never_answers_overloaded() {
     );
     eprintln!("budget 1: {refused} of 24 requests overloaded; budget 0: none");
 }
+
+#[test]
+fn an_event_mode_service_without_its_wake_up_says_it_sleeps() {
+    use hexacomp_client::wire::endpoints::{self, Role};
+    use iceoryx2::prelude::*;
+    let instance = unique_instance("nowake");
+    // Another process's listener holds the wake endpoint's only listener slot: the service's
+    // own listener cannot be created, and it serves by sleeping instead.
+    let node = NodeBuilder::new()
+        .signal_handling_mode(SignalHandlingMode::Disabled)
+        .create::<ipc::Service>()
+        .unwrap();
+    let wake = endpoints::wake(&node, &instance, Role::Serve).unwrap();
+    let _listener = wake.listener_builder().create().unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let state = dir.path().join("state");
+    let service = ServiceProcess::start(&instance, &["--wait", "event", "--state-dir", p(&state)]);
+    let mut client = service.client().unwrap();
+    assert_eq!(
+        client.status().unwrap().wait_mode,
+        "sleep",
+        "{}",
+        service.log()
+    );
+    assert!(
+        service.log().contains("serving with --wait sleep"),
+        "{}",
+        service.log()
+    );
+    // Clients are served (they do not wait for a wake-up that never comes).
+    client
+        .compensate_pose([0.0, 0.0, 280.0, 0.0, 0.0, 0.0])
+        .unwrap();
+}

@@ -12,8 +12,13 @@ const WAIT_MODES: [&str; 3] = ["spin", "sleep", "event"];
 /// with `--wait sleep`.
 const TERM_CONT_ROUNDS: usize = 8;
 
-fn start(test: &str, wait: &str) -> ServiceProcess {
-    ServiceProcess::start(&unique_instance(test), &["--wait", wait])
+/// A service of a new instance waiting as `wait`, with its state in a directory removed with
+/// the returned guard.
+fn start(test: &str, wait: &str) -> (ServiceProcess, tempfile::TempDir) {
+    let state = tempfile::tempdir().unwrap();
+    let dir = state.path().join("state");
+    let args = ["--wait", wait, "--state-dir", dir.to_str().unwrap()];
+    (ServiceProcess::start(&unique_instance(test), &args), state)
 }
 
 #[test]
@@ -21,7 +26,7 @@ fn sigterm_followed_at_once_by_sigcont_stops_the_service_in_every_wait_mode() {
     let mut stuck = Vec::new();
     for wait in WAIT_MODES {
         for round in 0..TERM_CONT_ROUNDS {
-            let mut service = start("termcont", wait);
+            let (mut service, _state) = start("termcont", wait);
             // systemd's `stop`: SIGTERM, then SIGCONT in case the process was stopped.
             match service.signal_and_wait(&[libc::SIGTERM, libc::SIGCONT], Duration::from_secs(10))
             {
@@ -46,7 +51,7 @@ fn sigterm_followed_at_once_by_sigcont_stops_the_service_in_every_wait_mode() {
 #[test]
 fn sigstop_and_sigcont_do_not_stop_the_service_in_any_wait_mode() {
     for wait in WAIT_MODES {
-        let mut service = start("stopcont", wait);
+        let (mut service, _state) = start("stopcont", wait);
         for _ in 0..5 {
             service.pause();
             service.resume();
@@ -76,7 +81,7 @@ fn sigstop_and_sigcont_do_not_stop_the_service_in_any_wait_mode() {
 #[test]
 fn sigterm_during_a_flood_stops_the_service_in_every_wait_mode() {
     for wait in WAIT_MODES {
-        let mut service = start("termflood", wait);
+        let (mut service, _state) = start("termflood", wait);
         let flooders: Vec<_> = (0..2)
             .map(|_| spawn_test_client(&service.instance, &["flood", "--seconds", "30"]))
             .collect();
