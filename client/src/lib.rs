@@ -221,7 +221,8 @@ pub struct Client {
     status: Port<ipc::Service, u64, (), StatusReport, ()>,
     deploy: Port<ipc::Service, [u8], (), DeployReply, ()>,
     _endpoints: (CompensateEndpoint, StatusEndpoint, DeployEndpoint),
-    /// Set when the service waits on events: notified after every compensation request.
+    /// The wake endpoint's notifier, notified after every compensation request (a service in
+    /// event mode waits for it; one in another mode has no listener, which costs nothing).
     wake: Option<iceoryx2::port::notifier::Notifier<ipc::Service>>,
     _wake_endpoint: Option<WakeEndpoint>,
     _node: Node<ipc::Service>,
@@ -278,11 +279,18 @@ impl Client {
             timeout: options.timeout,
             waiter: Waiter::default(),
         };
-        // A service that sleeps in a WaitSet needs a notification after each request.
-        if client.status_report()?.wait_mode == wire::WAIT_EVENT {
-            let factory = endpoints::wake(&client._node, instance, Role::Use)?;
-            client.wake = Some(factory.notifier_builder().create().map_err(transport)?);
-            client._wake_endpoint = Some(factory);
+        // A service that sleeps in a WaitSet needs a notification after each request. Notified
+        // whatever the service's wait mode now: a service restarted in event mode behind this
+        // connection listens on the same endpoint. A service without one (of an older build)
+        // is served without.
+        client.status_report()?;
+        match endpoints::wake(&client._node, instance, Role::Use) {
+            Ok(factory) => {
+                client.wake = Some(factory.notifier_builder().create().map_err(transport)?);
+                client._wake_endpoint = Some(factory);
+            }
+            Err(hexacomp_protocol::Error::Absent { .. }) => {}
+            Err(e) => return Err(e.into()),
         }
         Ok(client)
     }

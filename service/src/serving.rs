@@ -219,14 +219,26 @@ pub fn serve(setup: ServingSetup, ready: Sender<Result<WaitMode, Error>>) {
     // tick that keeps stop requests and model switches prompt while no request comes. Set up
     // before "ready", so that the wait mode reported (and advertised to clients) is the one
     // in effect.
-    let wake = match wait {
-        WaitMode::Event => match wake_listener(&node, &instance) {
-            Ok(parts) => Some(parts),
+    //
+    // The wake endpoint exists in every wait mode: a client connected to this service notifies
+    // it after each request whatever the mode (a notification no listener waits for costs no
+    // system call), so that a service restarted in event mode is woken by the clients that
+    // stayed connected across the restart.
+    let wake_endpoint = endpoints::wake(&node, &instance, Role::Serve)
+        .inspect_err(|e| tracing::error!("{e}: clients cannot wake this service"))
+        .ok();
+    let wake = match (wait, &wake_endpoint) {
+        (WaitMode::Event, Some(endpoint)) => match wake_listener(endpoint) {
+            Ok(listener) => Some(listener),
             Err(e) => {
                 tracing::error!("{e}; serving with --wait sleep instead");
                 None
             }
         },
+        (WaitMode::Event, None) => {
+            tracing::error!("no wake endpoint; serving with --wait sleep instead");
+            None
+        }
         _ => None,
     };
     let waitset = wake.as_ref().and_then(|_| {
@@ -236,7 +248,7 @@ pub fn serve(setup: ServingSetup, ready: Sender<Result<WaitMode, Error>>) {
             .ok()
     });
     let guards = match (&wake, &waitset) {
-        (Some((_, listener)), Some(waitset)) => waitset
+        (Some(listener), Some(waitset)) => waitset
             .attach_notification(listener)
             .ok()
             .zip(waitset.attach_interval(Duration::from_millis(10)).ok()),
@@ -261,7 +273,7 @@ pub fn serve(setup: ServingSetup, ready: Sender<Result<WaitMode, Error>>) {
             continue;
         }
         match (&waitset, &wake, &guards) {
-            (Some(waitset), Some((_, listener)), Some(_)) => {
+            (Some(waitset), Some(listener), Some(_)) => {
                 // Whatever ended the wait — a wake-up, the tick, or an interrupted epoll_wait
                 // (EINTR after SIGSTOP/SIGCONT) — the loop goes on: only `stop` ends it.
                 let _ = waitset.wait_and_process_once_with_timeout(
@@ -282,21 +294,12 @@ pub fn serve(setup: ServingSetup, ready: Sender<Result<WaitMode, Error>>) {
     }
 }
 
-/// The wake endpoint's service and this thread's listener on it.
+/// This thread's listener on the wake endpoint.
 fn wake_listener(
-    node: &Node<ipc::Service>,
-    instance: &str,
-) -> Result<
-    (
-        endpoints::WakeEndpoint,
-        iceoryx2::port::listener::Listener<ipc::Service>,
-    ),
-    Error,
-> {
-    let service = endpoints::wake(node, instance, Role::Serve)?;
-    let listener = service
+    endpoint: &endpoints::WakeEndpoint,
+) -> Result<iceoryx2::port::listener::Listener<ipc::Service>, Error> {
+    endpoint
         .listener_builder()
         .create()
-        .map_err(|e| Error::Iceoryx(format!("wake listener: {e:?}")))?;
-    Ok((service, listener))
+        .map_err(|e| Error::Iceoryx(format!("wake listener: {e:?}")))
 }

@@ -296,3 +296,50 @@ fn a_state_directory_that_cannot_be_written_is_reported_and_serving_goes_on() {
     assert_eq!(status.generation, 1);
     assert!(status.model.contains("smooth_model(5)"), "{}", status.model);
 }
+
+#[test]
+fn a_client_connected_to_a_spinning_service_wakes_the_event_mode_service_that_replaced_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let state = dir.path().join("state");
+    let (_, path) = save_smooth_model(dir.path(), 1);
+    let instance = unique_instance("waitswitch");
+    let args = |wait: &'static str| ["--state-dir", p(&state), "--wait", wait];
+    let service = ServiceProcess::start(
+        &instance,
+        &[
+            "--state-dir",
+            p(&state),
+            "--model",
+            p(&path),
+            "--wait",
+            "spin",
+        ],
+    );
+    // An NC-like client: 1 kHz, 8 ms deadline. An event-mode service that is not notified
+    // answers on its 10 ms tick only: most of its requests would time out.
+    let mut stream = spawn_test_client(
+        &instance,
+        &["stream", "--period-us", "1000", "--timeout-ms", "8"],
+    );
+    wait_until_connected(&mut stream);
+    service.kill();
+    let service = ServiceProcess::start(&instance, &args("event"));
+    let mut status = service.client().unwrap();
+    assert_eq!(status.status().unwrap().wait_mode, "event");
+    // The stream is served by the new service: 3000 requests (about 3 s at 1 kHz).
+    assert!(
+        eventually(PATIENCE, || status
+            .status()
+            .is_ok_and(|s| s.requests >= 3000)),
+        "the stream did not reach the restarted service"
+    );
+    let report = test_client_report(stream);
+    assert_eq!(report["other_errors"], 0, "{report}");
+    // Served without a timeout for its last 500 requests or more: woken by each request. Not
+    // woken, one request in five or more waits past 8 ms for the tick.
+    assert!(
+        report["served_since_timeout"].as_u64().unwrap() >= 500,
+        "{report}"
+    );
+    eprintln!("across a restart from spin into event mode: {report}");
+}
