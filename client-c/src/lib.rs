@@ -477,12 +477,12 @@ mod tests {
                 .to_str()
                 .unwrap()
         };
-        // The codes are dense from 0 to 10, each with its own message; any other integer is
+        // The codes are dense from 0 to 11, each with its own message; any other integer is
         // named as unknown.
-        let messages: std::collections::HashSet<&str> = (0..=10).map(message).collect();
-        assert_eq!(messages.len(), 11);
+        let messages: std::collections::HashSet<&str> = (0..=11).map(message).collect();
+        assert_eq!(messages.len(), 12);
         assert!(!messages.contains("unknown error code"));
-        for outside in [-1, 11, c_int::MAX, c_int::MIN] {
+        for outside in [-1, 12, c_int::MAX, c_int::MIN] {
             assert_eq!(message(outside), "unknown error code");
         }
         let mut client = std::ptr::null_mut();

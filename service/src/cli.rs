@@ -33,12 +33,13 @@ pub struct Args {
     /// Model file to serve at start (else the persisted one, else none).
     #[arg(long, value_name = "FILE")]
     model: Option<PathBuf>,
-    /// Where the accepted model persists. Default: $XDG_STATE_HOME/hexacomp/INSTANCE, or
+    /// Where the accepted model persists: a directory of the service's own (created 0700; an
+    /// existing one that others may write to is refused). Default: $XDG_STATE_HOME/hexacomp/INSTANCE, or
     /// ~/.local/state/hexacomp/INSTANCE.
     #[arg(long, value_name = "DIR")]
     state_dir: Option<PathBuf>,
-    /// spin: busy-poll (lowest latency, give it a core of its own); event: sleep in an iceoryx2
-    /// WaitSet until a client's notification (frees the core; each request pays a wake-up);
+    /// spin: busy-poll (lowest latency, give it a core of its own); event: sleep until a client's
+    /// notification (frees the core; each request pays a wake-up);
     /// sleep: poll and sleep 50 µs when idle.
     #[arg(long, value_enum, default_value_t = WaitArg::Spin)]
     wait: WaitArg,

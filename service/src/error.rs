@@ -73,7 +73,7 @@ pub enum Error {
         /// iceoryx2's reason.
         cause: String,
     },
-    /// iceoryx2 could not create a node, a port or a WaitSet.
+    /// iceoryx2 could not create a node or a port.
     #[error("iceoryx2: {0}")]
     Iceoryx(String),
     /// A thread of the service could not be started, or ended before it was ready.

@@ -60,7 +60,7 @@ pub enum WaitMode {
     Spin,
     /// Poll, and sleep 50 µs when idle: frees the core at a latency cost when idle.
     Sleep,
-    /// Sleep in an iceoryx2 WaitSet until a client notifies the wake endpoint.
+    /// Sleep on the wake endpoint's listener until a client notifies it (10 ms at most).
     Event,
 }
 
@@ -215,10 +215,10 @@ pub fn serve(setup: ServingSetup, ready: Sender<Result<WaitMode, Error>>) {
             return;
         }
     };
-    // Event mode: a listener on the wake endpoint, attached to a WaitSet together with a 10 ms
-    // tick that keeps stop requests and model switches prompt while no request comes. Set up
-    // before "ready", so that the wait mode reported (and advertised to clients) is the one
-    // in effect.
+    // Event mode: a listener on the wake endpoint, waited on for at most 10 ms at a time (the
+    // tick keeps stop requests and model switches prompt while no request comes). Not an
+    // iceoryx2 WaitSet: it builds a `Vec` on every wake-up, on this thread. Set up before
+    // "ready", so that the wait mode reported (and advertised to clients) is the one in effect.
     //
     // The wake endpoint exists in every wait mode: a client connected to this service notifies
     // it after each request whatever the mode (a notification no listener waits for costs no
@@ -241,26 +241,8 @@ pub fn serve(setup: ServingSetup, ready: Sender<Result<WaitMode, Error>>) {
         }
         _ => None,
     };
-    let waitset = wake.as_ref().and_then(|_| {
-        WaitSetBuilder::new()
-            .signal_handling_mode(SignalHandlingMode::Disabled)
-            .create::<ipc::Service>()
-            .ok()
-    });
-    let guards = match (&wake, &waitset) {
-        (Some(listener), Some(waitset)) => waitset
-            .attach_notification(listener)
-            .ok()
-            .zip(waitset.attach_interval(Duration::from_millis(10)).ok()),
-        _ => None,
-    };
-    let effective = match (wait, &guards) {
-        (WaitMode::Event, None) => {
-            if wake.is_some() {
-                tracing::error!("the wake WaitSet could not be set up; serving with --wait sleep");
-            }
-            WaitMode::Sleep
-        }
+    let effective = match (wait, &wake) {
+        (WaitMode::Event, None) => WaitMode::Sleep,
         _ => wait,
     };
     let answerer = Answerer::new(&server, &geometry, &counters, client_budget);
@@ -272,15 +254,11 @@ pub fn serve(setup: ServingSetup, ready: Sender<Result<WaitMode, Error>>) {
         if serving.poll_once() {
             continue;
         }
-        match (&waitset, &wake, &guards) {
-            (Some(waitset), Some(listener), Some(_)) => {
-                // Whatever ended the wait — a wake-up, the tick, or an interrupted epoll_wait
-                // (EINTR after SIGSTOP/SIGCONT) — the loop goes on: only `stop` ends it.
-                let _ = waitset.wait_and_process_once_with_timeout(
-                    |_| CallbackProgression::Continue,
-                    Duration::from_millis(100),
-                );
-                let _ = listener.try_wait(|_| {});
+        match &wake {
+            Some(listener) => {
+                // Whatever ended the wait — a wake-up, the tick, or an interrupted wait (EINTR
+                // after SIGSTOP/SIGCONT) — the loop goes on: only `stop` ends it.
+                let _ = listener.timed_wait(|_| {}, Duration::from_millis(10));
             }
             _ => {
                 if wait == WaitMode::Spin {

@@ -59,10 +59,30 @@ unsafe impl GlobalAlloc for Counting {
 #[global_allocator]
 static GLOBAL: Counting = Counting;
 
+/// One at a time: the counters are global (per process), each wait mode counted on its own.
+static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
 #[test]
-fn serving_thread_allocates_only_iceoryx2s_two_objects_per_request_and_nothing_on_a_swap() {
+fn spin_mode_allocates_only_iceoryx2s_two_objects_per_request_and_nothing_on_a_swap() {
+    serving_thread_allocations(WaitMode::Spin);
+}
+
+#[test]
+fn sleep_mode_allocates_only_iceoryx2s_two_objects_per_request_and_nothing_on_a_swap() {
+    serving_thread_allocations(WaitMode::Sleep);
+}
+
+#[test]
+fn event_mode_allocates_only_iceoryx2s_two_objects_per_request_and_nothing_on_a_swap() {
+    serving_thread_allocations(WaitMode::Event);
+}
+
+/// Serves 5000 requests of a client in `wait` mode, with a model switch half-way, and counts
+/// the serving thread's heap operations.
+fn serving_thread_allocations(wait: WaitMode) {
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let geometry = Geometry::prototype();
-    let instance = format!("alloc-{}", std::process::id());
+    let instance = format!("alloc-{}-{}", std::process::id(), wait.wire_value());
     let (to_serving, incoming) = crossbeam_channel::bounded(1);
     let (retired_tx, retired_rx) = crossbeam_channel::bounded(4);
     let (ready_tx, ready_rx) = crossbeam_channel::bounded(1);
@@ -75,14 +95,18 @@ fn serving_thread_allocates_only_iceoryx2s_two_objects_per_request_and_nothing_o
         retired: retired_tx,
         counters: Arc::new(Counters::default()),
         stop: stop.clone(),
-        wait: WaitMode::Sleep,
+        wait,
         client_budget: Some(hexacomp_service::admission::DEFAULT_POINTS_PER_SECOND),
     };
     let serving = std::thread::spawn(move || {
         ON_SERVING_THREAD.with(|f| f.set(true));
         serve(setup, ready_tx);
     });
-    ready_rx.recv().unwrap().unwrap();
+    assert_eq!(
+        ready_rx.recv().unwrap().unwrap(),
+        wait,
+        "the wait mode in effect"
+    );
     // The real control thread serves status and deploy (`Client::connect` asks the status for
     // the wait mode); it only reads the counters here.
     let (unused_tx, unused_rx) = crossbeam_channel::bounded(1);
@@ -98,7 +122,7 @@ fn serving_thread_allocates_only_iceoryx2s_two_objects_per_request_and_nothing_o
         stop: stop.clone(),
         initial_summary: String::new(),
         initial_generation: 0,
-        wait_mode: WaitMode::Sleep.wire_value(),
+        wait_mode: wait.wire_value(),
     };
     let control = std::thread::spawn(move || run_control(control_setup, control_ready_tx));
     control_ready_rx.recv().unwrap().unwrap();
@@ -138,13 +162,13 @@ fn serving_thread_allocates_only_iceoryx2s_two_objects_per_request_and_nothing_o
     assert_eq!(out[0].generation, 2, "the swap happened");
     assert_eq!(
         other, 0,
-        "{other} heap operations of hexacomp's own on the serving thread"
+        "{wait:?}: {other} heap operations of hexacomp's own on the serving thread"
     );
     // Two objects allocated and freed per request, all inside iceoryx2.
     assert_eq!(
         iox,
         4 * requests,
-        "iceoryx2's per-request heap operations changed"
+        "{wait:?}: iceoryx2's per-request heap operations changed"
     );
     // The retired model came back to be freed here, not there.
     assert_eq!(retired_rx.try_recv().unwrap().number, 1);
