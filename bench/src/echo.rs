@@ -58,7 +58,8 @@ pub fn serve(instance: &str) -> anyhow::Result<()> {
             Ok(None) => {
                 std::hint::spin_loop();
                 idle_polls += 1;
-                // Termination signals (as the service checks them), and the other endpoints
+                // Termination signals (iceoryx2's handler: the echo server is the bench's own
+                // child, stopped by the bench), and the other endpoints
                 // every few thousand idle polls.
                 if SignalHandler::termination_requested() {
                     return Ok(());

@@ -64,7 +64,7 @@ pub enum Error {
     /// The service runs as another user whose shared memory this process may not open.
     #[error(
         "no permission to use the hexacomp service of instance {instance:?}: it runs as another \
-         user; add this user to the service's group"
+         user (run the client as the service's user)"
     )]
     PermissionDenied {
         /// The instance.
@@ -279,7 +279,7 @@ impl Client {
             timeout: options.timeout,
             waiter: Waiter::default(),
         };
-        // A service that sleeps in a WaitSet needs a notification after each request. Notified
+        // A service that sleeps in event mode needs a notification after each request. Notified
         // whatever the service's wait mode now: a service restarted in event mode behind this
         // connection listens on the same endpoint. A service without one (of an older build)
         // is served without.

@@ -44,8 +44,8 @@ pub const TARGET_COLUMNS: [&str; 3 * TARGETS] = [
 pub struct Records<T> {
     /// The file's path as given.
     pub file: String,
-    /// The records, in file order.
-    pub items: Vec<T>,
+    /// The records, in file order (read through `Deref` as a slice, or [`Records::into_items`]).
+    items: Vec<T>,
     lines: Vec<u64>,
 }
 

@@ -46,7 +46,7 @@ fn poses_round_trip_to_the_bit() {
     write_poses(std::fs::File::create(&path).unwrap(), &rows).unwrap();
     let text = std::fs::read_to_string(&path).unwrap();
     assert!(text.starts_with("id,x,y,z,a,b,c\n"), "{text}");
-    assert_eq!(read_poses(&path).unwrap().items, rows);
+    assert_eq!(read_poses(&path).unwrap().into_items(), rows);
 }
 
 #[test]
@@ -72,7 +72,7 @@ fn measurements_and_corrections_round_trip() {
             .unwrap(),
         MEASUREMENT_HEADER
     );
-    assert_eq!(read_measurements(&path).unwrap().items, m);
+    assert_eq!(read_measurements(&path).unwrap().into_items(), m);
 
     let c = vec![JointCorrection {
         id: "7".into(),
@@ -92,7 +92,7 @@ fn measurements_and_corrections_round_trip() {
         text.starts_with("id,q1,q2,q3,q4,q5,q6,dq1,dq2,dq3,dq4,dq5,dq6,cond_pt\n"),
         "{text}"
     );
-    assert_eq!(read_corrections(&path).unwrap().items, c);
+    assert_eq!(read_corrections(&path).unwrap().into_items(), c);
 }
 
 #[test]

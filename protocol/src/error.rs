@@ -26,7 +26,7 @@ pub enum Error {
     /// shared memory this process may not open.
     #[error(
         "no permission to use the {endpoint} endpoint of instance {instance:?}: the service runs \
-         as another user; add this user to the service's group (docs/reliability.md, permission \
+         as another user (run the client as the service's user: docs/reliability.md, permission \
          model)"
     )]
     PermissionDenied {

@@ -18,7 +18,8 @@ pub enum Endpoint {
     Status,
     /// Model deployment (hot swap).
     Deploy,
-    /// Wake-up events for a service waiting in a WaitSet (`--wait event`).
+    /// Wake-up events: clients notify it after each request; a service with `--wait event`
+    /// sleeps until one comes.
     Wake,
 }
 

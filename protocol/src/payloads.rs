@@ -112,7 +112,7 @@ pub struct PointResponse {
 pub const WAIT_SPIN: u32 = 0;
 /// The serving thread polls and sleeps briefly when idle.
 pub const WAIT_SLEEP: u32 = 1;
-/// The serving thread sleeps in an iceoryx2 WaitSet until a client notifies `wake`.
+/// The serving thread sleeps until a client notifies `wake` (10 ms at most).
 pub const WAIT_EVENT: u32 = 2;
 
 /// Bytes of text fields in the status report.

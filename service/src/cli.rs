@@ -111,9 +111,15 @@ pub fn run(args: Args) -> Result<(), Error> {
     let service = Service::start(options)?;
     while !service.is_finished() {
         if let Some(signal) = signals.wait(Duration::from_millis(200)) {
-            tracing::info!("{} received: stopping", signal_name(signal));
-            service.stop();
+            tracing::info!(
+                "{} received: stopping (a second one ends the process at once)",
+                signal_name(signal)
+            );
+            signals.deliver_from_now_on();
+            break;
         }
     }
+    // After a signal, or when a thread ended by itself (a panic): the other thread stops too.
+    service.stop();
     service.join()
 }

@@ -50,8 +50,9 @@ pub struct ControlSetup {
     pub stop: Arc<AtomicBool>,
     /// Provenance of the model serving at start.
     pub initial_summary: String,
-    /// Generation of the model serving at start (0: none): deploys are numbered from it.
-    pub initial_generation: u64,
+    /// The last generation number given out before this start (the serving model's, or a
+    /// higher one whose model was not served): the next deploy is numbered after it.
+    pub last_numbered: u64,
     /// How the serving thread waits (status report value).
     pub wait_mode: u32,
 }
@@ -103,7 +104,7 @@ pub fn run(setup: ControlSetup, ready: Sender<Result<(), Error>>) {
     // The last generation number given out. Only this thread numbers models, one deploy at a
     // time, so numbers are unique and increase in the order the models are handed over (the
     // serving thread's counter lags until it takes a model in).
-    let mut numbered = setup.initial_generation;
+    let mut numbered = setup.last_numbered;
     while !setup.stop.load(Ordering::Relaxed) {
         let mut busy = false;
         while let Ok(old) = setup.retired.try_recv() {
@@ -273,7 +274,7 @@ mod tests {
     /// A control setup whose serving side is `incoming`, with its state in `dir`.
     fn setup(
         dir: &std::path::Path,
-        initial_generation: u64,
+        last_numbered: u64,
     ) -> (ControlSetup, Receiver<Box<Generation>>) {
         let (outgoing, incoming) = crossbeam_channel::bounded(1);
         let (_, retired) = crossbeam_channel::bounded(1);
@@ -286,7 +287,7 @@ mod tests {
             counters: Arc::new(Counters::default()),
             stop: Arc::new(AtomicBool::new(false)),
             initial_summary: String::new(),
-            initial_generation,
+            last_numbered,
             wait_mode: 0,
         };
         (setup, incoming)
@@ -335,7 +336,7 @@ mod tests {
                     .store(generation.number, Ordering::Relaxed);
             }
         });
-        let mut numbered = setup.initial_generation;
+        let mut numbered = setup.last_numbered;
         let given: Vec<u64> = [0.1, 0.2, 0.3]
             .iter()
             .map(|offset| deploy(&setup, *offset, &mut numbered).generation)

@@ -134,6 +134,10 @@ impl Service {
             .map(|(model, _)| summarise(model))
             .unwrap_or_default();
         let initial_generation = initial.as_ref().map_or(0, |(_, number)| *number);
+        // Deploys are numbered after every number the state directory has used, also when its
+        // model was ignored (another geometry, damaged): a number never names two models.
+        let last_numbered =
+            initial_generation.max(state::persisted_generation(&state_dir)?.unwrap_or(0));
         tracing::info!(
             "instance {instance} geometry {} ({}), model generation {initial_generation}, state {}",
             geometry.name,
@@ -187,7 +191,7 @@ impl Service {
             counters,
             stop,
             initial_summary,
-            initial_generation,
+            last_numbered,
             wait_mode: effective_wait.wire_value(),
         };
         let control = spawn("control", move || control::run(setup, control_ready))?;

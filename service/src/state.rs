@@ -30,6 +30,21 @@ pub fn model_path(dir: &Path) -> PathBuf {
     dir.join(MODEL)
 }
 
+/// Where the persisted pair is read from: `current/` when it exists, else (the first layout)
+/// the directory itself. The fixed links are for other tools; a crash while they are being
+/// made (converting the first layout) must not make a restart read a mixed pair.
+fn pair_dir(dir: &Path) -> Result<PathBuf, Error> {
+    let current = dir.join(CURRENT);
+    match std::fs::symlink_metadata(&current) {
+        Ok(_) => Ok(current),
+        Err(e) if e.kind() == ErrorKind::NotFound => Ok(dir.to_path_buf()),
+        Err(cause) => Err(Error::StateFile {
+            path: current,
+            cause,
+        }),
+    }
+}
+
 /// Prepares the state directory: creates it with mode 0700 when it does not exist; an existing
 /// one is used as it is, never changed, if it belongs to this user and no one else may write to
 /// it. A shared directory (`/tmp`, `/var/lib`) is refused: the service needs one of its own.
@@ -98,12 +113,31 @@ pub fn persist(dir: &Path, model_file: &[u8], generation: u64) -> Result<(), Err
     let written = (|| {
         std::fs::DirBuilder::new().mode(0o700).create(&target)?;
         replace_file(&target.join(MODEL), model_file)?;
-        replace_file(&target.join(GENERATION), generation.to_string().as_bytes())?;
-        replace_link(&dir.join(CURRENT), Path::new(&name))
+        replace_file(&target.join(GENERATION), generation.to_string().as_bytes())
     })();
     if let Err(cause) = written {
         let _ = std::fs::remove_dir_all(&target);
         return Err(fail(&target, cause));
+    }
+    let current = dir.join(CURRENT);
+    let link = current.with_file_name(".current.link");
+    if let Err(cause) = switch_link(&link, &current, Path::new(&name)) {
+        let _ = std::fs::remove_dir_all(&target);
+        return Err(fail(&link, cause));
+    }
+    // Committed: `current` names the new generation. From here on the generation directory
+    // stays, whatever fails.
+    if let Err(cause) = sync_directory_of(&current) {
+        return Err(Error::Persist {
+            path: dir.to_path_buf(),
+            cause: std::io::Error::new(
+                cause.kind(),
+                format!(
+                    "generation {generation} is current, but flushing the directory failed \
+                     ({cause}): after a power loss the previous one may come back"
+                ),
+            ),
+        });
     }
     // Committed. The fixed links and the removal of older generations are housekeeping: their
     // failure changes nothing a restart serves, so it is logged, not reported.
@@ -120,18 +154,23 @@ pub fn persist(dir: &Path, model_file: &[u8], generation: u64) -> Result<(), Err
     Ok(())
 }
 
-/// Replaces `path` by a symbolic link to `target`, by one rename, flushed to disk.
+/// Replaces `path` by a symbolic link to `target`, made as `temporary` and renamed over it
+/// (one rename: `path` is the old link or the new one, never missing).
+fn switch_link(temporary: &Path, path: &Path, target: &Path) -> std::io::Result<()> {
+    let _ = std::fs::remove_file(temporary);
+    std::os::unix::fs::symlink(target, temporary)?;
+    std::fs::rename(temporary, path).inspect_err(|_| {
+        let _ = std::fs::remove_file(temporary);
+    })
+}
+
+/// [`switch_link`] through `.<name>.link`, then the directory flushed.
 fn replace_link(path: &Path, target: &Path) -> std::io::Result<()> {
     let name = path
         .file_name()
         .ok_or_else(|| std::io::Error::other("the path names no file"))?;
     let temporary = path.with_file_name(format!(".{}.link", name.to_string_lossy()));
-    let _ = std::fs::remove_file(&temporary);
-    std::os::unix::fs::symlink(target, &temporary)?;
-    if let Err(e) = std::fs::rename(&temporary, path) {
-        let _ = std::fs::remove_file(&temporary);
-        return Err(e);
-    }
+    switch_link(&temporary, path, target)?;
     sync_directory_of(path)
 }
 
@@ -158,7 +197,7 @@ fn remove_other_generations(dir: &Path, keep: &str) {
 /// The persisted generation number: `Ok(None)` when nothing is persisted, an error naming the
 /// file when it holds anything but a decimal number from 1 to 2⁶⁴ − 1.
 pub fn persisted_generation(dir: &Path) -> Result<Option<u64>, Error> {
-    let path = dir.join(GENERATION);
+    let path = pair_dir(dir)?.join(GENERATION);
     let text = match std::fs::read_to_string(&path) {
         Err(e) if e.kind() == ErrorKind::NotFound => return Ok(None),
         Err(cause) => return Err(Error::StateFile { path, cause }),
@@ -181,12 +220,15 @@ pub fn persisted_generation(dir: &Path) -> Result<Option<u64>, Error> {
 /// geometry or a damaged one is reported and ignored; a generation file that does not hold a
 /// generation number, or a model without one, is an error naming the file.
 pub fn restore(dir: &Path, geometry: &Geometry) -> Result<Option<(Model, u64)>, Error> {
-    let path = model_path(dir);
-    if std::fs::symlink_metadata(&path).is_err() {
-        return Ok(None);
+    let pair = pair_dir(dir)?;
+    let path = pair.join(MODEL);
+    match std::fs::symlink_metadata(&path) {
+        Err(e) if e.kind() == ErrorKind::NotFound && pair == dir => return Ok(None),
+        Err(cause) => return Err(Error::StateFile { path, cause }),
+        Ok(_) => {}
     }
     let generation = persisted_generation(dir)?.ok_or_else(|| Error::StateFile {
-        path: dir.join(GENERATION),
+        path: pair.join(GENERATION),
         cause: std::io::Error::new(ErrorKind::NotFound, "missing beside the persisted model"),
     })?;
     match Model::load(&path, geometry) {
@@ -202,11 +244,11 @@ pub fn restore(dir: &Path, geometry: &Geometry) -> Result<Option<(Model, u64)>, 
 mod tests {
     use super::*;
 
-    /// What a restart reads: the model file's bytes and the generation, through the paths of
-    /// the first layout.
+    /// What a restart reads: the model file's bytes and the generation.
     fn pair(dir: &Path) -> (Vec<u8>, Option<u64>) {
+        let from = pair_dir(dir).unwrap();
         (
-            std::fs::read(model_path(dir)).unwrap_or_default(),
+            std::fs::read(from.join(MODEL)).unwrap_or_default(),
             persisted_generation(dir).unwrap(),
         )
     }
@@ -235,11 +277,9 @@ mod tests {
         std::fs::create_dir(dir.path().join(GENERATION)).unwrap();
         std::fs::write(dir.path().join(GENERATION).join("x"), b"x").unwrap();
         let result = persist(dir.path(), b"model two", 2);
-        let current = std::fs::read(dir.path().join(CURRENT).join(MODEL)).unwrap();
-        let number = std::fs::read_to_string(dir.path().join(CURRENT).join(GENERATION)).unwrap();
         match result {
-            Ok(()) => assert_eq!((current, number), (b"model two".to_vec(), "2".into())),
-            Err(_) => assert_eq!((current, number), (b"model one".to_vec(), "1".into())),
+            Ok(()) => assert_eq!(pair(dir.path()), (b"model two".to_vec(), Some(2))),
+            Err(_) => assert_eq!(pair(dir.path()), (b"model one".to_vec(), Some(1))),
         }
     }
 

@@ -23,19 +23,24 @@ impl TerminationSignals {
     /// other thread starts (before [`crate::Service::start`]), so that every thread inherits
     /// the mask and the signals stay pending until [`TerminationSignals::wait`] takes them.
     pub fn block() -> Result<Self, Error> {
-        // SAFETY: `set` is a plain C struct that sigemptyset initialises before any other use;
-        // the pointers passed point to it (or are null for the old mask, which is allowed).
-        unsafe {
-            let mut set: libc::sigset_t = std::mem::zeroed();
-            libc::sigemptyset(&mut set);
-            libc::sigaddset(&mut set, libc::SIGTERM);
-            libc::sigaddset(&mut set, libc::SIGINT);
-            let failed = libc::pthread_sigmask(libc::SIG_BLOCK, &set, std::ptr::null_mut());
+        let set = signal_set(&[libc::SIGTERM, libc::SIGINT]);
+        let ignored = signal_set(&[libc::SIGHUP, libc::SIGUSR1, libc::SIGUSR2]);
+        for set in [&set, &ignored] {
+            // SAFETY: `set` was initialised by `signal_set`; a null old mask is allowed.
+            let failed =
+                unsafe { libc::pthread_sigmask(libc::SIG_BLOCK, set, std::ptr::null_mut()) };
             if failed != 0 {
                 return Err(Error::Signals(std::io::Error::from_raw_os_error(failed)));
             }
-            Ok(Self { set })
         }
+        Ok(Self { set })
+    }
+
+    /// Unblocks SIGTERM and SIGINT in the calling (main) thread: from now on they take their
+    /// default action and end the process at once (after a first one started a clean stop).
+    pub fn deliver_from_now_on(&self) {
+        // SAFETY: `self.set` was initialised by `signal_set`; a null old mask is allowed.
+        unsafe { libc::pthread_sigmask(libc::SIG_UNBLOCK, &self.set, std::ptr::null_mut()) };
     }
 
     /// Waits up to `timeout` for SIGTERM or SIGINT: the signal's number, or `None` when none
@@ -43,12 +48,27 @@ impl TerminationSignals {
     pub fn wait(&self, timeout: Duration) -> Option<i32> {
         let timeout = libc::timespec {
             tv_sec: libc::time_t::try_from(timeout.as_secs()).unwrap_or(libc::time_t::MAX),
-            tv_nsec: libc::c_long::from(timeout.subsec_nanos()),
+            // Below 10⁹: fits tv_nsec's type on every target.
+            tv_nsec: timeout.subsec_nanos() as _,
         };
         // SAFETY: `self.set` was initialised by `block`; `timeout` lives for the call; the
         // siginfo pointer may be null.
         let signal = unsafe { libc::sigtimedwait(&self.set, std::ptr::null_mut(), &timeout) };
         (signal > 0).then_some(signal)
+    }
+}
+
+/// The set of `signals`.
+fn signal_set(signals: &[libc::c_int]) -> libc::sigset_t {
+    // SAFETY: sigemptyset initialises the plain C struct before sigaddset uses it; both get a
+    // pointer to it, and the signal numbers are valid.
+    unsafe {
+        let mut set: libc::sigset_t = std::mem::zeroed();
+        libc::sigemptyset(&mut set);
+        for &signal in signals {
+            libc::sigaddset(&mut set, signal);
+        }
+        set
     }
 }
 

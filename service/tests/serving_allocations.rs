@@ -121,7 +121,7 @@ fn serving_thread_allocations(wait: WaitMode) {
         counters: Arc::new(Counters::default()),
         stop: stop.clone(),
         initial_summary: String::new(),
-        initial_generation: 0,
+        last_numbered: 0,
         wait_mode: wait.wire_value(),
     };
     let control = std::thread::spawn(move || run_control(control_setup, control_ready_tx));

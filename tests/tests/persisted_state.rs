@@ -124,8 +124,13 @@ fn a_generation_file_without_a_number_is_refused_by_name() {
     let output = refused_start(&["--instance", &instance, "--state-dir", p(&state)]);
     let message = String::from_utf8_lossy(&output.stderr);
     assert!(
-        message.contains(&state.join("generation").display().to_string())
-            && message.contains("not a generation number"),
+        message.contains(
+            &state
+                .join("current")
+                .join("generation")
+                .display()
+                .to_string()
+        ) && message.contains("not a generation number"),
         "{message}"
     );
 }
@@ -174,4 +179,31 @@ fn a_shared_state_directory_is_refused_and_left_as_it_was() {
     assert!(message.contains("writable by others"), "{message}");
     let mode = std::fs::metadata(&shared).unwrap().permissions().mode() & 0o7777;
     assert_eq!(mode, 0o1777, "the shared directory's mode was changed");
+}
+
+#[test]
+fn after_an_ignored_persisted_model_deploys_are_numbered_after_its_number() {
+    let dir = tempfile::tempdir().unwrap();
+    let state = dir.path().join("state");
+    let instance = unique_instance("ignorednumber");
+    let (_, model) = save_smooth_model(dir.path(), 1);
+    let service = ServiceProcess::with_model(&instance, &state, &model);
+    assert!(matches!(
+        deploy(&service, &model),
+        DeployOutcome::Accepted { generation: 2, .. }
+    ));
+    service.stop_with(libc::SIGTERM);
+    // Damaged (written through the link, into the current generation's file): ignored.
+    std::fs::write(state.join("model.hxm"), b"not a model").unwrap();
+    let service = ServiceProcess::start(&instance, &["--state-dir", p(&state)]);
+    assert_eq!(service.client().unwrap().status().unwrap().generation, 0);
+    assert!(
+        service.log().contains("ignoring the persisted model"),
+        "{}",
+        service.log()
+    );
+    match deploy(&service, &model) {
+        DeployOutcome::Accepted { generation, .. } => assert_eq!(generation, 3),
+        refused => panic!("{refused:?}"),
+    }
 }

@@ -424,7 +424,7 @@ fn event_mode_serves_the_same_numbers_swaps_and_leaves_the_core_free_when_idle()
         .compensate_pose([0.0, 0.0, 280.0, 0.0, 0.0, 0.0])
         .unwrap();
     assert_eq!(point.generation, 2);
-    // Idle for a second: a spinning thread would use a whole core; the WaitSet sleeps.
+    // Idle for a second: a spinning thread would use a whole core; the event-mode thread sleeps.
     let before = cpu_seconds(service.pid());
     std::thread::sleep(Duration::from_secs(1));
     let used = cpu_seconds(service.pid()) - before;
