@@ -4,7 +4,7 @@
 //! the numbers is refused by name, and a shared directory is refused and left as it was.
 
 use std::os::unix::fs::PermissionsExt;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
@@ -51,6 +51,23 @@ fn deploy(service: &ServiceProcess, model: &Path) -> DeployOutcome {
     service.client().unwrap().deploy(&bytes).unwrap()
 }
 
+/// A state directory in which a service served `model` as generation 1 and accepted it again
+/// as generation 2, then stopped: (its temporary directory, the state directory, the instance,
+/// the model file).
+fn two_generations_persisted(test: &str) -> (tempfile::TempDir, PathBuf, String, PathBuf) {
+    let dir = tempfile::tempdir().unwrap();
+    let state = dir.path().join("state");
+    let instance = unique_instance(test);
+    let (_, model) = save_smooth_model(dir.path(), 1);
+    let service = ServiceProcess::with_model(&instance, &state, &model);
+    assert!(matches!(
+        deploy(&service, &model),
+        DeployOutcome::Accepted { generation: 2, .. }
+    ));
+    service.stop_with(libc::SIGTERM);
+    (dir, state, instance, model)
+}
+
 #[test]
 fn a_refused_second_service_changes_nothing_in_the_state_directory() {
     let dir = tempfile::tempdir().unwrap();
@@ -94,16 +111,7 @@ fn a_refused_second_service_changes_nothing_in_the_state_directory() {
 
 #[test]
 fn a_start_model_is_numbered_after_the_persisted_generations() {
-    let dir = tempfile::tempdir().unwrap();
-    let state = dir.path().join("state");
-    let instance = unique_instance("startnumber");
-    let (_, model) = save_smooth_model(dir.path(), 1);
-    let service = ServiceProcess::with_model(&instance, &state, &model);
-    assert!(matches!(
-        deploy(&service, &model),
-        DeployOutcome::Accepted { generation: 2, .. }
-    ));
-    service.stop_with(libc::SIGTERM);
+    let (_dir, state, instance, model) = two_generations_persisted("startnumber");
     let service = ServiceProcess::with_model(&instance, &state, &model);
     assert_eq!(service.client().unwrap().status().unwrap().generation, 3);
     assert_eq!(
@@ -183,16 +191,7 @@ fn a_shared_state_directory_is_refused_and_left_as_it_was() {
 
 #[test]
 fn after_an_ignored_persisted_model_deploys_are_numbered_after_its_number() {
-    let dir = tempfile::tempdir().unwrap();
-    let state = dir.path().join("state");
-    let instance = unique_instance("ignorednumber");
-    let (_, model) = save_smooth_model(dir.path(), 1);
-    let service = ServiceProcess::with_model(&instance, &state, &model);
-    assert!(matches!(
-        deploy(&service, &model),
-        DeployOutcome::Accepted { generation: 2, .. }
-    ));
-    service.stop_with(libc::SIGTERM);
+    let (_dir, state, instance, model) = two_generations_persisted("ignorednumber");
     // Damaged (written through the link, into the current generation's file): ignored.
     std::fs::write(state.join("model.hxm"), b"not a model").unwrap();
     let service = ServiceProcess::start(&instance, &["--state-dir", p(&state)]);
