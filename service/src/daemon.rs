@@ -119,12 +119,13 @@ impl Service {
         } = options;
         hexacomp_protocol::service_name(&instance, hexacomp_protocol::Endpoint::Compensate)?;
         state::prepare(&state_dir)?;
+        let persisted = state::persisted_generation(&state_dir)?;
         // A start model is numbered after whatever the state directory holds, so that a number
         // never names two models; it is persisted only once this service owns the instance.
         let (initial, start_model_file) = match &model {
             Some(path) => {
                 let (model, bytes) = start_model(path, &geometry)?;
-                let number = next_generation(state::persisted_generation(&state_dir)?)?;
+                let number = next_generation(persisted)?;
                 (Some((model, number)), Some((bytes, number)))
             }
             None => (state::restore(&state_dir, &geometry)?, None),
@@ -136,8 +137,7 @@ impl Service {
         let initial_generation = initial.as_ref().map_or(0, |(_, number)| *number);
         // Deploys are numbered after every number the state directory has used, also when its
         // model was ignored (another geometry, damaged): a number never names two models.
-        let last_numbered =
-            initial_generation.max(state::persisted_generation(&state_dir)?.unwrap_or(0));
+        let last_numbered = initial_generation.max(persisted.unwrap_or(0));
         tracing::info!(
             "instance {instance} geometry {} ({}), model generation {initial_generation}, state {}",
             geometry.name,

@@ -254,20 +254,14 @@ pub fn serve(setup: ServingSetup, ready: Sender<Result<WaitMode, Error>>) {
         if serving.poll_once() {
             continue;
         }
-        match &wake {
-            Some(listener) => {
+        match (&wake, effective) {
+            (Some(listener), _) => {
                 // Whatever ended the wait — a wake-up, the tick, or an interrupted wait (EINTR
                 // after SIGSTOP/SIGCONT) — the loop goes on: only `stop` ends it.
                 let _ = listener.timed_wait(|_| {}, Duration::from_millis(10));
             }
-            _ => {
-                if wait == WaitMode::Spin {
-                    std::hint::spin_loop();
-                } else {
-                    // Sleep mode, or event mode fallen back to it (`effective`).
-                    std::thread::sleep(Duration::from_micros(50));
-                }
-            }
+            (None, WaitMode::Spin) => std::hint::spin_loop(),
+            (None, _) => std::thread::sleep(Duration::from_micros(50)),
         }
     }
 }

@@ -102,13 +102,13 @@ pub fn persist(dir: &Path, model_file: &[u8], generation: u64) -> Result<(), Err
         path: path.to_path_buf(),
         cause,
     };
-    // A directory of this number left by a crash before its commit: never current, so stale.
     if std::fs::read_link(dir.join(CURRENT)).is_ok_and(|current| current == Path::new(&name)) {
         return Err(fail(
             &target,
             std::io::Error::other("this generation is already the persisted one"),
         ));
     }
+    // A directory of this number left by a crash before its commit: never current, so stale.
     let _ = std::fs::remove_dir_all(&target);
     let written = (|| {
         std::fs::DirBuilder::new().mode(0o700).create(&target)?;
@@ -120,10 +120,9 @@ pub fn persist(dir: &Path, model_file: &[u8], generation: u64) -> Result<(), Err
         return Err(fail(&target, cause));
     }
     let current = dir.join(CURRENT);
-    let link = current.with_file_name(".current.link");
-    if let Err(cause) = switch_link(&link, &current, Path::new(&name)) {
+    if let Err(cause) = switch_link(&current, Path::new(&name)) {
         let _ = std::fs::remove_dir_all(&target);
-        return Err(fail(&link, cause));
+        return Err(fail(&link_temporary(&current), cause));
     }
     // Committed: `current` names the new generation. From here on the generation directory
     // stays, whatever fails.
@@ -154,23 +153,27 @@ pub fn persist(dir: &Path, model_file: &[u8], generation: u64) -> Result<(), Err
     Ok(())
 }
 
-/// Replaces `path` by a symbolic link to `target`, made as `temporary` and renamed over it
-/// (one rename: `path` is the old link or the new one, never missing).
-fn switch_link(temporary: &Path, path: &Path, target: &Path) -> std::io::Result<()> {
-    let _ = std::fs::remove_file(temporary);
-    std::os::unix::fs::symlink(target, temporary)?;
-    std::fs::rename(temporary, path).inspect_err(|_| {
-        let _ = std::fs::remove_file(temporary);
+/// Where a new link for `path` (a file of the state directory) is made before its rename:
+/// `.<name>.link` beside it.
+fn link_temporary(path: &Path) -> PathBuf {
+    let name = path.file_name().unwrap_or_default().to_string_lossy();
+    path.with_file_name(format!(".{name}.link"))
+}
+
+/// Replaces `path` by a symbolic link to `target`, made at [`link_temporary`] and renamed over
+/// it (one rename: `path` is the old link or the new one, never missing).
+fn switch_link(path: &Path, target: &Path) -> std::io::Result<()> {
+    let temporary = link_temporary(path);
+    let _ = std::fs::remove_file(&temporary);
+    std::os::unix::fs::symlink(target, &temporary)?;
+    std::fs::rename(&temporary, path).inspect_err(|_| {
+        let _ = std::fs::remove_file(&temporary);
     })
 }
 
-/// [`switch_link`] through `.<name>.link`, then the directory flushed.
+/// [`switch_link`], then the directory flushed.
 fn replace_link(path: &Path, target: &Path) -> std::io::Result<()> {
-    let name = path
-        .file_name()
-        .ok_or_else(|| std::io::Error::other("the path names no file"))?;
-    let temporary = path.with_file_name(format!(".{}.link", name.to_string_lossy()));
-    switch_link(&temporary, path, target)?;
+    switch_link(path, target)?;
     sync_directory_of(path)
 }
 
