@@ -185,8 +185,9 @@ extern "C" {
 const char *hexacomp_error_message(int code);
 
 /**
- * The calling thread's last error in full (empty before any error), NUL-terminated; valid
- * until the thread's next failing call.
+ * The calling thread's last error in full (empty before any error), NUL-terminated UTF-8 of at
+ * most 511 bytes (a longer detail is cut at a character boundary); valid until the thread's
+ * next failing call, and no longer than the thread. Reading it allocates nothing.
  */
 const char *hexacomp_last_error_detail(void);
 

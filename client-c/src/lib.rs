@@ -22,7 +22,8 @@
 #![warn(missing_docs)]
 
 use std::cell::RefCell;
-use std::ffi::{CStr, CString, c_char, c_int};
+use std::ffi::{CStr, c_char, c_int};
+use std::fmt::{self, Write as _};
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::time::Duration;
 
@@ -139,13 +140,99 @@ pub struct HexacompClient {
     client: Client,
 }
 
-thread_local! {
-    static LAST_ERROR: RefCell<CString> = RefCell::new(CString::default());
+/// Longest error detail kept, bytes, the terminating NUL included: a longer one is cut at the
+/// last character boundary that fits.
+const DETAIL_CAPACITY: usize = 512;
+
+/// A thread's last error detail: NUL-terminated UTF-8 in a fixed buffer, written without
+/// allocating (a timed-out call in a servo thread must not call malloc). `bytes` comes first so
+/// that a pointer to the detail is a pointer to its text.
+#[repr(C)]
+struct Detail {
+    bytes: [u8; DETAIL_CAPACITY],
+    /// Bytes of text before the NUL.
+    len: usize,
 }
 
-fn remember(detail: &str) {
-    let text = CString::new(detail.replace('\0', " ")).unwrap_or_default();
-    LAST_ERROR.with(|last| *last.borrow_mut() = text);
+impl Detail {
+    const EMPTY: Self = Self {
+        bytes: [0; DETAIL_CAPACITY],
+        len: 0,
+    };
+
+    /// Replaces the text with `text`'s display.
+    fn set(&mut self, text: &dyn fmt::Display) {
+        self.len = 0;
+        // Err only when the buffer is full: the text is then cut there.
+        let _ = write!(self, "{text}");
+        self.bytes[self.len] = 0;
+    }
+}
+
+impl fmt::Write for Detail {
+    /// Appends `s` while it fits (a NUL, which would end the C string early, written as a
+    /// space); fails at the first character that does not.
+    fn write_str(&mut self, s: &str) -> fmt::Result {
+        for c in s.chars() {
+            let c = if c == '\0' { ' ' } else { c };
+            let mut utf8 = [0; 4];
+            let encoded = c.encode_utf8(&mut utf8).as_bytes();
+            let end = self.len + encoded.len();
+            if end >= DETAIL_CAPACITY {
+                return Err(fmt::Error);
+            }
+            self.bytes[self.len..end].copy_from_slice(encoded);
+            self.len = end;
+        }
+        Ok(())
+    }
+}
+
+thread_local! {
+    static LAST_ERROR: RefCell<Detail> = const { RefCell::new(Detail::EMPTY) };
+}
+
+/// Why a call failed: its code and, displayed, its detail. Built and displayed without
+/// allocating, except for what a client error carries.
+#[derive(Debug)]
+enum Failure {
+    /// A bad argument, described.
+    Invalid(&'static str),
+    /// A point kind that is no `HexacompKind`.
+    UnknownKind(c_int),
+    /// The client library's error.
+    Client(Error),
+    /// A panic caught at the boundary, with its message.
+    Panic(String),
+}
+
+impl Failure {
+    fn code(&self) -> HexacompError {
+        match self {
+            Failure::Invalid(_) | Failure::UnknownKind(_) => {
+                HexacompError::HexacompErrorInvalidArgument
+            }
+            Failure::Client(error) => code_of(error),
+            Failure::Panic(_) => HexacompError::HexacompErrorInternal,
+        }
+    }
+}
+
+impl fmt::Display for Failure {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Failure::Invalid(what) => f.write_str(what),
+            Failure::UnknownKind(kind) => write!(f, "unknown point kind {kind}"),
+            Failure::Client(error) => write!(f, "{error}"),
+            Failure::Panic(message) => write!(f, "internal error (caught panic): {message}"),
+        }
+    }
+}
+
+impl From<Error> for Failure {
+    fn from(error: Error) -> Self {
+        Failure::Client(error)
+    }
 }
 
 fn code_of(error: &Error) -> HexacompError {
@@ -163,28 +250,21 @@ fn code_of(error: &Error) -> HexacompError {
     }
 }
 
-/// Runs `body`, turning errors and panics into codes (and the thread's last error detail).
-fn guarded(body: impl FnOnce() -> Result<(), (HexacompError, String)>) -> HexacompError {
-    match catch_unwind(AssertUnwindSafe(body)) {
-        Ok(Ok(())) => HexacompError::HexacompOk,
-        Ok(Err((code, detail))) => {
-            remember(&detail);
-            code
-        }
-        Err(panic) => {
-            let what = panic
+/// Runs `body`, turning a failure or a panic into its code and the thread's last error detail.
+fn guarded(body: impl FnOnce() -> Result<(), Failure>) -> HexacompError {
+    let failure = match catch_unwind(AssertUnwindSafe(body)) {
+        Ok(Ok(())) => return HexacompError::HexacompOk,
+        Ok(Err(failure)) => failure,
+        Err(panic) => Failure::Panic(
+            panic
                 .downcast_ref::<&str>()
                 .map(|s| s.to_string())
                 .or_else(|| panic.downcast_ref::<String>().cloned())
-                .unwrap_or_default();
-            remember(&format!("internal error (caught panic): {what}"));
-            HexacompError::HexacompErrorInternal
-        }
-    }
-}
-
-fn invalid(detail: &str) -> (HexacompError, String) {
-    (HexacompError::HexacompErrorInvalidArgument, detail.into())
+                .unwrap_or_default(),
+        ),
+    };
+    LAST_ERROR.with(|last| last.borrow_mut().set(&failure));
+    failure.code()
 }
 
 impl HexacompError {
@@ -209,10 +289,6 @@ impl HexacompError {
     }
 }
 
-fn failed(error: Error) -> (HexacompError, String) {
-    (code_of(&error), error.to_string())
-}
-
 fn point(p: &CompensatedPoint) -> HexacompPoint {
     HexacompPoint {
         legs: p.legs,
@@ -226,13 +302,11 @@ fn point(p: &CompensatedPoint) -> HexacompPoint {
 ///
 /// # Safety
 /// `client` is null or was returned by [`hexacomp_connect`] and not closed.
-unsafe fn client_mut<'a>(
-    client: *mut HexacompClient,
-) -> Result<&'a mut HexacompClient, (HexacompError, String)> {
+unsafe fn client_mut<'a>(client: *mut HexacompClient) -> Result<&'a mut HexacompClient, Failure> {
     // SAFETY: the caller guarantees `client` is null (refused here) or a live client from
     // `hexacomp_connect` that no other thread uses meanwhile (a hand-over between threads is
     // ordered by the caller, see the module documentation).
-    unsafe { client.as_mut() }.ok_or_else(|| invalid("client is null"))
+    unsafe { client.as_mut() }.ok_or(Failure::Invalid("client is null"))
 }
 
 /// The name of an error code (a `HexacompError` value), as a static NUL-terminated string
@@ -261,11 +335,14 @@ pub extern "C" fn hexacomp_error_message(code: c_int) -> *const c_char {
     text.as_ptr()
 }
 
-/// The calling thread's last error in full (empty before any error), NUL-terminated; valid
-/// until the thread's next failing call.
+/// The calling thread's last error in full (empty before any error), NUL-terminated UTF-8 of at
+/// most 511 bytes (a longer detail is cut at a character boundary); valid until the thread's
+/// next failing call, and no longer than the thread. Reading it allocates nothing.
 #[unsafe(no_mangle)]
 pub extern "C" fn hexacomp_last_error_detail() -> *const c_char {
-    LAST_ERROR.with(|last| last.borrow().as_ptr())
+    // The detail's text is its first field (`repr(C)`); the pointer comes from the cell, not
+    // from a borrow that would end here.
+    LAST_ERROR.with(|last| last.as_ptr().cast::<c_char>().cast_const())
 }
 
 /// Connects to the service of `instance` (NUL-terminated, e.g. `"default"`); every later
@@ -283,16 +360,16 @@ pub unsafe extern "C" fn hexacomp_connect(
 ) -> HexacompError {
     guarded(|| {
         if instance.is_null() || client.is_null() {
-            return Err(invalid("instance and client must not be null"));
+            return Err(Failure::Invalid("instance and client must not be null"));
         }
         // SAFETY: `instance` is not null, and the caller guarantees it is NUL-terminated.
         let name = unsafe { CStr::from_ptr(instance) }
             .to_str()
-            .map_err(|_| invalid("instance is not UTF-8"))?;
+            .map_err(|_| Failure::Invalid("instance is not UTF-8"))?;
         let options = ClientOptions {
             timeout: Duration::from_micros(timeout_us),
         };
-        let connected = Client::connect(name, &options).map_err(failed)?;
+        let connected = Client::connect(name, &options)?;
         // SAFETY: `client` is not null, and the caller guarantees it is writable.
         unsafe { *client = Box::into_raw(Box::new(HexacompClient { client: connected })) };
         Ok(())
@@ -338,13 +415,13 @@ pub unsafe extern "C" fn hexacomp_compensate_batch(
         let kind = match kind {
             k if k == HexacompKind::HexacompKindPoses as c_int => RequestKind::Poses,
             k if k == HexacompKind::HexacompKindJoints as c_int => RequestKind::Joints,
-            unknown => return Err(invalid(&format!("unknown point kind {unknown}"))),
+            unknown => return Err(Failure::UnknownKind(unknown)),
         };
         if count > MAX_BATCH {
-            return Err(failed(Error::BatchTooLarge { points: count }));
+            return Err(Error::BatchTooLarge { points: count }.into());
         }
         if count > 0 && (points.is_null() || out.is_null()) {
-            return Err(invalid("points and out must not be null"));
+            return Err(Failure::Invalid("points and out must not be null"));
         }
         let (points, out) = if count == 0 {
             (&[][..], &mut [][..])
@@ -361,7 +438,7 @@ pub unsafe extern "C" fn hexacomp_compensate_batch(
         client
             .client
             .compensate_each(kind, points, |i, result| out[i] = point(&result))
-            .map_err(failed)
+            .map_err(Failure::from)
     })
 }
 
@@ -422,8 +499,8 @@ pub unsafe extern "C" fn hexacomp_status(
         // SAFETY: the caller's guarantee on `client` is `client_mut`'s.
         let client = unsafe { client_mut(client) }?;
         // SAFETY: the caller guarantees `out` is null (refused here) or writable.
-        let out = unsafe { out.as_mut() }.ok_or_else(|| invalid("out is null"))?;
-        let s = client.client.status().map_err(failed)?;
+        let out = unsafe { out.as_mut() }.ok_or(Failure::Invalid("out is null"))?;
+        let s = client.client.status()?;
         *out = HexacompStatus {
             generation: s.generation,
             requests: s.requests,
@@ -467,6 +544,24 @@ mod tests {
         let code = guarded(|| panic!("boom at the boundary"));
         assert_eq!(code, HexacompError::HexacompErrorInternal);
         assert!(detail().contains("boom at the boundary"), "{}", detail());
+    }
+
+    #[test]
+    fn a_long_detail_is_cut_at_a_character_boundary_and_a_nul_inside_becomes_a_space() {
+        // 'é' is two bytes: 255 of them plus "a" make 511 bytes, and 511 is the most that fits.
+        let mut detail = Detail::EMPTY;
+        let fits = format!("a{}", "é".repeat(255));
+        detail.set(&fits);
+        assert_eq!(&detail.bytes[..detail.len], fits.as_bytes());
+        assert_eq!(detail.bytes[511], 0);
+        // One byte more: the last 'é' no longer fits whole and is left out.
+        let longer = format!("ab{}", "é".repeat(255));
+        detail.set(&longer);
+        assert_eq!(detail.len, 510);
+        assert_eq!(&detail.bytes[..510], &longer.as_bytes()[..510]);
+        assert_eq!(detail.bytes[510], 0);
+        detail.set(&"before\0after");
+        assert_eq!(&detail.bytes[..13], b"before after\0");
     }
 
     #[test]

@@ -17,15 +17,7 @@
 #include <time.h>
 
 #include "hexacomp.h"
-
-static int failures = 0;
-
-static void expect(int condition, const char *what) {
-    if (!condition) {
-        fprintf(stderr, "FAILED: %s (last error: %s)\n", what, hexacomp_last_error_detail());
-        failures++;
-    }
-}
+#include "support.h"
 
 static void print_point(char tag, int i, const double in[6], const HexacompPoint *p) {
     printf("%c %d", tag, i);
@@ -34,39 +26,6 @@ static void print_point(char tag, int i, const double in[6], const HexacompPoint
     for (int k = 0; k < 6; k++) printf(" %.17g", p->legs[k]);
     for (int k = 0; k < 6; k++) printf(" %.17g", p->corrections[k]);
     printf("\n");
-}
-
-static int64_t now_us(void) {
-    struct timespec t;
-    clock_gettime(CLOCK_MONOTONIC, &t);
-    return (int64_t)t.tv_sec * 1000000 + t.tv_nsec / 1000;
-}
-
-/* The state letter of process `pid` from /proc/PID/stat ('T' when stopped), '?' if unreadable. */
-static char process_state(pid_t pid) {
-    char path[64];
-    snprintf(path, sizeof path, "/proc/%ld/stat", (long)pid);
-    FILE *f = fopen(path, "r");
-    if (f == NULL) return '?';
-    char line[512];
-    size_t n = fread(line, 1, sizeof line - 1, f);
-    fclose(f);
-    line[n] = '\0';
-    /* The state follows the command name, which is in parentheses and may hold spaces. */
-    char *end = strrchr(line, ')');
-    return end != NULL && end[1] == ' ' ? end[2] : '?';
-}
-
-/* Stops `pid` and returns once the kernel reports it stopped (SIGSTOP is delivered
- * asynchronously: a request sent right after kill() may still be answered). */
-static int stop_process(pid_t pid) {
-    if (kill(pid, SIGSTOP) != 0) return 0;
-    for (int i = 0; i < 10000; i++) {
-        if (process_state(pid) == 'T') return 1;
-        struct timespec step = {0, 1000000};
-        nanosleep(&step, NULL);
-    }
-    return 0;
 }
 
 /* A pose call to the stopped service with deadline `timeout_us`: it must give the timeout code,

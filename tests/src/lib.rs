@@ -6,6 +6,7 @@
 
 #![warn(missing_docs)]
 
+pub mod c_program;
 pub mod linuxcnc;
 
 use std::path::PathBuf;
