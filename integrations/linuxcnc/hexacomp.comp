@@ -6,18 +6,24 @@ Every servo period the component sends the six nominal joint positions (leg leng
 to the motor position commands (\\fBjoint.N.motor-pos-cmd\\fR, which differ from the joint positions
 by the offset homing set) on their way to the drives. It waits at
 most \\fBwait-us\\fR microseconds for the answer. On a timeout, an absent service or an answer that
-is not ok, it keeps applying the last good corrections, raises \\fBfault\\fR and counts the period in
+is not ok, it keeps the last good corrections, raises \\fBfault\\fR and counts the period in
 \\fBfault-count\\fR: it never outputs an unchecked value. Before the first good answer the held
-corrections are zero (the nominal joints pass through). While \\fBhomed\\fR is false (wire it to
-\\fBmotion.is-all-homed\\fR) the joint positions mean nothing: the component asks nothing, raises no
-fault and ramps the correction out.
+corrections are zero (the nominal joints pass through).
+
+Compensation is used while \\fBenable\\fR is set and \\fBhomed\\fR is true (wire it to
+\\fBmotion.is-all-homed\\fR: before homing the joint positions mean nothing). Not used, the
+component asks nothing and raises no fault: switching it off, or a machine not homed, never
+inhibits the feed. The applied share \\fBblend\\fR of the held correction moves to 1 while used
+and to 0 while not, at 1/\\fBramp-time\\fR per second.
+
+Every change of the applied correction is ramped: per joint it changes by at most
+\\fBmax-rate\\fR mm per second (max-rate times the servo period per period). Along a path the
+corrections change far slower and are followed exactly; a jump (a fault clearing after the machine
+moved, a new model after a deploy or a service restart, the end of a clamped stretch) reaches the
+drives as a ramp, never as a step.
 
 The feedback pins remove the applied correction from the drive feedback again, so that motion sees
 the nominal joint positions and computes no following error from the correction.
-
-\\fBenable\\fR switches compensation on and off at run time; the applied share \\fBblend\\fR moves
-to its target at 1/\\fBramp-time\\fR per second, so switching mid-motion changes the joints by at
-most |correction|·period/ramp-time per period.
 
 Wire \\fBfault\\fR to \\fBmotion.feed-inhibit\\fR to stop the machine while compensation is lost:
 it resumes by itself when the service answers again.
@@ -37,19 +43,20 @@ see_also "hexacomp-service(1), motion(9)";
 pin in float joint_in-#[6] "Nominal joint position (leg length) from joint.N.pos-cmd, machine units";
 pin in float motor_in-#[6] "Motor position command from joint.N.motor-pos-cmd, machine units";
 pin out float motor_out-#[6] "Compensated motor position command for the drive, machine units";
-pin in bit homed = 1 "Compensate only while true (wire to motion.is-all-homed)";
+pin in bit homed = 1 "Compensate only while true (wire to motion.is-all-homed); false is no fault";
 pin in float feedback_in-#[6] "Joint position feedback from the drive, machine units";
 pin out float feedback_out-#[6] "Feedback minus the applied correction, for joint.N.motor-pos-fb, machine units";
-pin out float correction-#[6] "Correction added this period (blend times the held correction), machine units";
-pin out bit fault "True while compensation fails: no service, no answer within wait-us, or a point not ok";
+pin out float correction-#[6] "Correction added this period (blend times the held correction, ramped at max-rate), machine units";
+pin out bit fault "True while compensation is used and fails: no service, no answer within wait-us, or a point not ok";
 pin out u32 fault_count "Servo periods in which compensation failed, since loading";
 pin out u32 model_generation "Generation of the service's model that computed the held corrections (0: none yet)";
 pin out u32 point_status "Status of the last answered point (HEXACOMP_STATUS_*: 0 ok, 1 out of stroke, 2 outside trained range, 3 clamped, 4 invalid input, 5 no model)";
 pin out s32 last_error "Result of the last call to the service (HexacompError: 0 ok, 3 service absent, 4 timeout, ...)";
 pin out float blend "Share of the held correction applied, 0 to 1";
 
-param rw bit enable = 1 "Apply the corrections (changes ramp over ramp-time)";
+param rw bit enable = 1 "Use compensation (changes ramp over ramp-time); 0 asks nothing and is no fault";
 param rw float ramp_time = 1.0 "Seconds to go from no correction to the full one and back";
+param rw float max_rate = 2.0 "Largest change of the applied correction per joint, mm per second (whatever the machine units); 0 or less: no limit";
 param rw float mm_per_unit = 1.0 "Millimetres per machine unit: 1 for mm machines, 25.4 for inch machines";
 param rw u32 wait_us = 200 "Longest wait for the service's answer in a servo period, microseconds";
 
@@ -58,6 +65,7 @@ modparam dummy instance "Name of the hexacomp-service instance to use (default: 
 variable void *connection;
 variable void *connector;
 variable double held[6];
+variable double applied[6];
 
 option extra_setup yes;
 option extra_cleanup yes;
@@ -236,15 +244,23 @@ static int ask_service(struct __comp_state *__comp_inst) {
 
 FUNCTION(_) {
     int i;
-    double step = ramp_time > 0 ? period * 1e-9 / ramp_time : 1.0;
-    double target = enable && homed ? 1.0 : 0.0;
-    int ok = homed ? ask_service(__comp_inst) : 1;
+    double seconds = period * 1e-9;
+    double share_step = ramp_time > 0 ? seconds / ramp_time : 1.0;
+    /* The largest change of a joint's applied correction this period, machine units. */
+    double limit = max_rate > 0 && mm_per_unit > 0 ? max_rate * seconds / mm_per_unit : 0.0;
+    int used = enable && homed;
+    double share = used ? 1.0 : 0.0;
+    int ok = used ? ask_service(__comp_inst) : 1;
     fault = !ok;
     if (!ok) fault_count++;
-    if (blend < target) blend = blend + step > target ? target : blend + step;
-    if (blend > target) blend = blend - step < target ? target : blend - step;
+    if (blend < share) blend = blend + share_step > share ? share : blend + share_step;
+    if (blend > share) blend = blend - share_step < share ? share : blend - share_step;
     for (i = 0; i < 6; i++) {
-        correction(i) = blend * held[i];
+        double change = blend * held[i] - applied[i];
+        if (limit > 0 && change > limit) change = limit;
+        if (limit > 0 && change < -limit) change = -limit;
+        applied[i] += change;
+        correction(i) = applied[i];
         motor_out(i) = motor_in(i) + correction(i);
         feedback_out(i) = feedback_in(i) - correction(i);
     }

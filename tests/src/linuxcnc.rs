@@ -29,7 +29,7 @@ pub fn realtime_kernel() -> bool {
 }
 
 /// The pins the test sampler records: the `cfg` string of its `loadrt sampler`.
-pub const SAMPLER_CFG: &str = "ffffffffffffffffffbuf";
+pub const SAMPLER_CFG: &str = "ffffffffffffffffffufu";
 
 /// True when LinuxCNC and halcompile are installed. Without them the LinuxCNC tests say so and
 /// pass, unless `HEXACOMP_REQUIRE_LINUXCNC` is set (as `.ci/run` does): then they fail.
@@ -215,13 +215,19 @@ impl SimConfig {
     /// Starts `hexacomp-service` (instance `default`, this configuration's geometry and model)
     /// and waits until it serves; `log` names its log file in the directory.
     pub fn start_service(&self, log: &str) -> SimService {
+        self.start_service_with_model(log, "model.hxm")
+    }
+
+    /// As [`SimConfig::start_service`], serving the model file `model` of the directory (which
+    /// replaces the persisted one, as a new generation).
+    pub fn start_service_with_model(&self, log: &str, model: &str) -> SimService {
         let log_path = self.dir.join(log);
         let mut child = self
             .command(self.dir.join("hexacomp-service"))
             .args(["--instance", "default", "--geometry", "geometry.toml"])
             .args([
                 "--model",
-                "model.hxm",
+                model,
                 "--state-dir",
                 "state",
                 // Spinning on CPU 0: LinuxCNC's servo thread runs on the last one.
@@ -272,14 +278,25 @@ impl SimConfig {
         }
     }
 
+    /// Runs `program` with `args` in the configuration directory as the LinuxCNC user (so that
+    /// it reaches the service's and LinuxCNC's shared memory) and returns its output; a
+    /// program that cannot be started fails the test.
+    pub fn run(&self, program: impl AsRef<std::ffi::OsStr>, args: &[&str]) -> std::process::Output {
+        let program = program.as_ref();
+        self.command(program)
+            .args(args)
+            .output()
+            .unwrap_or_else(|e| panic!("running {}: {e}", program.to_string_lossy()))
+    }
+
     /// A path in the configuration directory.
     pub fn path(&self, name: &str) -> PathBuf {
         self.dir.join(name)
     }
 
     /// Loads the test sampler (`SAMPLER_CFG`: joints 0–5 leg lengths `joint.N.pos-cmd`,
-    /// 6–11 motor commands into the component, 12–17 out of it, fault, fault count, blend) with
-    /// the configuration's HAL files.
+    /// 6–11 motor commands into the component, 12–17 out of it, fault count, blend, model
+    /// generation; a HAL sampler takes at most 21 values) with the configuration's HAL files.
     pub fn add_sampler(ini: String) -> String {
         ini.replace(
             "HALFILE = hexacomp.hal\n",
@@ -304,13 +321,13 @@ fn write_sampler_hal(dir: &Path) {
             pin += 1;
         }
     }
-    hal += &format!("net hexacomp:fault => sampler.0.pin.{pin}\n");
+    hal += &format!("net hexacomp:fault-count hexacomp.0.fault-count => sampler.0.pin.{pin}\n");
     hal += &format!(
-        "net hexacomp:fault-count hexacomp.0.fault-count => sampler.0.pin.{}\n",
+        "net hexacomp:blend hexacomp.0.blend => sampler.0.pin.{}\n",
         pin + 1
     );
     hal += &format!(
-        "net hexacomp:blend hexacomp.0.blend => sampler.0.pin.{}\n",
+        "net hexacomp:generation hexacomp.0.model-generation => sampler.0.pin.{}\n",
         pin + 2
     );
     std::fs::write(dir.join("sampling.hal"), hal).expect("writing sampling.hal");
@@ -443,29 +460,37 @@ pub struct Sample {
     pub motor_in: [f64; 6],
     /// Motor commands out of the component, to the drives.
     pub motor_out: [f64; 6],
-    /// The component's fault pin.
+    /// Whether the component faulted in this period: its fault count rose (the sampler has no
+    /// room for the fault pin as well; the count rises exactly in the periods the pin is set).
     pub fault: bool,
     /// The component's fault count.
     pub fault_count: u64,
     /// The component's blend (share of the correction applied).
     pub blend: f64,
+    /// Generation of the model that computed the component's held corrections (0: none yet).
+    pub generation: u64,
 }
 
 /// Reads the samples drive.py recorded (one line of Python reprs per servo period).
 pub fn read_samples(path: &Path) -> Vec<Sample> {
     let text = std::fs::read_to_string(path).expect("reading samples");
+    let mut previous_count = None;
     text.lines()
         .map(|line| {
             let words: Vec<&str> = line.split_whitespace().collect();
             assert_eq!(words.len(), SAMPLER_CFG.len(), "sample line {line:?}");
             let float = |i: usize| -> f64 { words[i].parse().expect("a float") };
+            let fault_count = words[18].parse().expect("a count");
+            let fault = previous_count.is_some_and(|count| fault_count > count);
+            previous_count = Some(fault_count);
             Sample {
                 legs: std::array::from_fn(float),
                 motor_in: std::array::from_fn(|j| float(6 + j)),
                 motor_out: std::array::from_fn(|j| float(12 + j)),
-                fault: words[18] == "True",
-                fault_count: words[19].parse().expect("a count"),
-                blend: float(20),
+                fault,
+                fault_count,
+                blend: float(19),
+                generation: words[20].parse().expect("a generation"),
             }
         })
         .collect()

@@ -13,15 +13,18 @@
 //!
 //! The four tests share LinuxCNC (one instance per machine) and run one at a time.
 
+use std::collections::BTreeMap;
 use std::sync::Mutex;
 use std::time::Duration;
 
 use hexacomp_core::compensator::{PointStatus, compensate_legs};
+use hexacomp_core::model::Model;
 use hexacomp_core::sampling::{SamplerOptions, WorkspaceSampler};
 use hexacomp_core::{Pose, inverse_kinematics};
 use hexacomp_tests::linuxcnc::{
     Sample, SimConfig, SimService, linuxcnc_available, read_samples, realtime_kernel,
 };
+use hexacomp_tests::{binary, smooth_model_for};
 use serde_json::json;
 
 /// One LinuxCNC at a time.
@@ -36,10 +39,10 @@ fn one_at_a_time() -> std::sync::MutexGuard<'static, ()> {
         .unwrap_or_else(|poisoned| poisoned.into_inner())
 }
 
-/// The correction the component must add for `sample`'s legs (inch), from the service's model.
-fn expected_correction(sim: &SimConfig, sample: &Sample) -> [f64; 6] {
+/// The correction the service's `model` gives for `sample`'s legs (inch).
+fn service_correction(sim: &SimConfig, model: &Model, sample: &Sample) -> [f64; 6] {
     let legs_mm = sample.legs.map(|q| q * MM_PER_INCH);
-    let answer = compensate_legs(&sim.geometry, Some(&sim.model), &legs_mm);
+    let answer = compensate_legs(&sim.geometry, Some(model), &legs_mm);
     assert_eq!(answer.status, PointStatus::Ok, "legs {legs_mm:?} mm");
     answer.corrections.map(|c| c / MM_PER_INCH)
 }
@@ -77,53 +80,132 @@ fn compensating(samples: &[Sample]) -> Vec<Sample> {
 /// the rounding of `motor_in + correction`, far below the corrections (1e-3 in).
 const CORRECTION_TOLERANCE_IN: f64 = 1e-12;
 
+/// The value of `key = value` or `setp key value` in the configuration file `name`.
+fn setting(sim: &SimConfig, name: &str, key: &str) -> f64 {
+    let text = std::fs::read_to_string(sim.path(name)).expect("a configuration file");
+    text.lines()
+        .find_map(|line| {
+            let line = line.trim();
+            let rest = line.strip_prefix(key)?;
+            rest.trim_start_matches([' ', '=']).parse().ok()
+        })
+        .unwrap_or_else(|| panic!("{name} sets no {key}"))
+}
+
+/// The largest change of the applied correction per servo period the configuration allows, in:
+/// the component's `max-rate` (mm/s) times the servo period.
+fn ramp_step(sim: &SimConfig) -> f64 {
+    let rate_mm_s = setting(sim, "hexacomp.hal", "setp hexacomp.0.max-rate");
+    let period_s = setting(sim, "hexapod-hexacomp.ini", "SERVO_PERIOD") * 1e-9;
+    rate_mm_s * period_s / MM_PER_INCH
+}
+
 /// What [`check_periods`] saw.
 struct PeriodCheck {
     /// Periods faulted (no good answer in time).
     faults: usize,
-    /// Largest |added − service's correction| over the periods not faulted, in.
+    /// Periods in which compensation was not used (`enable` 0 or not homed).
+    unused: usize,
+    /// Periods in which the correction's change was limited to the ramp step.
+    ramped: Vec<usize>,
+    /// Ramps that began right after an answered period that needed none (a new model's answer,
+    /// or a correction changing faster than the ramp along a path); the others began after a
+    /// fault, when the legs had moved on under a held correction.
+    ramps_after_an_answer: Vec<usize>,
+    /// Largest change of the applied correction from one period to the next, in.
+    largest_change: f64,
+    /// Largest |added − the component's law| over the periods checked, in.
     worst: f64,
     /// Largest service correction, in.
     largest_correction: f64,
 }
 
-/// Checks every period from the first answered one: without a fault the component added the
-/// service's correction for that period's legs, with one it held the previous period's. Faulted
-/// periods before the first answered one (nothing to compare them with) are counted.
-fn check_periods(sim: &SimConfig, periods: &[Sample]) -> PeriodCheck {
-    let first_answered = periods
-        .iter()
-        .position(|s| !s.fault)
+/// Replays the component's law over `periods` (consecutive servo periods) from the first
+/// answered one on, and checks every period against it: while compensation is used (`blend`
+/// rising or 1; `enable` and `homed` are not sampled, the blend's ramp tells) and not faulted,
+/// the held correction is the service's for that period's legs from the model of the sampled
+/// generation (`models`); otherwise it is the previous one, and an unused period is no fault.
+/// The correction added is the previous period's moved towards blend × held by at most `step`.
+/// Faulted periods before the first answered one (nothing to compare them with) are counted.
+/// Unused periods are never faults, before it as after.
+fn check_periods(
+    sim: &SimConfig,
+    models: &BTreeMap<u64, &Model>,
+    periods: &[Sample],
+    step: f64,
+) -> PeriodCheck {
+    let used =
+        |i: usize| periods[i].blend == 1.0 || (i > 0 && periods[i].blend > periods[i - 1].blend);
+    let first_answered = (0..periods.len())
+        .find(|&i| used(i) && !periods[i].fault)
         .expect("no period was answered");
     let mut check = PeriodCheck {
-        faults: first_answered,
+        faults: periods[..first_answered].iter().filter(|s| s.fault).count(),
+        unused: 0,
+        ramped: Vec::new(),
+        ramps_after_an_answer: Vec::new(),
+        largest_change: 0.0,
         worst: 0.0,
         largest_correction: 0.0,
     };
-    let periods = &periods[first_answered..];
-    for (i, sample) in periods.iter().enumerate() {
-        let added = applied_correction(sample);
-        if sample.fault {
-            check.faults += 1;
-            let held = applied_correction(&periods[i - 1]);
+    let model = |sample: &Sample| -> &Model {
+        models
+            .get(&sample.generation)
+            .unwrap_or_else(|| panic!("no model of generation {}", sample.generation))
+    };
+    let mut held = service_correction(
+        sim,
+        model(&periods[first_answered]),
+        &periods[first_answered],
+    );
+    let unused_fault = (1..=first_answered).find(|&i| !used(i) && periods[i].fault);
+    assert_eq!(unused_fault, None, "a fault while not in use");
+    for i in first_answered + 1..periods.len() {
+        let (before, sample) = (&periods[i - 1], &periods[i]);
+        if !used(i) {
+            check.unused += 1;
             assert!(
-                max_difference(added, held) <= CORRECTION_TOLERANCE_IN,
-                "faulted period did not hold the correction: {sample:?}"
+                !sample.fault,
+                "period {i}: a fault while not in use: {sample:?}"
             );
-            continue;
+        } else if sample.fault {
+            check.faults += 1;
+        } else {
+            held = service_correction(sim, model(sample), sample);
+            check.largest_correction = (held.iter())
+                .map(|c| c.abs())
+                .fold(check.largest_correction, f64::max);
         }
-        let expected = expected_correction(sim, sample);
-        let difference = max_difference(added, expected);
+        let previous = applied_correction(before);
+        let added = applied_correction(sample);
+        let mut limited = false;
+        let law: [f64; 6] = std::array::from_fn(|j| {
+            let change = sample.blend * held[j] - previous[j];
+            limited |= change.abs() > step + CORRECTION_TOLERANCE_IN;
+            previous[j] + change.clamp(-step, step)
+        });
+        if limited {
+            let ramp_began = check.ramped.last() != Some(&(i - 1));
+            if ramp_began && !before.fault {
+                check.ramps_after_an_answer.push(i);
+            }
+            check.ramped.push(i);
+        }
+        let difference = max_difference(added, law);
         check.worst = check.worst.max(difference);
-        check.largest_correction = (expected.iter())
-            .map(|c| c.abs())
-            .fold(check.largest_correction, f64::max);
+        check.largest_change = check.largest_change.max(max_difference(added, previous));
         assert!(
             difference <= CORRECTION_TOLERANCE_IN,
-            "legs {:?}: added {added:?}, the service's {expected:?}",
+            "period {i}, legs {:?}: added {added:?}, the law gives {law:?} (held {held:?}, \
+             previous {previous:?})",
             sample.legs
         );
     }
+    assert!(
+        check.largest_change <= step + CORRECTION_TOLERANCE_IN,
+        "a step of {} in, the ramp allows {step} in",
+        check.largest_change
+    );
     check
 }
 
@@ -254,11 +336,24 @@ fn a_program_runs_with_the_component_adding_the_services_corrections() {
         "{} compensated periods",
         compensating.len()
     );
+    let check = check_periods(
+        &sim,
+        &BTreeMap::from([(1, &sim.model)]),
+        &compensating,
+        ramp_step(&sim),
+    );
     let PeriodCheck {
         faults,
         worst,
         largest_correction,
-    } = check_periods(&sim, &compensating);
+        ..
+    } = check;
+    // Along the path the corrections change far slower than the ramp: followed exactly, a
+    // ramp only after a fault (the legs moved on under the held correction).
+    assert_eq!(
+        check.ramps_after_an_answer, [0usize; 0],
+        "ramps along the path"
+    );
     // No fault where LinuxCNC runs realtime. Without PREEMPT_RT its servo thread is an ordinary
     // thread sharing the cores, and a period misses its 900 µs wait as often as the machine is
     // busy (8.5 % of the periods with a load average of 6 on 2 cores, 58 % beside a release
@@ -290,10 +385,15 @@ fn a_program_runs_with_the_component_adding_the_services_corrections() {
     let last = samples.last().expect("samples");
     eprintln!(
         "{} compensated periods ({moved} moving), largest correction {largest_correction:.6} in, \
-         largest |applied − service| {worst:.1e} in, {faults} periods faulted (timeouts, \
-         correction held), {} in the whole run, homing included; program {:.1} s",
+         largest |applied − the component's law| {worst:.1e} in, {faults} periods faulted \
+         (timeouts, correction held), {} in the whole run, homing included; {} periods ramped \
+         (after faults), largest change in one period {:.2e} in (ramp step {:.2e} in); program \
+         {:.1} s",
         compensating.len(),
         last.fault_count,
+        check.ramped.len(),
+        check.largest_change,
+        ramp_step(&sim),
         results["program"]["seconds"].as_f64().unwrap_or_default()
     );
     drop(service);
@@ -352,12 +452,14 @@ fn killing_the_service_mid_program_faults_holds_and_recovers() {
             "the machine moved while faulted"
         );
     }
-    assert_eq!(
-        compensating[end - 1].fault_count - before.fault_count,
-        (end - first) as u64
-    );
     // Recovered: the service's corrections again, the program ran to its end.
-    check_periods(&sim, &compensating[end..]);
+    // The restarted service serves model.hxm again, as generation 2 (its --model).
+    check_periods(
+        &sim,
+        &BTreeMap::from([(1, &sim.model), (2, &sim.model)]),
+        &compensating[end - 1..],
+        ramp_step(&sim),
+    );
     let moved_after = moving_periods(&compensating[end..]);
     assert!(
         moved_after > 500,
@@ -372,6 +474,120 @@ fn killing_the_service_mid_program_faults_holds_and_recovers() {
         results["program"]["seconds"].as_f64().unwrap_or_default()
     );
     drop(restarted);
+}
+
+#[test]
+fn a_restart_into_another_model_and_a_deploy_ramp_in_and_enable_0_is_no_fault() {
+    if !linuxcnc_available("ramps") {
+        return;
+    }
+    let _guard = one_at_a_time();
+    let mut services = Vec::new();
+    let mut models = Vec::new();
+    let (sim, results, samples) = run_demo("ramps", |sim, first| {
+        // Two more models for the same machine, different corrections (as a recalibration
+        // gives), and the trainer to deploy one, where the LinuxCNC user can run them.
+        for (seed, name) in [(41, "model-b.hxm"), (42, "model-c.hxm")] {
+            let model = smooth_model_for(&sim.geometry, seed);
+            model.save(&sim.path(name)).expect("saving a model");
+            models.push(model);
+        }
+        std::fs::copy(binary("hexacomp-trainer"), sim.path("hexacomp-trainer")).unwrap();
+        // Generation 1 serves; the service dies and comes back with model b (generation 2).
+        std::thread::sleep(Duration::from_millis(1500));
+        first.kill();
+        std::thread::sleep(Duration::from_millis(1000));
+        services.push(sim.start_service_with_model("service-2.log", "model-b.hxm"));
+        // Model c deployed to the running service (generation 3).
+        std::thread::sleep(Duration::from_millis(2000));
+        let deploy = sim.run(
+            sim.path("hexacomp-trainer"),
+            &[
+                "deploy",
+                "--geometry",
+                "geometry.toml",
+                "--model",
+                "model-c.hxm",
+            ],
+        );
+        assert!(
+            deploy.status.success()
+                && String::from_utf8_lossy(&deploy.stdout).contains("generation 3"),
+            "deploy: {}{}",
+            String::from_utf8_lossy(&deploy.stdout),
+            String::from_utf8_lossy(&deploy.stderr)
+        );
+        // Compensation switched off, then the service gone: not used is no fault, the machine
+        // runs on with the correction ramping out.
+        std::thread::sleep(Duration::from_millis(2000));
+        let setp = sim.run("halcmd", &["setp", "hexacomp.0.enable", "0"]);
+        assert!(setp.status.success(), "halcmd: {setp:?}");
+        std::thread::sleep(Duration::from_millis(300));
+        services.pop().expect("the second service").kill();
+    });
+    assert!(
+        results["errors"].as_array().is_some_and(|e| e.is_empty()),
+        "{results}"
+    );
+    let served = BTreeMap::from([(1, &sim.model), (2, &models[0]), (3, &models[1])]);
+    let step = ramp_step(&sim);
+    let homed = samples
+        .iter()
+        .position(|s| s.blend > 0.0)
+        .expect("compensation was used");
+    let check = check_periods(&sim, &served, &samples[homed..], step);
+    // The scenario happened: each new model's corrections ramped in over several periods (the
+    // models differ by far more than one step), and compensation was switched off while the
+    // program ran.
+    let began = |generation: u64| {
+        homed
+            + samples[homed..]
+                .iter()
+                .position(|s| s.generation == generation)
+                .unwrap_or_else(|| panic!("generation {generation} never served"))
+    };
+    for generation in [2, 3] {
+        let first = began(generation) - homed;
+        let ramp = check
+            .ramped
+            .iter()
+            .filter(|&&i| (first..first + 1000).contains(&i));
+        assert!(
+            ramp.count() >= 10,
+            "generation {generation}: no ramp after its first answer (period {first})"
+        );
+    }
+    assert!(
+        !check.ramps_after_an_answer.is_empty(),
+        "the deploy's switch ramped in from an answered period"
+    );
+    assert!(check.unused >= 100, "enable 0 for {} periods", check.unused);
+    let off = homed
+        + samples[homed..]
+            .iter()
+            .position(|s| s.blend < 1.0 && s.generation == 3)
+            .unwrap();
+    let last = samples.last().unwrap();
+    assert_eq!(
+        last.fault_count, samples[off].fault_count,
+        "faults counted while not in use"
+    );
+    assert!(
+        moving_periods(&samples[off..]) > 500,
+        "the machine did not run on with compensation off and no service"
+    );
+    eprintln!(
+        "{} periods checked against the component's law: {} ramped (largest change {:.3e} in per \
+         period, the ramp allows {step:.3e} in), {} faulted, {} not in use (no fault), largest \
+         correction {:.6} in; program {:.1} s",
+        samples.len() - homed,
+        check.ramped.len(),
+        check.largest_change,
+        check.faults,
+        check.unused,
+        check.largest_correction,
+        results["program"]["seconds"].as_f64().unwrap_or_default()
+    );
 }
 
 #[test]
