@@ -11,7 +11,11 @@
 //! - no service answering from the start: the servo thread runs on while the component's helper
 //!   thread tries to connect, and the connection is picked up once the service is back.
 //!
-//! The four tests share LinuxCNC (one instance per machine) and run one at a time.
+//! - a restart into another model, a deploy, and `enable` 0 with the service killed: every
+//!   servo period follows the component's law (each change of the correction ramped at
+//!   `max-rate`), and compensation switched off is no fault.
+//!
+//! The five tests share LinuxCNC (one instance per machine) and run one at a time.
 
 use std::collections::BTreeMap;
 use std::sync::Mutex;
