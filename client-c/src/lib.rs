@@ -152,17 +152,22 @@ struct Detail {
     bytes: [u8; DETAIL_CAPACITY],
     /// Bytes of text before the NUL.
     len: usize,
+    /// A character did not fit: nothing more is written (the text ends cleanly there, even
+    /// where a later, shorter character would fit).
+    full: bool,
 }
 
 impl Detail {
     const EMPTY: Self = Self {
         bytes: [0; DETAIL_CAPACITY],
         len: 0,
+        full: false,
     };
 
     /// Replaces the text with `text`'s display.
     fn set(&mut self, text: &dyn fmt::Display) {
         self.len = 0;
+        self.full = false;
         // Err only when the buffer is full: the text is then cut there.
         let _ = write!(self, "{text}");
         self.bytes[self.len] = 0;
@@ -178,7 +183,8 @@ impl fmt::Write for Detail {
             let mut utf8 = [0; 4];
             let encoded = c.encode_utf8(&mut utf8).as_bytes();
             let end = self.len + encoded.len();
-            if end >= DETAIL_CAPACITY {
+            if self.full || end >= DETAIL_CAPACITY {
+                self.full = true;
                 return Err(fmt::Error);
             }
             self.bytes[self.len..end].copy_from_slice(encoded);
@@ -560,6 +566,17 @@ mod tests {
         assert_eq!(detail.len, 510);
         assert_eq!(&detail.bytes[..510], &longer.as_bytes()[..510]);
         assert_eq!(detail.bytes[510], 0);
+        // A display that goes on after a refused character: the text still ends at the cut.
+        struct GoesOn(String);
+        impl fmt::Display for GoesOn {
+            fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+                let _ = f.write_str(&self.0);
+                f.write_str("x")
+            }
+        }
+        detail.set(&GoesOn(longer.clone()));
+        assert_eq!(detail.len, 510);
+        assert_eq!(&detail.bytes[..510], &longer.as_bytes()[..510]);
         detail.set(&"before\0after");
         assert_eq!(&detail.bytes[..13], b"before after\0");
     }

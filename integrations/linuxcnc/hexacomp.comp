@@ -14,10 +14,12 @@ Compensation is used while \\fBenable\\fR is set and \\fBhomed\\fR is true (wire
 \\fBmotion.is-all-homed\\fR: before homing the joint positions mean nothing). Not used, the
 component asks nothing and raises no fault: switching it off, or a machine not homed, never
 inhibits the feed. The applied share \\fBblend\\fR of the held correction moves to 1 while used
-and to 0 while not, at 1/\\fBramp-time\\fR per second.
+and to 0 while not, at 1/\\fBramp-time\\fR per second; once it is 0 the held corrections are
+forgotten, so that compensation used again starts from the service's next answer.
 
 Every change of the applied correction is ramped: per joint it changes by at most
-\\fBmax-rate\\fR mm per second (max-rate times the servo period per period). Along a path the
+\\fBmax-rate\\fR mm per second (max-rate times the servo period per period; exactly 0 turns the
+limit off, a negative value or not a number means the default 2). Along a path the
 corrections change far slower and are followed exactly; a jump (a fault clearing after the machine
 moved, a new model after a deploy or a service restart, the end of a clamped stretch) reaches the
 drives as a ramp, never as a step.
@@ -55,8 +57,8 @@ pin out s32 last_error "Result of the last call to the service (HexacompError: 0
 pin out float blend "Share of the held correction applied, 0 to 1";
 
 param rw bit enable = 1 "Use compensation (changes ramp over ramp-time); 0 asks nothing and is no fault";
-param rw float ramp_time = 1.0 "Seconds to go from no correction to the full one and back";
-param rw float max_rate = 2.0 "Largest change of the applied correction per joint, mm per second (whatever the machine units); 0 or less: no limit";
+param rw float ramp_time = 1.0 "Seconds for blend to go from 0 to 1 and back (the correction itself may take longer: max-rate bounds it too)";
+param rw float max_rate = 2.0 "Largest change of the applied correction per joint, mm per second (whatever the machine units); exactly 0: no limit; negative or not a number: the default 2";
 param rw float mm_per_unit = 1.0 "Millimetres per machine unit: 1 for mm machines, 25.4 for inch machines";
 param rw u32 wait_us = 200 "Longest wait for the service's answer in a servo period, microseconds";
 
@@ -65,7 +67,7 @@ modparam dummy instance "Name of the hexacomp-service instance to use (default: 
 variable void *connection;
 variable void *connector;
 variable double held[6];
-variable double applied[6];
+variable double applied[6];   /* the correction applied, machine units */
 
 option extra_setup yes;
 option extra_cleanup yes;
@@ -76,6 +78,7 @@ license "Apache-2.0";
 author "hexacomp developers";
 ;;
 #include <errno.h>
+#include <math.h>
 #include <pthread.h>
 #include <stdlib.h>
 #include <time.h>
@@ -83,6 +86,9 @@ author "hexacomp developers";
 
 static char *instance = "default";
 RTAPI_MP_STRING(instance, "Name of the hexacomp-service instance to use");
+
+/* The ramp's rate where max-rate is negative or not a number, mm per second. */
+#define DEFAULT_MAX_RATE_MM_S 2.0
 
 /* Seconds between connection attempts while no service answers. */
 #define RETRY_INTERVAL_S 1
@@ -237,6 +243,10 @@ static int ask_service(struct __comp_state *__comp_inst) {
     if (result != HEXACOMP_OK) return 0;
     point_status = answer.status;
     if (answer.status != HEXACOMP_STATUS_OK) return 0;
+    /* A correction that is not a finite number of machine units (mm-per-unit 0 or not a
+       number) is never held: it would make the applied correction NaN for good. */
+    for (i = 0; i < 6; i++)
+        if (!isfinite(answer.corrections[i] / mm_per_unit)) return 0;
     for (i = 0; i < 6; i++) held[i] = answer.corrections[i] / mm_per_unit;
     model_generation = answer.generation;
     return 1;
@@ -246,8 +256,10 @@ FUNCTION(_) {
     int i;
     double seconds = period * 1e-9;
     double share_step = ramp_time > 0 ? seconds / ramp_time : 1.0;
-    /* The largest change of a joint's applied correction this period, machine units. */
-    double limit = max_rate > 0 && mm_per_unit > 0 ? max_rate * seconds / mm_per_unit : 0.0;
+    /* The largest change of a joint's applied correction this period, machine units (0: no
+       limit). A bad mm-per-unit makes every answer a fault (ask_service), never a NaN here. */
+    double rate = max_rate == 0 ? 0.0 : (max_rate > 0 ? max_rate : DEFAULT_MAX_RATE_MM_S);
+    double limit = mm_per_unit > 0 ? rate * seconds / mm_per_unit : 0.0;
     int used = enable && homed;
     double share = used ? 1.0 : 0.0;
     int ok = used ? ask_service(__comp_inst) : 1;
@@ -255,6 +267,10 @@ FUNCTION(_) {
     if (!ok) fault_count++;
     if (blend < share) blend = blend + share_step > share ? share : blend + share_step;
     if (blend > share) blend = blend - share_step < share ? share : blend - share_step;
+    /* Ramped out and not used: forget the held corrections, computed for legs long gone, so
+       that using compensation again ramps in only what the service answers then. */
+    if (!used && blend == 0)
+        for (i = 0; i < 6; i++) held[i] = 0;
     for (i = 0; i < 6; i++) {
         double change = blend * held[i] - applied[i];
         if (limit > 0 && change > limit) change = limit;

@@ -84,7 +84,12 @@ fn c_calls_allocate_only_iceoryx2s_request_object_answered_or_timed_out_in_every
         );
         assert_eq!(stdout.lines().last(), Some("OK"), "{wait}");
         let tallies = tallies(&stdout);
-        for kind in ["ANSWERED_JOINTS", "ANSWERED_POSES", "TIMED_OUT_JOINTS"] {
+        for kind in [
+            "ANSWERED_JOINTS",
+            "ANSWERED_POSES",
+            "FIRST_TIMED_OUT_JOINTS",
+            "TIMED_OUT_JOINTS",
+        ] {
             let tally = &tallies[kind];
             assert!(tally.calls > 0, "{wait} {kind}: no calls made");
             assert_eq!(
