@@ -119,3 +119,22 @@ pub fn compile(source: &str, out: &Path, shared: bool) -> PathBuf {
     );
     exe
 }
+
+/// Runs the C test program `exe` against `service` (its arguments: the instance and the
+/// service's process id, which the program may stop and continue) and returns what it printed;
+/// a program that fails fails the test, with its output.
+pub fn run_against(exe: &Path, service: &crate::ServiceProcess) -> String {
+    let output = Command::new(exe)
+        .arg(&service.instance)
+        .arg(service.pid().to_string())
+        .output()
+        .unwrap_or_else(|e| panic!("running {}: {e}", exe.display()));
+    let stdout = String::from_utf8_lossy(&output.stdout).into_owned();
+    assert!(
+        output.status.success(),
+        "{} failed:\n{}\n{stdout}",
+        exe.display(),
+        String::from_utf8_lossy(&output.stderr)
+    );
+    stdout
+}

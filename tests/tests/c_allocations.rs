@@ -11,9 +11,8 @@
 //! exactly that, so that an allocation of ours, or a change in iceoryx2, shows up.
 
 use std::collections::BTreeMap;
-use std::process::Command;
 
-use hexacomp_tests::c_program::compile;
+use hexacomp_tests::c_program::{compile, run_against};
 use hexacomp_tests::{ServiceProcess, save_smooth_model, unique_instance};
 
 /// One line of the program's output: calls made, heap allocations and frees, allocations by
@@ -70,18 +69,7 @@ fn c_calls_allocate_only_iceoryx2s_request_object_answered_or_timed_out_in_every
                 wait,
             ],
         );
-        let output = Command::new(&exe)
-            .arg(&instance)
-            .arg(service.pid().to_string())
-            .output()
-            .unwrap();
-        let stdout = String::from_utf8_lossy(&output.stdout);
-        assert!(
-            output.status.success(),
-            "{wait}: {} failed:\n{}\n{stdout}",
-            exe.display(),
-            String::from_utf8_lossy(&output.stderr)
-        );
+        let stdout = run_against(&exe, &service);
         assert_eq!(stdout.lines().last(), Some("OK"), "{wait}");
         let tallies = tallies(&stdout);
         for kind in [

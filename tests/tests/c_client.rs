@@ -3,12 +3,10 @@
 //! it prints equals the compensator's answer bit for bit, its error paths give codes, and a call
 //! to a stopped service gives the timeout code after the deadline `hexacomp_set_timeout` set.
 
-use std::process::Command;
-
 use hexacomp_core::Geometry;
 use hexacomp_core::compensator::{compensate_legs, compensate_pose};
 use hexacomp_core::pose::Pose;
-use hexacomp_tests::c_program::compile;
+use hexacomp_tests::c_program::{compile, run_against};
 use hexacomp_tests::{ServiceProcess, save_smooth_model, unique_instance};
 
 fn numbers(fields: &[&str]) -> [f64; 6] {
@@ -26,18 +24,7 @@ fn a_c_program_linked_statically_and_dynamically_gets_the_compensators_answers()
         let instance = unique_instance("cabi");
         let service =
             ServiceProcess::with_model(&instance, &dir.path().join(format!("s{shared}")), &path);
-        let output = Command::new(&exe)
-            .arg(&instance)
-            .arg(service.pid().to_string())
-            .output()
-            .unwrap();
-        let stdout = String::from_utf8_lossy(&output.stdout);
-        assert!(
-            output.status.success(),
-            "{} failed:\n{}\n{stdout}",
-            exe.display(),
-            String::from_utf8_lossy(&output.stderr)
-        );
+        let stdout = run_against(&exe, &service);
         let mut checked = std::collections::BTreeMap::new();
         let mut deadlines = Vec::new();
         for line in stdout.lines() {
