@@ -67,7 +67,6 @@ modparam dummy instance "Name of the hexacomp-service instance to use (default: 
 variable void *connection;
 variable void *connector;
 variable double held[6];
-variable double applied[6];   /* the correction applied, machine units */
 
 option extra_setup yes;
 option extra_cleanup yes;
@@ -272,11 +271,11 @@ FUNCTION(_) {
     if (!used && blend == 0)
         for (i = 0; i < 6; i++) held[i] = 0;
     for (i = 0; i < 6; i++) {
-        double change = blend * held[i] - applied[i];
+        /* The correction pin is the applied correction: it moves towards its target. */
+        double change = blend * held[i] - correction(i);
         if (limit > 0 && change > limit) change = limit;
         if (limit > 0 && change < -limit) change = -limit;
-        applied[i] += change;
-        correction(i) = applied[i];
+        correction(i) += change;
         motor_out(i) = motor_in(i) + correction(i);
         feedback_out(i) = feedback_in(i) - correction(i);
     }

@@ -107,11 +107,7 @@ static void report(const char *kind, int calls) {
 enum { WARM_UP = 200, ANSWERED = 2000, TIMED_OUT = 20 };
 
 int main(int argc, char **argv) {
-    if (argc != 3) {
-        fprintf(stderr, "usage: %s INSTANCE SERVICE_PID\n", argv[0]);
-        return 2;
-    }
-    pid_t service = (pid_t)atol(argv[2]);
+    pid_t service = service_argument(argc, argv);
     HexacompClient *client = NULL;
     /* A deadline far above any answer time for the answered calls. */
     if (hexacomp_connect(argv[1], 10000000, &client) != HEXACOMP_OK) {

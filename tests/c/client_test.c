@@ -44,11 +44,7 @@ static void expect_timeout(HexacompClient *client, uint64_t timeout_us) {
 }
 
 int main(int argc, char **argv) {
-    if (argc != 3) {
-        fprintf(stderr, "usage: %s INSTANCE SERVICE_PID\n", argv[0]);
-        return 2;
-    }
-    pid_t service = (pid_t)atol(argv[2]);
+    pid_t service = service_argument(argc, argv);
     HexacompClient *client = NULL;
 
     /* Errors come back as codes with a message, never as a crash. */

@@ -5,6 +5,7 @@
 #include <signal.h>
 #include <stdint.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 #include <sys/types.h>
 #include <time.h>
@@ -54,6 +55,16 @@ static inline int stop_process(pid_t pid) {
         nanosleep(&step, NULL);
     }
     return 0;
+}
+
+/* The test programs' arguments, INSTANCE SERVICE_PID: returns the service's process id (the
+ * instance is argv[1]); exits with status 2 and the usage on any other arguments. */
+static inline pid_t service_argument(int argc, char **argv) {
+    if (argc != 3) {
+        fprintf(stderr, "usage: %s INSTANCE SERVICE_PID\n", argv[0]);
+        exit(2);
+    }
+    return (pid_t)atol(argv[2]);
 }
 
 #endif
