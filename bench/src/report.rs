@@ -7,6 +7,7 @@ use std::path::Path;
 
 use anyhow::Context;
 use hdrhistogram::Histogram;
+use hexacomp_core::durable::replace_file;
 use hexacomp_trainer::svg::{Chart, Series};
 use serde::Serialize;
 
@@ -65,7 +66,8 @@ impl JsonSummary {
     /// Writes the summary to `path`.
     pub fn write(&self, path: &Path) -> anyhow::Result<()> {
         let text = serde_json::to_string_pretty(self)?;
-        std::fs::write(path, text + "\n").with_context(|| format!("writing {}", path.display()))
+        replace_file(path, (text + "\n").as_bytes())
+            .with_context(|| format!("writing {}", path.display()))
     }
 }
 
@@ -201,7 +203,7 @@ pub fn along_path_chart(title: &str, latencies_ns: &[u32], period_s: f64) -> Cha
 /// Writes `text` to `dir/name` and returns the path written.
 pub fn write_into(dir: &Path, name: &str, text: &str) -> anyhow::Result<std::path::PathBuf> {
     let path = dir.join(name);
-    std::fs::write(&path, text).with_context(|| format!("writing {}", path.display()))?;
+    replace_file(&path, text.as_bytes()).with_context(|| format!("writing {}", path.display()))?;
     Ok(path)
 }
 

@@ -65,6 +65,9 @@ fn run(cli: Cli) -> anyhow::Result<()> {
     let options = ClientOptions {
         timeout: Duration::from_millis(cli.timeout_ms),
     };
+    if let Command::Compensate { input, output, .. } = &cli.command {
+        hexacomp_formats::refuse_same_file(output, &[input])?;
+    }
     let mut client = Client::connect(&cli.instance, &options)?;
     match cli.command {
         Command::Status => {
@@ -130,8 +133,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     },
                 })
                 .collect();
-            let file = hexacomp_formats::create_file(&output)?;
-            write_compensated(file, &rows)?;
+            hexacomp_formats::write_file(&output, |file| write_compensated(file, &rows))?;
             let generations: std::collections::BTreeSet<u64> =
                 results.iter().map(|r| r.generation).collect();
             eprintln!(

@@ -211,11 +211,14 @@ impl Geometry {
         toml::to_string(&file).expect("a geometry always serialises to TOML")
     }
 
-    /// Writes the geometry as TOML to `path`.
+    /// Writes the geometry as TOML to `path`, whole or not at all
+    /// ([`crate::durable::replace_file`]).
     pub fn save(&self, path: &Path) -> Result<()> {
-        std::fs::write(path, self.to_toml_string()).map_err(|e| Error::GeometryIo {
-            path: path.display().to_string(),
-            message: e.to_string(),
+        crate::durable::replace_file(path, self.to_toml_string().as_bytes()).map_err(|e| {
+            Error::GeometryIo {
+                path: path.display().to_string(),
+                message: e.to_string(),
+            }
         })
     }
 

@@ -78,7 +78,18 @@ fn replacing_a_file_syncs_it_renames_it_and_syncs_its_directory() {
         .lines()
         .filter_map(parse)
         .collect();
-    let temporary = format!("{directory}/.model.hxm.tmp");
+    // The temporary is `.model.hxm.<random>.tmp` in the target's directory.
+    let prefix = format!("\"{directory}/.model.hxm.");
+    let temporary = calls
+        .iter()
+        .find_map(|c| {
+            let start = c.args.find(&prefix)?;
+            let name = &c.args[start + 1..];
+            let end = name.find('"')?;
+            let path = &name[..end];
+            (c.name == "openat" && path.ends_with(".tmp")).then(|| path.to_string())
+        })
+        .expect("a temporary beside the target is created");
     let opened = |path: &str, from: usize| {
         calls[from..]
             .iter()

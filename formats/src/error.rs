@@ -9,7 +9,7 @@ pub enum Error {
     /// The file, or one of its rows or columns, is invalid, or it could not be read or created.
     #[error("{file}:{line}: {}{message}", column.as_ref().map(|c| format!("column {c}: ")).unwrap_or_default())]
     Format {
-        /// The file's path as given (`<output>` for a writer without a path).
+        /// The file's path as given.
         file: String,
         /// 1-based line number (1 is the header); 0 when the problem is the file as a whole.
         line: u64,
@@ -17,6 +17,27 @@ pub enum Error {
         column: Option<String>,
         /// What is wrong.
         message: String,
+    },
+
+    /// A file could not be written; nothing was replaced (an existing file is as it was).
+    #[error("{file}: cannot write: {message}; the file was left as it was")]
+    Write {
+        /// The file's path as given.
+        file: String,
+        /// What the operating system said.
+        message: String,
+    },
+
+    /// An output path names the same file as an input: writing it would destroy the input.
+    #[error(
+        "{output} is the same file as the input {input}: refusing to overwrite an input \
+         (write to another file)"
+    )]
+    SameFile {
+        /// The output's path as given.
+        output: String,
+        /// The input's path as given.
+        input: String,
     },
 }
 

@@ -21,6 +21,7 @@ use std::io::{Read, Write};
 use std::path::Path;
 
 use glam::DVec3;
+use hexacomp_core::durable::NewFile;
 use hexacomp_core::geometry::{LEGS, TARGETS};
 use hexacomp_core::records::{
     JointCorrection, MeasuredConfiguration, NamedCompensation, NamedLegs, NamedPose,
@@ -345,7 +346,7 @@ pub fn read_joints(path: &Path) -> Result<Records<NamedLegs>> {
 }
 
 /// Writes a compensated-output file: `id,q1..q6` (the legs to command), `dq1..dq6`, `status`.
-pub fn write_compensated<W: Write>(writer: W, rows: &[NamedCompensation]) -> Result<()> {
+pub fn write_compensated<W: Write>(writer: W, rows: &[NamedCompensation]) -> std::io::Result<()> {
     let mut head = header(&[&LEG_COLUMNS, &CORRECTION_COLUMNS]);
     head.push("status");
     write_rows(
@@ -366,19 +367,13 @@ fn write_rows<W: Write>(
     writer: W,
     header: &[&str],
     rows: impl IntoIterator<Item = Vec<String>>,
-) -> Result<()> {
-    let io = |e: csv::Error| Error::Format {
-        file: "<output>".into(),
-        line: 0,
-        column: None,
-        message: e.to_string(),
-    };
+) -> std::io::Result<()> {
     let mut csv = csv::Writer::from_writer(writer);
-    csv.write_record(header).map_err(io)?;
+    csv.write_record(header)?;
     for row in rows {
-        csv.write_record(&row).map_err(io)?;
+        csv.write_record(&row)?;
     }
-    csv.flush().map_err(|e| io(e.into()))
+    csv.flush()
 }
 
 fn cells(values: &[f64]) -> impl Iterator<Item = String> + '_ {
@@ -392,7 +387,7 @@ fn header<'a>(parts: &[&[&'a str]]) -> Vec<&'a str> {
 }
 
 /// Writes a poses file.
-pub fn write_poses<W: Write>(writer: W, rows: &[NamedPose]) -> Result<()> {
+pub fn write_poses<W: Write>(writer: W, rows: &[NamedPose]) -> std::io::Result<()> {
     write_rows(
         writer,
         &header(&[&POSE_COLUMNS]),
@@ -405,7 +400,10 @@ pub fn write_poses<W: Write>(writer: W, rows: &[NamedPose]) -> Result<()> {
 }
 
 /// Writes a measurements file.
-pub fn write_measurements<W: Write>(writer: W, rows: &[MeasuredConfiguration]) -> Result<()> {
+pub fn write_measurements<W: Write>(
+    writer: W,
+    rows: &[MeasuredConfiguration],
+) -> std::io::Result<()> {
     write_rows(
         writer,
         &header(&[&POSE_COLUMNS, &LEG_COLUMNS, &TARGET_COLUMNS]),
@@ -427,7 +425,7 @@ pub fn write_corrections<W: Write>(
     rows: &[JointCorrection],
     diagnostic_columns: &[&str],
     diagnostics: &[Vec<String>],
-) -> Result<()> {
+) -> std::io::Result<()> {
     let mut head = header(&[&LEG_COLUMNS, &CORRECTION_COLUMNS]);
     head.extend_from_slice(diagnostic_columns);
     write_rows(
@@ -443,14 +441,41 @@ pub fn write_corrections<W: Write>(
     )
 }
 
-/// Creates (truncates) `path` for writing, with the error naming the file.
-pub fn create_file(path: &Path) -> Result<std::io::BufWriter<std::fs::File>> {
-    std::fs::File::create(path)
-        .map(std::io::BufWriter::new)
-        .map_err(|e| Error::Format {
-            file: path.display().to_string(),
-            line: 0,
-            column: None,
-            message: format!("cannot create: {e}"),
-        })
+/// Writes the file at `path` whole or not at all: `write` fills a temporary beside it, which
+/// replaces `path` only once `write` has succeeded and the content is on disk
+/// ([`hexacomp_core::durable::NewFile`]). On any failure (a full disk, an error of `write`) the
+/// temporary is removed and an existing file at `path` is left as it was. Errors name the file.
+pub fn write_file(
+    path: &Path,
+    write: impl FnOnce(&mut NewFile) -> std::io::Result<()>,
+) -> Result<()> {
+    let failed = |e: std::io::Error| Error::Write {
+        file: path.display().to_string(),
+        message: e.to_string(),
+    };
+    let mut file = NewFile::create(path).map_err(failed)?;
+    write(&mut file).map_err(failed)?;
+    file.commit().map_err(failed)
+}
+
+/// Refuses an output that is the same file as one of the inputs (the same file by device and
+/// inode, whatever the spelling of the paths, links included) — to be called before anything is
+/// written, so that a command never replaces what it reads. An output that does not exist yet
+/// cannot be an input.
+pub fn refuse_same_file(output: &Path, inputs: &[&Path]) -> Result<()> {
+    use std::os::unix::fs::MetadataExt;
+    let Ok(out) = std::fs::metadata(output) else {
+        return Ok(());
+    };
+    for input in inputs {
+        if let Ok(meta) = std::fs::metadata(input)
+            && (meta.dev(), meta.ino()) == (out.dev(), out.ino())
+        {
+            return Err(Error::SameFile {
+                output: output.display().to_string(),
+                input: input.display().to_string(),
+            });
+        }
+    }
+    Ok(())
 }

@@ -12,8 +12,8 @@ fn text(bytes: &[u8]) -> String {
     String::from_utf8_lossy(bytes).into_owned()
 }
 
-/// Runs the trainer with `args` in `dir`, asserting success; returns stderr.
-fn trainer_ok(dir: &std::path::Path, args: &[&str]) -> String {
+/// Runs the trainer with `args`, its `.csv` and `.toml` arguments taken in `dir`.
+fn trainer(dir: &std::path::Path, args: &[&str]) -> std::process::Output {
     let args: Vec<String> = args
         .iter()
         .map(|a| {
@@ -25,10 +25,15 @@ fn trainer_ok(dir: &std::path::Path, args: &[&str]) -> String {
         })
         .collect();
     let refs: Vec<&str> = args.iter().map(String::as_str).collect();
-    let output = run("hexacomp-trainer", &refs);
+    run("hexacomp-trainer", &refs)
+}
+
+/// [`trainer`], asserting success; returns stderr.
+fn trainer_ok(dir: &std::path::Path, args: &[&str]) -> String {
+    let output = trainer(dir, args);
     assert!(
         output.status.success(),
-        "{refs:?}: {}",
+        "{args:?}: {}",
         text(&output.stderr)
     );
     text(&output.stderr)
@@ -56,7 +61,8 @@ fn plan_simulate_solve_identify_produce_the_design_formats() {
     );
     let solved = trainer_ok(d, &["solve", "--measurements", "m.csv", "--out", "c.csv"]);
     assert!(
-        solved.contains("robust compensator: solved 60/60 configurations"),
+        solved.contains("60 of 60 configurations kept, 0 excluded")
+            && solved.contains("robust compensator: 60 configurations"),
         "{solved}"
     );
     let ordinary = trainer_ok(
@@ -203,49 +209,68 @@ fn bad_measurement_files_are_refused_with_file_line_and_column() {
 }
 
 #[test]
-fn rows_that_cannot_be_solved_are_named_and_the_rest_is_written() {
+fn gross_errors_are_excluded_by_line_and_a_file_of_them_is_refused() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    trainer_ok(d, &["plan", "--count", "6", "--out", "poses.csv"]);
+    trainer_ok(d, &["plan", "--count", "20", "--out", "poses.csv"]);
     trainer_ok(d, &["simulate", "--plan", "poses.csv", "--out", "m.csv"]);
     let good = std::fs::read_to_string(d.join("m.csv")).unwrap();
-    let mut rows: Vec<String> = good.lines().map(str::to_string).collect();
+    let lines: Vec<String> = good.lines().map(str::to_string).collect();
+    // `change(lines, row, column, f)`: row `row` (1-based id = line − 1), cell `column`.
+    let change = |lines: &mut Vec<String>, row: usize, column: usize, f: &dyn Fn(f64) -> f64| {
+        let mut cells: Vec<String> = lines[row].split(',').map(str::to_string).collect();
+        cells[column] = f(cells[column].parse().unwrap()).to_string();
+        lines[row] = cells.join(",");
+    };
     // Row id 2: a commanded leg beyond the stroke. Row id 4: a target 40 mm away.
-    let mut cells: Vec<String> = rows[2].split(',').map(str::to_string).collect();
-    cells[7] = "445".into();
-    rows[2] = cells.join(",");
-    let mut cells: Vec<String> = rows[4].split(',').map(str::to_string).collect();
-    let p2x: f64 = cells[16].parse().unwrap();
-    cells[16] = (p2x + 40.0).to_string();
-    rows[4] = cells.join(",");
-    std::fs::write(d.join("bad.csv"), rows.join("\n") + "\n").unwrap();
+    let mut bad = lines.clone();
+    change(&mut bad, 2, 7, &|_| 445.0);
+    change(&mut bad, 4, 16, &|x| x + 40.0);
+    std::fs::write(d.join("bad.csv"), bad.join("\n") + "\n").unwrap();
     let report = trainer_ok(d, &["solve", "--measurements", "bad.csv", "--out", "c.csv"]);
+    let bad_csv = d.join("bad.csv").display().to_string();
     assert!(
-        report.contains("error: configuration 2 (line 3): cannot be solved: leg 1 length 445"),
+        report.contains(&format!(
+            "excluded: configuration 2 ({bad_csv}:3): cannot be solved: leg 1 length 445"
+        )),
         "{report}"
     );
     assert!(
-        report.contains("warning: configuration 4 (line 5): residual"),
+        report.contains(&format!(
+            "excluded: configuration 4 ({bad_csv}:5): fit residual"
+        )),
+        "{report}"
+    );
+    assert!(
+        report.contains("18 of 20 configurations kept, 2 excluded"),
         "{report}"
     );
     let written = read_corrections(&d.join("c.csv")).unwrap();
     let ids: Vec<&str> = written.iter().map(|c| c.id.as_str()).collect();
-    assert_eq!(ids, ["1", "3", "4", "5", "6"]);
-    trainer_ok(
-        d,
-        &[
-            "solve",
-            "--measurements",
-            "bad.csv",
-            "--out",
-            "c.csv",
-            "--exclude-flagged",
-        ],
-    );
-    let ids: Vec<String> = read_corrections(&d.join("c.csv"))
-        .unwrap()
-        .into_iter()
-        .map(|c| c.id)
+    let expected: Vec<String> = (1..=20)
+        .filter(|id| *id != 2 && *id != 4)
+        .map(|id| id.to_string())
         .collect();
-    assert_eq!(ids, ["1", "3", "5", "6"]);
+    assert_eq!(ids, expected);
+
+    // Inches: every row is a gross error; the file is refused and c.csv is left as it was.
+    let before = std::fs::read(d.join("c.csv")).unwrap();
+    let mut inches = lines.clone();
+    for row in 1..inches.len() {
+        for column in 13..22 {
+            change(&mut inches, row, column, &|x| x / 25.4);
+        }
+    }
+    std::fs::write(d.join("inches.csv"), inches.join("\n") + "\n").unwrap();
+    let output = trainer(
+        d,
+        &["solve", "--measurements", "inches.csv", "--out", "c.csv"],
+    );
+    let report = text(&output.stderr);
+    assert!(!output.status.success(), "{report}");
+    assert!(
+        report.contains("20 of 20 configurations would be excluded") && report.contains("inches"),
+        "{report}"
+    );
+    assert_eq!(std::fs::read(d.join("c.csv")).unwrap(), before);
 }

@@ -188,16 +188,12 @@ fn regularised_step(
         })
 }
 
-/// Why a configuration's corrections deserve a look before training on them.
+/// A per-configuration reason to exclude a configuration from training (see
+/// [`crate::screening`], which decides).
 #[derive(Debug, Clone, PartialEq)]
 pub enum Flag {
     /// The iteration hit its limit before `‖ρ‖ < κ`.
     NotConverged,
-    /// `‖ζ‖` at `q⁽ᴸ⁾` is far above the measurement noise: a bad reading or a target knocked.
-    LargeResidual {
-        /// The residual, mm.
-        residual_mm: f64,
-    },
     /// A correction is larger than any plausible leg error.
     LargeCorrection {
         /// The largest `|Δq_i|`, mm.
@@ -215,17 +211,19 @@ impl std::fmt::Display for Flag {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
             Flag::NotConverged => write!(f, "did not converge"),
-            Flag::LargeResidual { residual_mm } => write!(
-                f,
-                "residual {residual_mm:.4} mm is far above the measurement noise (bad reading?)"
-            ),
             Flag::LargeCorrection { max_mm } => {
-                write!(f, "correction of {max_mm:.3} mm is implausibly large")
+                write!(
+                    f,
+                    "correction of {} mm is implausibly large (a wrong coordinate, or a \
+                     measurement in other units?)",
+                    crate::screening::quantity(*max_mm)
+                )
             }
             Flag::LegsDisagreeWithPose { max_mm } => write!(
                 f,
-                "commanded legs differ from the pose's inverse kinematics by {max_mm:.3e} mm \
-                 (wrong geometry file?)"
+                "commanded legs differ from the pose's inverse kinematics by {} mm (a wrong \
+                 geometry file, or swapped leg columns?)",
+                crate::screening::quantity(*max_mm)
             ),
         }
     }
@@ -234,9 +232,6 @@ impl std::fmt::Display for Flag {
 /// Thresholds of the per-configuration checks.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Checks {
-    /// Flag a configuration whose residual `‖ζ‖` exceeds this, mm. With 9 measured coordinates
-    /// and 6 unknowns, pure noise of σ per coordinate leaves `‖ζ‖ ≈ √3·σ`.
-    pub max_residual_mm: f64,
     /// Flag a configuration with any `|Δq_i|` above this, mm.
     pub max_correction_mm: f64,
     /// Flag a configuration whose commanded legs differ from the pose's nominal inverse
@@ -247,7 +242,6 @@ pub struct Checks {
 impl Default for Checks {
     fn default() -> Self {
         Self {
-            max_residual_mm: 0.1,
             max_correction_mm: 5.0,
             legs_tolerance_mm: 1e-4,
         }
@@ -263,7 +257,7 @@ pub struct Outcome {
     pub commanded: [f64; LEGS],
     /// The solution, or why there is none.
     pub solution: std::result::Result<Solution, String>,
-    /// Reasons to look at the configuration (empty for a clean one).
+    /// The per-configuration checks it failed (empty for a clean one).
     pub flags: Vec<Flag>,
 }
 
@@ -314,11 +308,6 @@ fn solve_row(
     if let Ok(s) = &solution {
         if !s.converged {
             flags.push(Flag::NotConverged);
-        }
-        if s.residual_mm > checks.max_residual_mm {
-            flags.push(Flag::LargeResidual {
-                residual_mm: s.residual_mm,
-            });
         }
         let largest = s.corrections.iter().fold(0.0_f64, |m, d| m.max(d.abs()));
         if largest > checks.max_correction_mm {

@@ -41,6 +41,11 @@ pub enum Error {
         lambda: f64,
     },
 
+    /// The input as a whole was refused: so much of it is a gross error that the data must be
+    /// wrong (the message says what was found and the likely causes).
+    #[error("refused: {0}")]
+    Refused(String),
+
     /// The data cannot support the requested computation (too few configurations, none usable).
     #[error("insufficient data: {0}")]
     InsufficientData(String),

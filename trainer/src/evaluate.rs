@@ -14,11 +14,12 @@ use hexacomp_core::stats::{PoseErrorNorm, PoseErrorStats};
 use hexacomp_core::{Geometry, Pose, inverse_kinematics};
 use hexacomp_virtual::{ErrorModel, VirtualPlatform};
 
-use crate::corrections::SolverOptions;
+use crate::corrections::{Checks, SolverOptions};
 use crate::error::{Error, Result};
 use crate::identify::{IdentifyOptions, identify};
 use crate::pipeline::Pipeline;
 use crate::plan::PlanOptions;
+use crate::screening::ScreeningOptions;
 use crate::train::{Architecture, TrainOptions, Trained};
 
 /// A compensation method of the comparison.
@@ -136,12 +137,19 @@ pub fn evaluate(
         train: options.train.clone(),
         ..Default::default()
     };
-    // The paper's ordinary compensator: the same pipeline with λ = 0.
+    // The paper's ordinary compensator: the same pipeline with λ = 0, trained on every
+    // correction it solves — its erratic corrections near singular configurations are what the
+    // comparison shows, and the gross-error screening would hide them.
     let ordinary_pipeline = Pipeline {
         solver: SolverOptions {
             robust: false,
             ..robust_pipeline.solver
         },
+        checks: Checks {
+            max_correction_mm: f64::INFINITY,
+            ..robust_pipeline.checks
+        },
+        screening: ScreeningOptions::keep_all(),
         ..robust_pipeline.clone()
     };
     let mut platform = VirtualPlatform::new(

@@ -116,6 +116,17 @@ pub fn identify(
     })
 }
 
+/// Per configuration of `rows` (in order), the norm of its nine target residuals
+/// `r_Pm − r_Pc` at `geometry`, mm: how far the targets that `geometry` (an identified one)
+/// predicts for the commanded legs are from the measured ones.
+pub fn target_residuals(geometry: &Geometry, rows: &[MeasuredConfiguration]) -> Result<Vec<f64>> {
+    let mut poses: Vec<Pose> = rows.iter().map(MeasuredConfiguration::pose).collect();
+    let (_, residual) = linearise(geometry, rows, &mut poses)?;
+    Ok((0..rows.len())
+        .map(|k| residual.rows(9 * k, 9).norm())
+        .collect())
+}
+
 /// `error` of an iterate, with the likely cause when the last step's data determined fewer
 /// than all parameter combinations (`rank` of them): an ill-conditioned identification drifts
 /// into geometries where forward kinematics fails.

@@ -6,6 +6,8 @@
 //! - [`acquire`]: measuring a plan on the virtual platform;
 //! - [`corrections`]: the robust Levenberg–Marquardt joint-correction solver (Fig. 2; Eq. 5,
 //!   Eq. 6, Eq. 7, Eq. 8, Eq. 9);
+//! - [`screening`]: gross-error screening — which configurations are excluded, and when an input
+//!   is refused;
 //! - [`train`], [`evaluate`]: the networks and their check on the virtual platform;
 //! - [`pipeline`]: the calibration pipeline (plan → acquire → solve → train) as one type, which
 //!   every command, the bench and the tests run;
@@ -26,6 +28,7 @@ pub mod identify;
 pub mod linuxcnc;
 pub mod pipeline;
 pub mod plan;
+pub mod screening;
 pub mod svg;
 pub mod table;
 pub mod train;

@@ -43,6 +43,25 @@ enum Command {
     Geometry(commands::geometry::GeometryArgs),
 }
 
+impl Command {
+    /// The files the command reads and writes.
+    fn files(&self) -> commands::Files<'_> {
+        match self {
+            Command::Calibrate(args) => args.files(),
+            Command::Plan(args) => args.files(),
+            Command::Simulate(args) => args.files(),
+            Command::Solve(args) => args.files(),
+            Command::Identify(args) => args.files(),
+            Command::Train(args) => args.files(),
+            Command::Inspect(args) => args.files(),
+            Command::Predict(args) => args.files(),
+            Command::Evaluate(_) | Command::Survey(_) => commands::Files::default(),
+            Command::Deploy(args) => args.files(),
+            Command::Geometry(args) => args.files(),
+        }
+    }
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     match run(cli) {
@@ -55,6 +74,9 @@ fn main() -> ExitCode {
 }
 
 fn run(cli: Cli) -> anyhow::Result<()> {
+    cli.command
+        .files()
+        .refuse_overwriting_inputs(cli.geometry.as_deref())?;
     let geometry = match &cli.geometry {
         Some(path) => Geometry::load(path)?,
         None => Geometry::prototype(),

@@ -14,6 +14,7 @@ use crate::acquire::measure_plan;
 use crate::corrections::{Checks, Outcome, SolverOptions, solve_all};
 use crate::error::Result;
 use crate::plan::{PlanOptions, numbered_rows, plan};
+use crate::screening::{Screening, ScreeningOptions, screen_measured};
 use crate::train::{Architecture, TrainOptions, Trained, train};
 
 /// The settings of every stage of a calibration.
@@ -23,8 +24,10 @@ pub struct Pipeline {
     pub plan: PlanOptions,
     /// The joint-correction solve (robust by default, Fig. 2).
     pub solver: SolverOptions,
-    /// What makes a configuration's corrections suspect.
+    /// The per-configuration checks of the solve.
     pub checks: Checks,
+    /// Which configurations are gross errors, and when an input is refused.
+    pub screening: ScreeningOptions,
     /// Network training and hidden-node selection.
     pub train: TrainOptions,
 }
@@ -34,8 +37,32 @@ pub struct Pipeline {
 pub struct Solved {
     /// Every configuration's outcome, in the measurements' order (solution or error, flags).
     pub outcomes: Vec<Outcome>,
-    /// The correction rows of the configurations that have a solution: the training data.
+    /// Which configurations are excluded and why, in the same order.
+    pub screening: Screening,
+    /// The correction rows of the kept configurations: the training data.
     pub corrections: Vec<JointCorrection>,
+}
+
+impl Solved {
+    /// The items of `rows` (one per configuration, in the measurements' order, such as the
+    /// measurements themselves) of the kept configurations.
+    pub fn kept_of<T: Clone>(&self, rows: &[T]) -> Vec<T> {
+        rows.iter()
+            .enumerate()
+            .filter(|(index, _)| self.screening.kept(*index))
+            .map(|(_, row)| row.clone())
+            .collect()
+    }
+
+    /// The outcomes of the kept configurations, in the measurements' order.
+    pub fn kept(&self) -> Vec<&Outcome> {
+        self.outcomes
+            .iter()
+            .enumerate()
+            .filter(|(index, _)| self.screening.kept(*index))
+            .map(|(_, o)| o)
+            .collect()
+    }
 }
 
 /// What a whole calibration produced.
@@ -59,19 +86,25 @@ impl Pipeline {
         Ok((rows, measurements))
     }
 
-    /// Solves the joint corrections of every measured configuration.
+    /// Solves the joint corrections of every measured configuration and screens them for gross
+    /// errors: the excluded configurations are not trained on, and an input with too many of
+    /// them is refused ([`crate::Error::Refused`]).
     pub fn solve(
         &self,
         geometry: &Geometry,
         measurements: &[MeasuredConfiguration],
     ) -> Result<Solved> {
         let outcomes = solve_all(geometry, measurements, &self.solver, &self.checks)?;
+        let screening = screen_measured(geometry, measurements, &outcomes, &self.screening)?;
         let corrections = outcomes
             .iter()
-            .filter_map(|o| o.joint_correction())
+            .enumerate()
+            .filter(|(index, _)| screening.kept(*index))
+            .filter_map(|(_, o)| o.joint_correction())
             .collect();
         Ok(Solved {
             outcomes,
+            screening,
             corrections,
         })
     }

@@ -6,6 +6,8 @@ use hexacomp_core::kinematics::target_points;
 use hexacomp_core::stats::{PoseErrorNorm, PoseErrorStats};
 use hexacomp_core::{ForwardOptions, Geometry, forward_kinematics};
 use hexacomp_trainer::corrections::{Checks, Flag, SolverOptions, solve_all};
+use hexacomp_trainer::pipeline::Pipeline;
+use hexacomp_trainer::screening::Reason;
 use hexacomp_virtual::{DEFAULT_MACHINE_SEED, ErrorModel, ErrorVariant};
 
 #[test]
@@ -120,7 +122,7 @@ fn default_noise_moves_the_corrections_by_about_the_noise_level() {
 }
 
 #[test]
-fn a_knocked_target_and_a_pose_outside_the_stroke_are_reported_not_hidden() {
+fn a_knocked_target_and_a_pose_outside_the_stroke_are_excluded_not_hidden() {
     let g = Geometry::prototype();
     let rows = common::plan_rows(&g, 10, 4);
     let (_, mut measurements) =
@@ -128,29 +130,27 @@ fn a_knocked_target_and_a_pose_outside_the_stroke_are_reported_not_hidden() {
     // Row 3: one target read 0.5 mm off (a knocked cone). Row 6: legs beyond the stroke.
     measurements[2].targets[1].x += 0.5;
     measurements[5].legs[0] = 440.0;
-    let outcomes = solve_all(
-        &g,
-        &measurements,
-        &SolverOptions::default(),
-        &Checks::default(),
-    )
-    .unwrap();
+    let solved = Pipeline::default().solve(&g, &measurements).unwrap();
+    let reasons = &solved.screening.reasons;
     assert!(
-        matches!(outcomes[2].flags.as_slice(), [Flag::LargeResidual { residual_mm }] if *residual_mm > 0.2),
+        matches!(reasons[2].as_slice(), [Reason::Residual { residual_mm, .. }] if *residual_mm > 0.2),
         "{:?}",
-        outcomes[2].flags
+        reasons[2]
     );
-    let failure = outcomes[5].solution.as_ref().unwrap_err();
+    let failure = solved.outcomes[5].solution.as_ref().unwrap_err();
     assert!(failure.contains("leg 1 length 440"), "{failure}");
+    assert!(matches!(reasons[5].as_slice(), [Reason::Unsolvable(_)]));
     assert!(matches!(
-        outcomes[5].flags.as_slice(),
+        solved.outcomes[5].flags.as_slice(),
         [Flag::LegsDisagreeWithPose { .. }]
     ));
-    for (i, o) in outcomes.iter().enumerate() {
+    for (i, r) in reasons.iter().enumerate() {
         if i != 2 && i != 5 {
-            assert!(o.flags.is_empty() && o.solution.is_ok(), "{o:?}");
+            assert!(r.is_empty(), "{i}: {r:?}");
         }
     }
+    let ids: Vec<&str> = solved.corrections.iter().map(|c| c.id.as_str()).collect();
+    assert_eq!(ids, ["1", "2", "4", "5", "7", "8", "9", "10"]);
 }
 
 #[test]

@@ -2,6 +2,8 @@
 
 use std::path::PathBuf;
 
+use anyhow::Context;
+
 use hexacomp_client::wire::MAX_BATCH;
 use hexacomp_trainer::svg::{Chart, Series};
 
@@ -105,7 +107,11 @@ pub fn run(command: &BatchesCommand) -> anyhow::Result<()> {
         let rates: std::collections::BTreeMap<&str, &Vec<f64>> =
             curves.iter().map(|(k, r)| (k.name(), r)).collect();
         let json = serde_json::json!({ "batch_sizes": sizes, "points_per_second": rates });
-        std::fs::write(file, serde_json::to_string_pretty(&json)? + "\n")?;
+        hexacomp_core::durable::replace_file(
+            file,
+            (serde_json::to_string_pretty(&json)? + "\n").as_bytes(),
+        )
+        .with_context(|| format!("writing {}", file.display()))?;
         println!("wrote {}", file.display());
     }
     Ok(())

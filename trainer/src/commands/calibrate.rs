@@ -10,7 +10,6 @@ use hexacomp_core::sampling::{SamplerOptions, WorkspaceSampler};
 use hexacomp_core::stats::PoseErrorStats;
 use hexacomp_core::{Geometry, inverse_kinematics};
 use hexacomp_formats::{Records, read_measurements, write_measurements, write_poses};
-use hexacomp_trainer::corrections::Outcome;
 use hexacomp_trainer::evaluate::drive;
 use hexacomp_trainer::identify::{IdentifyOptions, identify};
 use hexacomp_trainer::pipeline::{Pipeline, Solved};
@@ -18,11 +17,14 @@ use hexacomp_trainer::plan::PlanOptions;
 use hexacomp_trainer::train::{Architecture, TrainOptions, Trained};
 use hexacomp_virtual::{DEFAULT_MACHINE_SEED, ErrorModel, ErrorVariant, VirtualPlatform};
 
-use super::solve::{print_problems, write_outcomes};
+use super::solve::{MeasuredScreeningArgs, print_solve_exclusions, write_outcomes};
 use super::train::{
     InputArg, arch_name, print_selection, train_with_progress, write_selection_plot,
 };
-use super::write_file;
+use hexacomp_core::durable::NewDirectory;
+use hexacomp_formats::write_file;
+
+use super::write_bytes;
 use hexacomp_trainer::table::Table;
 
 /// Calibrate in one command: plan → measure (the virtual platform, or --measurements from a real
@@ -57,9 +59,22 @@ pub struct CalibrateArgs {
     /// Network input (see `train --help`).
     #[arg(long, value_enum, default_value_t = InputArg::Equivalent)]
     input: InputArg,
-    /// Output folder.
+    /// Output folder, replaced as a whole when the calibration succeeds (a failed one leaves it
+    /// as it was).
     #[arg(long, value_name = "DIR", default_value = "calibration")]
     out_dir: PathBuf,
+    #[command(flatten)]
+    screening: MeasuredScreeningArgs,
+}
+
+impl CalibrateArgs {
+    /// The files this command reads and writes.
+    pub fn files(&self) -> super::Files<'_> {
+        super::Files {
+            inputs: self.measurements.iter().map(PathBuf::as_path).collect(),
+            outputs: vec![],
+        }
+    }
 }
 
 /// How long each stage took, seconds, in the order they ran.
@@ -72,11 +87,59 @@ impl Stages {
     }
 }
 
+/// Every file `calibrate` writes into its folder. An existing folder holding anything else is
+/// refused rather than replaced: it is not a calibration folder.
+const CALIBRATION_FILES: [&str; 8] = [
+    "poses.csv",
+    "measurements.csv",
+    "corrections.csv",
+    "model-coupled.hxm",
+    "model-coupled.selection.svg",
+    "model-decoupled.hxm",
+    "model-decoupled.selection.svg",
+    "model.hxm",
+];
+
+/// Refuses an existing `dir` that holds anything `calibrate` does not write.
+fn refuse_foreign_folder(dir: &Path) -> anyhow::Result<()> {
+    let entries = match std::fs::read_dir(dir) {
+        Ok(entries) => entries,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(()),
+        Err(e) => return Err(e).with_context(|| format!("reading {}", dir.display())),
+    };
+    let mut foreign = Vec::new();
+    for entry in entries {
+        let name = entry
+            .with_context(|| format!("reading {}", dir.display()))?
+            .file_name();
+        if !CALIBRATION_FILES.iter().any(|known| name == *known) {
+            foreign.push(name.to_string_lossy().into_owned());
+        }
+    }
+    foreign.sort();
+    anyhow::ensure!(
+        foreign.is_empty(),
+        "{} is replaced as a whole by calibrate, but holds files calibrate did not write ({}): \
+         give another --out-dir",
+        dir.display(),
+        foreign.join(", ")
+    );
+    Ok(())
+}
+
 pub fn run(geometry: &Geometry, args: &CalibrateArgs) -> anyhow::Result<()> {
     let total = Instant::now();
     let mut stages = Stages::default();
-    let dir = &args.out_dir;
-    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    refuse_foreign_folder(&args.out_dir)?;
+    if let Some(parent) = args.out_dir.parent().filter(|p| !p.as_os_str().is_empty()) {
+        std::fs::create_dir_all(parent)
+            .with_context(|| format!("creating {}", parent.display()))?;
+    }
+    // Everything is written into a new folder that replaces --out-dir as a unit at the end: a
+    // calibration that fails leaves the previous folder whole.
+    let folder = NewDirectory::create(&args.out_dir)
+        .with_context(|| format!("creating a new folder beside {}", args.out_dir.display()))?;
+    let dir = folder.path();
     let error_model = ErrorModel::variant(args.error_variant);
     let mut platform = VirtualPlatform::new(geometry, &error_model, args.machine_seed, args.seed)?;
     let pipeline = Pipeline {
@@ -90,11 +153,13 @@ pub fn run(geometry: &Geometry, args: &CalibrateArgs) -> anyhow::Result<()> {
             seed: args.seed,
             ..Default::default()
         },
+        checks: args.screening.checks(),
+        screening: args.screening.options(),
         ..Default::default()
     };
 
     let start = Instant::now();
-    let measurements = acquire(args, &pipeline, &mut platform)?;
+    let measurements = acquire(args, &pipeline, &mut platform, dir)?;
     stages.record(
         if args.measurements.is_some() {
             "read measurements"
@@ -106,9 +171,9 @@ pub fn run(geometry: &Geometry, args: &CalibrateArgs) -> anyhow::Result<()> {
 
     let start = Instant::now();
     let solved = pipeline.solve(geometry, &measurements)?;
-    print_problems(&solved.outcomes, &measurements, " (kept)");
-    let all: Vec<&Outcome> = solved.outcomes.iter().collect();
-    write_outcomes(&dir.join("corrections.csv"), &all)?;
+    print_solve_exclusions(&solved, &measurements);
+    let kept = solved.kept();
+    write_outcomes(&dir.join("corrections.csv"), &kept)?;
     stages.record("solve corrections", start);
 
     let trained = train_both(
@@ -127,7 +192,8 @@ pub fn run(geometry: &Geometry, args: &CalibrateArgs) -> anyhow::Result<()> {
 
     let check = if args.measurements.is_none() {
         let start = Instant::now();
-        let table = check_on_fresh_poses(geometry, &platform, &measurements, &trained, args)?;
+        let kept = solved.kept_of(&measurements);
+        let table = check_on_fresh_poses(geometry, &platform, &kept, &trained, args)?;
         stages.record("evaluate on fresh poses", start);
         Some(table)
     } else {
@@ -158,10 +224,13 @@ pub fn run(geometry: &Geometry, args: &CalibrateArgs) -> anyhow::Result<()> {
             args.validation.max(1)
         );
     }
+    folder
+        .commit()
+        .with_context(|| format!("replacing {}", args.out_dir.display()))?;
     println!(
         "model.hxm = the {} model (lower validation RMSE); files in {}",
         arch_name(*best_arch),
-        dir.display()
+        args.out_dir.display()
     );
     let breakdown: Vec<String> = stages
         .0
@@ -176,22 +245,28 @@ pub fn run(geometry: &Geometry, args: &CalibrateArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The measurements: read from --measurements, or the plan measured on the virtual platform
-/// (both written to the output folder, and the measurements read back from it, so that what is
-/// solved is what the folder holds).
+/// The measurements: read from --measurements (and copied byte for byte into `dir`), or the plan
+/// measured on the virtual platform (both written to `dir`, and the measurements read back from
+/// it, so that what is solved is what the folder holds).
 fn acquire(
     args: &CalibrateArgs,
     pipeline: &Pipeline,
     platform: &mut VirtualPlatform,
+    dir: &Path,
 ) -> anyhow::Result<Records<MeasuredConfiguration>> {
+    let written = dir.join("measurements.csv");
     if let Some(path) = &args.measurements {
+        let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+        write_bytes(&written, &bytes)?;
         return Ok(read_measurements(path)?);
     }
     let (poses, measured) = pipeline.measure_virtual(platform)?;
-    let written = args.out_dir.join("measurements.csv");
-    write_file(&args.out_dir.join("poses.csv"), |w| write_poses(w, &poses))?;
+    write_file(&dir.join("poses.csv"), |w| write_poses(w, &poses))?;
     write_file(&written, |w| write_measurements(w, &measured))?;
-    Ok(read_measurements(&written)?)
+    let mut records = read_measurements(&written)?;
+    // Messages name the file where it will be, not the folder it is staged in.
+    records.file = args.out_dir.join("measurements.csv").display().to_string();
+    Ok(records)
 }
 
 /// Trains the coupled and the decoupled networks on the solved corrections, writing each model

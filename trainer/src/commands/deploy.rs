@@ -20,6 +20,16 @@ pub struct DeployArgs {
     instance: String,
 }
 
+impl DeployArgs {
+    /// The files this command reads and writes.
+    pub fn files(&self) -> super::Files<'_> {
+        super::Files {
+            inputs: vec![&self.model],
+            outputs: vec![],
+        }
+    }
+}
+
 pub fn run(args: &DeployArgs) -> anyhow::Result<()> {
     let bytes =
         std::fs::read(&args.model).with_context(|| format!("reading {}", args.model.display()))?;

@@ -289,5 +289,5 @@ pub fn write_figures(evaluation: &Evaluation, dir: &Path) -> anyhow::Result<()> 
 
 fn write(dir: &Path, file: &str, chart: &Chart) -> anyhow::Result<()> {
     let path = dir.join(file);
-    std::fs::write(&path, chart.to_svg()).with_context(|| format!("writing {}", path.display()))
+    Ok(super::write_bytes(&path, chart.to_svg().as_bytes())?)
 }

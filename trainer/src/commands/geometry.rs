@@ -3,7 +3,6 @@
 
 use std::path::PathBuf;
 
-use anyhow::Context;
 use hexacomp_core::{Geometry, Workspace};
 use hexacomp_trainer::linuxcnc::{ConversionOptions, LinuxCncHexapod};
 
@@ -50,6 +49,16 @@ pub struct GeometryArgs {
     yaw_range: Option<[f64; 2]>,
 }
 
+impl GeometryArgs {
+    /// The files this command reads and writes.
+    pub fn files(&self) -> super::Files<'_> {
+        super::Files {
+            inputs: self.from_linuxcnc.iter().map(PathBuf::as_path).collect(),
+            outputs: self.out.iter().map(PathBuf::as_path).collect(),
+        }
+    }
+}
+
 pub fn run(geometry: &Geometry, args: &GeometryArgs) -> anyhow::Result<()> {
     let converted;
     let geometry = match &args.from_linuxcnc {
@@ -66,9 +75,7 @@ pub fn run(geometry: &Geometry, args: &GeometryArgs) -> anyhow::Result<()> {
         geometry.to_toml_string()
     );
     match &args.out {
-        Some(path) => {
-            std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))?
-        }
+        Some(path) => super::write_bytes(path, text.as_bytes())?,
         None => print!("{text}"),
     }
     Ok(())

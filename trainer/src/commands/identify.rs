@@ -6,6 +6,9 @@ use anyhow::Context;
 use hexacomp_core::{Geometry, LEGS};
 use hexacomp_formats::read_measurements;
 use hexacomp_trainer::identify::{IdentifyOptions, PARAMETERS, identify};
+use hexacomp_trainer::pipeline::Pipeline;
+
+use super::solve::{MeasuredScreeningArgs, print_solve_exclusions};
 
 /// Identify the platform's geometric parameters from point measurements (the paper's model-based
 /// comparison method) and write them as a geometry file.
@@ -15,6 +18,8 @@ use hexacomp_trainer::identify::{IdentifyOptions, PARAMETERS, identify};
 /// measurements cannot determine are dropped by SVD and keep their nominal values. Compensating
 /// with this baseline means commanding the identified geometry's inverse kinematics: the output
 /// is a geometry TOML (leg zero offsets in `leg_offsets`) usable on its own as --geometry.
+///
+/// Configurations that are gross errors (as `solve` screens them) are excluded and listed first.
 #[derive(Debug, clap::Args)]
 pub struct IdentifyArgs {
     /// Measurements CSV.
@@ -26,10 +31,32 @@ pub struct IdentifyArgs {
     /// Gauss–Newton iterations at most.
     #[arg(long, default_value_t = IdentifyOptions::default().max_iterations)]
     max_iterations: usize,
+    #[command(flatten)]
+    screening: MeasuredScreeningArgs,
+}
+
+impl IdentifyArgs {
+    /// The files this command reads and writes.
+    pub fn files(&self) -> super::Files<'_> {
+        super::Files {
+            inputs: vec![&self.measurements],
+            outputs: vec![&self.out],
+        }
+    }
 }
 
 pub fn run(geometry: &Geometry, args: &IdentifyArgs) -> anyhow::Result<()> {
-    let rows = read_measurements(&args.measurements)?;
+    let file = read_measurements(&args.measurements)?;
+    // The configurations the joint-correction solve screens out as gross errors are left out
+    // of the identification too: one wrong coordinate would move the identified joints.
+    let pipeline = Pipeline {
+        checks: args.screening.checks(),
+        screening: args.screening.options(),
+        ..Default::default()
+    };
+    let solved = pipeline.solve(geometry, &file)?;
+    print_solve_exclusions(&solved, &file);
+    let rows = solved.kept_of(&file);
     let options = IdentifyOptions {
         max_iterations: args.max_iterations,
         ..Default::default()
@@ -49,8 +76,10 @@ pub fn run(geometry: &Geometry, args: &IdentifyArgs) -> anyhow::Result<()> {
         result.rms_before_mm,
         result.rms_after_mm,
     );
-    std::fs::write(&args.out, header + &identified.to_toml_string())
-        .with_context(|| format!("writing {}", args.out.display()))?;
+    super::write_bytes(
+        &args.out,
+        (header + &identified.to_toml_string()).as_bytes(),
+    )?;
 
     let largest = |pick: &dyn Fn(usize) -> f64| (0..LEGS).map(pick).fold(0.0_f64, f64::max);
     eprintln!(

@@ -18,6 +18,16 @@ pub struct InspectArgs {
     model: PathBuf,
 }
 
+impl InspectArgs {
+    /// The files this command reads and writes.
+    pub fn files(&self) -> super::Files<'_> {
+        super::Files {
+            inputs: vec![&self.model],
+            outputs: vec![],
+        }
+    }
+}
+
 pub fn run(geometry: &Geometry, args: &InspectArgs) -> anyhow::Result<()> {
     let bytes =
         std::fs::read(&args.model).with_context(|| format!("reading {}", args.model.display()))?;

@@ -7,7 +7,7 @@ use hexacomp_core::sampling::SamplerOptions;
 use hexacomp_formats::write_poses;
 use hexacomp_trainer::plan::{PlanOptions, numbered_rows, plan};
 
-use super::write_file;
+use hexacomp_formats::write_file;
 
 /// Plan N measuring configurations spread over the task workspace (like the paper's Fig. 8).
 ///
@@ -32,6 +32,16 @@ pub struct PlanArgs {
     /// Output poses CSV.
     #[arg(long, value_name = "FILE")]
     out: PathBuf,
+}
+
+impl PlanArgs {
+    /// The files this command reads and writes.
+    pub fn files(&self) -> super::Files<'_> {
+        super::Files {
+            inputs: vec![],
+            outputs: vec![&self.out],
+        }
+    }
 }
 
 pub fn run(geometry: &Geometry, args: &PlanArgs) -> anyhow::Result<()> {

@@ -8,7 +8,7 @@ use hexacomp_core::model::Model;
 use hexacomp_core::records::NamedCompensation;
 use hexacomp_formats::{read_joints, read_poses, write_compensated};
 
-use super::write_file;
+use hexacomp_formats::write_file;
 
 /// Compensate poses (or nominal leg lengths) offline with a model: exactly the numbers the
 /// service returns.
@@ -35,6 +35,21 @@ pub struct PredictArgs {
     /// Output compensated CSV.
     #[arg(long, value_name = "FILE")]
     out: PathBuf,
+}
+
+impl PredictArgs {
+    /// The files this command reads and writes.
+    pub fn files(&self) -> super::Files<'_> {
+        super::Files {
+            inputs: [&self.model]
+                .into_iter()
+                .chain(&self.poses)
+                .chain(&self.joints)
+                .map(PathBuf::as_path)
+                .collect(),
+            outputs: vec![&self.out],
+        }
+    }
 }
 
 pub fn run(geometry: &Geometry, args: &PredictArgs) -> anyhow::Result<()> {

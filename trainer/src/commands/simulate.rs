@@ -7,7 +7,7 @@ use hexacomp_formats::{read_poses, write_measurements};
 use hexacomp_trainer::acquire::measure_plan;
 use hexacomp_virtual::{DEFAULT_MACHINE_SEED, ErrorModel, ErrorVariant, VirtualPlatform};
 
-use super::write_file;
+use hexacomp_formats::write_file;
 
 /// Measure a plan on the built-in virtual platform, writing exactly what a measuring arm would
 /// have produced.
@@ -34,6 +34,16 @@ pub struct SimulateArgs {
     /// Output measurements CSV.
     #[arg(long, value_name = "FILE")]
     out: PathBuf,
+}
+
+impl SimulateArgs {
+    /// The files this command reads and writes.
+    pub fn files(&self) -> super::Files<'_> {
+        super::Files {
+            inputs: vec![&self.plan],
+            outputs: vec![&self.out],
+        }
+    }
 }
 
 pub fn run(geometry: &Geometry, args: &SimulateArgs) -> anyhow::Result<()> {

@@ -7,9 +7,11 @@ use std::time::Instant;
 use hexacomp_core::Geometry;
 use hexacomp_core::records::MeasuredConfiguration;
 use hexacomp_formats::{Records, read_measurements, write_corrections};
-use hexacomp_trainer::corrections::{Checks, Outcome, Solution, SolverOptions, solve_all};
+use hexacomp_trainer::corrections::{Checks, Outcome, Solution, SolverOptions};
+use hexacomp_trainer::pipeline::{Pipeline, Solved};
+use hexacomp_trainer::screening::{Screening, ScreeningOptions};
 
-use super::write_file;
+use hexacomp_formats::write_file;
 
 /// Solve the joint corrections Δq of every measured configuration (paper Fig. 2: Eq. 5, Eq. 6,
 /// Eq. 7, Eq. 8, Eq. 9).
@@ -20,11 +22,14 @@ use super::write_file;
 /// diagnostics `cond_pt` (largest over the iterates), `iterations`, `converged`, `residual_mm`
 /// (‖ζ‖ at q⁽ᴸ⁾).
 ///
-/// Configurations that did not converge, whose residual is far above the measurement noise, whose
-/// correction is implausibly large, or whose commanded legs disagree with the geometry are listed
-/// by id; they stay in the output unless --exclude-flagged is given. Configurations that cannot be
-/// solved at all (a leg leaves the stroke, a singular iterate) cannot have a row and are listed as
-/// errors.
+/// Gross errors are excluded, each listed with its line, id and reason: a configuration that
+/// cannot be solved or does not converge, whose commanded legs disagree with the pose, whose
+/// correction exceeds --max-correction, whose fit residual is more than --residual-factor × the
+/// median, or whose targets are far from the geometry identified from all configurations
+/// (docs/calibration.md, "Gross errors").
+/// When more than --max-excluded-share of the file would be excluded, the file is refused and
+/// nothing is written: the data as a whole must be wrong. An existing output is replaced only by
+/// a complete new one.
 #[derive(Debug, clap::Args)]
 pub struct SolveArgs {
     /// Measurements CSV (from a measuring arm or laser tracker, or `hexacomp-trainer simulate`).
@@ -48,16 +53,18 @@ pub struct SolveArgs {
     /// The paper's ordinary compensator: λ = 0 always, for comparison.
     #[arg(long)]
     ordinary: bool,
-    /// Flag configurations whose residual ‖ζ‖ exceeds this, mm (noise alone leaves about
-    /// √3 × the device's per-coordinate uncertainty).
-    #[arg(long, default_value_t = Checks::default().max_residual_mm)]
-    max_residual: f64,
-    /// Flag configurations with a correction larger than this, mm.
-    #[arg(long, default_value_t = Checks::default().max_correction_mm)]
-    max_correction: f64,
-    /// Leave flagged configurations out of the output.
-    #[arg(long)]
-    exclude_flagged: bool,
+    #[command(flatten)]
+    screening: MeasuredScreeningArgs,
+}
+
+impl SolveArgs {
+    /// The files this command reads and writes.
+    pub fn files(&self) -> super::Files<'_> {
+        super::Files {
+            inputs: vec![&self.measurements],
+            outputs: vec![&self.out],
+        }
+    }
 }
 
 pub fn run(geometry: &Geometry, args: &SolveArgs) -> anyhow::Result<()> {
@@ -67,51 +74,37 @@ pub fn run(geometry: &Geometry, args: &SolveArgs) -> anyhow::Result<()> {
         "{}: no configurations",
         args.measurements.display()
     );
-    let options = SolverOptions {
-        lambda0: args.lambda0,
-        cond_threshold: args.cond_threshold,
-        kappa_mm: args.kappa,
-        max_iterations: args.max_iterations,
-        robust: !args.ordinary,
-    };
-    let checks = Checks {
-        max_residual_mm: args.max_residual,
-        max_correction_mm: args.max_correction,
-        ..Checks::default()
+    let pipeline = Pipeline {
+        solver: SolverOptions {
+            lambda0: args.lambda0,
+            cond_threshold: args.cond_threshold,
+            kappa_mm: args.kappa,
+            max_iterations: args.max_iterations,
+            robust: !args.ordinary,
+        },
+        checks: args.screening.checks(),
+        screening: args.screening.options(),
+        ..Default::default()
     };
     let start = Instant::now();
-    let outcomes = solve_all(geometry, &rows, &options, &checks)?;
+    let solved = pipeline.solve(geometry, &rows)?;
     let elapsed = start.elapsed();
-
-    let kept: Vec<&Outcome> = outcomes
-        .iter()
-        .filter(|o| o.solution.is_ok() && (o.flags.is_empty() || !args.exclude_flagged))
-        .collect();
-    let written = write_outcomes(&args.out, &kept)?;
-    report(
-        &outcomes,
-        &rows,
-        &options,
-        elapsed.as_secs_f64(),
-        written,
-        args,
-    );
+    print_solve_exclusions(&solved, &rows);
+    let kept = solved.kept();
     anyhow::ensure!(
-        written > 0,
-        "no configuration could be solved; nothing to train on"
+        !kept.is_empty(),
+        "no configuration of {} could be used; nothing written",
+        args.measurements.display()
     );
+    let written = write_outcomes(&args.out, &kept)?;
+    report(&kept, &pipeline.solver, elapsed.as_secs_f64());
+    eprintln!("wrote {written} rows → {}", args.out.display());
     Ok(())
 }
 
-fn report(
-    outcomes: &[Outcome],
-    measurements: &Records<MeasuredConfiguration>,
-    options: &SolverOptions,
-    seconds: f64,
-    written: usize,
-    args: &SolveArgs,
-) {
-    let solved: Vec<_> = outcomes
+/// The solver's figures over the configurations kept.
+fn report(kept: &[&Outcome], options: &SolverOptions, seconds: f64) {
+    let solved: Vec<&Solution> = kept
         .iter()
         .filter_map(|o| o.solution.as_ref().ok())
         .collect();
@@ -125,30 +118,15 @@ fn report(
     let mean_residual =
         solved.iter().map(|s| s.residual_mm).sum::<f64>() / solved.len().max(1) as f64;
     eprintln!(
-        "{} compensator: solved {}/{} configurations in {:.1} ms; cond(PT) ≤ {:.3e} \
-         ({above} above c = {:.0e}, {regularised} regularised); iterations ≤ {max_iterations}; \
-         mean residual {:.4} mm",
+        "{} compensator: {} configurations in {:.1} ms; cond(PT) ≤ {:.3e} ({above} above c = \
+         {:.0e}, {regularised} regularised); iterations ≤ {max_iterations}; mean residual {:.4} mm",
         if options.robust { "robust" } else { "ordinary" },
         solved.len(),
-        outcomes.len(),
         1e3 * seconds,
         max_cond,
         options.cond_threshold,
         mean_residual,
     );
-    print_problems(outcomes, measurements, "");
-    let flagged = outcomes.iter().filter(|o| !o.flags.is_empty()).count();
-    if flagged > 0 {
-        eprintln!(
-            "{flagged} configurations flagged; {}",
-            if args.exclude_flagged {
-                "excluded from the output (--exclude-flagged)"
-            } else {
-                "kept in the output (use --exclude-flagged to leave them out of training)"
-            }
-        );
-    }
-    eprintln!("wrote {written} rows → {}", args.out.display());
 }
 
 /// Writes the corrections file of `outcomes` that have a solution: the columns of docs/formats.md and the
@@ -184,27 +162,92 @@ pub fn write_outcomes(path: &Path, outcomes: &[&Outcome]) -> anyhow::Result<usiz
     Ok(corrections.len())
 }
 
-/// Prints every configuration that could not be solved (as an error) or was flagged (as a
-/// warning, followed by `flag_note`), with its line in `measurements` (the file the outcomes,
-/// in the same order, were solved from).
-pub fn print_problems(
-    outcomes: &[Outcome],
-    measurements: &Records<MeasuredConfiguration>,
-    flag_note: &str,
-) {
-    for (index, o) in outcomes.iter().enumerate() {
-        let line = measurements.line(index);
-        if let Err(e) = &o.solution {
-            eprintln!(
-                "error: configuration {} (line {line}): cannot be solved: {e}",
-                o.id
-            );
+/// Prints every excluded configuration of `file` with its id and line (`row(index)`) and
+/// reasons, then how many were kept and excluded.
+pub fn print_exclusions(screening: &Screening, file: &str, row: impl Fn(usize) -> (String, u64)) {
+    for (index, reasons) in screening.reasons.iter().enumerate() {
+        let (id, line) = row(index);
+        for reason in reasons {
+            eprintln!("excluded: configuration {id} ({file}:{line}): {reason}");
         }
-        for flag in &o.flags {
-            eprintln!(
-                "warning: configuration {} (line {line}): {flag}{flag_note}",
-                o.id
-            );
+    }
+    let total = screening.reasons.len();
+    eprintln!(
+        "{} of {total} configurations kept, {} excluded as gross errors{}",
+        total - screening.excluded(),
+        screening.excluded(),
+        screening
+            .residual_limit_mm
+            .map(|limit| format!(" (residual limit {limit:.4} mm)"))
+            .unwrap_or_default()
+    );
+}
+
+/// [`print_exclusions`] of the solve of `measurements`.
+pub fn print_solve_exclusions(solved: &Solved, measurements: &Records<MeasuredConfiguration>) {
+    print_exclusions(&solved.screening, &measurements.file, |index| {
+        (solved.outcomes[index].id.clone(), measurements.line(index))
+    });
+}
+
+/// How gross errors among corrections are found and decided (the options of `train`; with
+/// [`MeasuredScreeningArgs`], of `solve`, `calibrate` and `identify`).
+#[derive(Debug, clap::Args)]
+pub struct ScreeningArgs {
+    /// Exclude a configuration with a correction larger than this, mm (no real leg is that far
+    /// off).
+    #[arg(long, default_value_t = Checks::default().max_correction_mm, value_name = "MM")]
+    max_correction: f64,
+    /// Refuse the input when more than this share of its configurations is excluded.
+    #[arg(long, default_value_t = ScreeningOptions::default().max_excluded_share, value_name = "SHARE")]
+    max_excluded_share: f64,
+}
+
+impl ScreeningArgs {
+    /// The largest plausible correction, mm.
+    pub fn max_correction_mm(&self) -> f64 {
+        self.max_correction
+    }
+
+    /// The population checks and the refusal.
+    pub fn options(&self) -> ScreeningOptions {
+        ScreeningOptions {
+            max_excluded_share: self.max_excluded_share,
+            ..ScreeningOptions::default()
+        }
+    }
+}
+
+/// How gross errors among measurements are found and decided.
+#[derive(Debug, clap::Args)]
+pub struct MeasuredScreeningArgs {
+    #[command(flatten)]
+    corrections: ScreeningArgs,
+    /// Exclude a configuration whose fit residual exceeds this many times the file's median
+    /// residual (pure noise exceeds 3× once in 10 000).
+    #[arg(long, default_value_t = ScreeningOptions::default().residual_factor)]
+    residual_factor: f64,
+    /// Exclude a configuration whose targets are further from the geometry identified from all
+    /// configurations than this many times the median distance.
+    #[arg(long, default_value_t = ScreeningOptions::default().identification_factor)]
+    identification_factor: f64,
+}
+
+impl MeasuredScreeningArgs {
+    /// The per-configuration checks of the solve.
+    pub fn checks(&self) -> Checks {
+        Checks {
+            max_correction_mm: self.corrections.max_correction_mm(),
+            ..Checks::default()
+        }
+    }
+
+    /// The population checks and the refusal.
+    pub fn options(&self) -> ScreeningOptions {
+        ScreeningOptions {
+            residual_factor: self.residual_factor,
+            identification_factor: self.identification_factor,
+            ..self.corrections.options()
         }
     }
 }

@@ -8,6 +8,9 @@ use hexacomp_core::model::NetworkInput;
 use hexacomp_core::records::JointCorrection;
 use hexacomp_formats::read_corrections;
 use hexacomp_trainer::pipeline::Pipeline;
+use hexacomp_trainer::screening::screen_corrections;
+
+use super::solve::{ScreeningArgs, print_exclusions};
 use hexacomp_trainer::svg::{Chart, Series};
 use hexacomp_trainer::train::{Architecture, Selection, TrainOptions, Trained};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -51,6 +54,18 @@ pub struct TrainArgs {
     /// Output model file.
     #[arg(long, value_name = "FILE")]
     out: PathBuf,
+    #[command(flatten)]
+    screening: ScreeningArgs,
+}
+
+impl TrainArgs {
+    /// The files this command reads and writes.
+    pub fn files(&self) -> super::Files<'_> {
+        super::Files {
+            inputs: vec![&self.corrections],
+            outputs: vec![&self.out],
+        }
+    }
 }
 
 /// The architecture on the command line.
@@ -90,8 +105,22 @@ impl From<InputArg> for NetworkInput {
 }
 
 pub fn run(geometry: &Geometry, args: &TrainArgs) -> anyhow::Result<()> {
-    let rows = read_corrections(&args.corrections)?;
     anyhow::ensure!(args.hidden_max >= 1, "--hidden-max must be at least 1");
+    let file = read_corrections(&args.corrections)?;
+    let screening = screen_corrections(
+        &file,
+        args.screening.max_correction_mm(),
+        &args.screening.options(),
+    )?;
+    print_exclusions(&screening, &file.file, |index| {
+        (file[index].id.clone(), file.line(index))
+    });
+    let rows: Vec<JointCorrection> = file
+        .iter()
+        .enumerate()
+        .filter(|(index, _)| screening.kept(*index))
+        .map(|(_, row)| row.clone())
+        .collect();
     let options = TrainOptions {
         hidden_sizes: (1..=args.hidden_max.min(hexacomp_core::network::MAX_HIDDEN)).collect(),
         restarts: args.restarts,
@@ -290,5 +319,5 @@ pub fn write_selection_plot(
         y_label: "RMSE (mm)".into(),
         series,
     };
-    std::fs::write(path, chart.to_svg()).with_context(|| format!("writing {}", path.display()))
+    Ok(super::write_bytes(path, chart.to_svg().as_bytes())?)
 }

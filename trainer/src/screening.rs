@@ -1,0 +1,392 @@
+//! Gross-error screening: which configurations are left out of training, why, and when a whole
+//! input is refused.
+//!
+//! A check that finds a problem decides: the configuration is excluded (and listed with its
+//! reason), or, when so much is excluded that the data as a whole must be wrong (a swapped
+//! column, another machine's geometry, inches), the input is refused. The checks:
+//!
+//! - **Unsolvable, not converged, legs against the pose, correction bound** — per configuration
+//!   ([`crate::corrections::Flag`]).
+//! - **Fit residual.** Three targets give nine equations for the six leg corrections; what the
+//!   corrections cannot explain is left in the residual `‖ζ‖`. Measurement noise of σ per
+//!   coordinate leaves `‖ζ‖` distributed as σ·χ₃ (median 1.54σ, 1 − 10⁻⁴ quantile 4.6σ), so a
+//!   residual above [`ScreeningOptions::residual_factor`] × the file's median residual (3 would be
+//!   the 10⁻⁴ quantile of pure noise) is a gross error in a coordinate.
+//! - **Consistency with the other configurations.** A typo along a direction the fit absorbs (a
+//!   target's coordinate normal to the target plane is, to first order, a tilt of the platform)
+//!   leaves a small residual but a correction unlike the others'. The one geometry that explains
+//!   all configurations best is identified (the model-based baseline, [`crate::identify`]: 42
+//!   joint and leg-zero parameters, least squares over all rows), and a configuration whose
+//!   measured targets are further from that geometry's prediction than
+//!   [`ScreeningOptions::identification_factor`] × the median distance (and
+//!   [`ScreeningOptions::identification_floor_mm`]) is a gross error. The geometry is shared by
+//!   all rows, so one row cannot pull it onto itself (its influence is about 1/rows), and the
+//!   exact kinematics follow the corrections into every corner of the workspace, where a smooth
+//!   fit over leg space did not (a quadratic fit flagged up to 4 clean rows of 110).
+//!
+//! Units: mm.
+
+use hexacomp_core::Geometry;
+use hexacomp_core::records::{JointCorrection, MeasuredConfiguration};
+
+use crate::corrections::{Flag, Outcome};
+use crate::error::{Error, Result};
+use crate::identify::{IdentifyOptions, identify, target_residuals};
+
+/// Thresholds of the population checks and of the refusal.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ScreeningOptions {
+    /// Exclude a configuration whose fit residual `‖ζ‖` exceeds this many times the median
+    /// residual of the file (dimensionless).
+    pub residual_factor: f64,
+    /// ... and exceeds this, mm: the residual limit never goes below it (noise-free data).
+    pub residual_floor_mm: f64,
+    /// Exclude a configuration whose measured targets are further from the identified
+    /// geometry's prediction than this many times the median distance (dimensionless).
+    pub identification_factor: f64,
+    /// ... and further than this, mm.
+    pub identification_floor_mm: f64,
+    /// Refuse the whole input when more than this share of its configurations is excluded
+    /// (0–1).
+    pub max_excluded_share: f64,
+}
+
+impl Default for ScreeningOptions {
+    fn default() -> Self {
+        Self {
+            residual_factor: 4.0,
+            residual_floor_mm: 0.01,
+            identification_factor: 3.0,
+            identification_floor_mm: 0.05,
+            max_excluded_share: 0.2,
+        }
+    }
+}
+
+impl ScreeningOptions {
+    /// No population check and no refusal: only what cannot be trained on (unsolvable, not
+    /// converged, legs against the pose) is excluded. For method comparisons that must train on
+    /// everything a method produced, as the paper's ordinary compensator did.
+    pub fn keep_all() -> Self {
+        Self {
+            residual_factor: f64::INFINITY,
+            identification_factor: f64::INFINITY,
+            max_excluded_share: 1.0,
+            ..Self::default()
+        }
+    }
+
+    /// Checks that every setting is usable (the factors may be infinite: check off).
+    pub fn validate(&self) -> Result<()> {
+        let positive = [
+            ("residual-factor", self.residual_factor),
+            ("residual-floor", self.residual_floor_mm),
+            ("identification-factor", self.identification_factor),
+            ("identification-floor", self.identification_floor_mm),
+        ];
+        for (name, value) in positive {
+            if value.is_nan() || value <= 0.0 {
+                return Err(Error::InvalidSetting(format!(
+                    "{name} = {value} must be a number > 0"
+                )));
+            }
+        }
+        if !(0.0..=1.0).contains(&self.max_excluded_share) {
+            return Err(Error::InvalidSetting(format!(
+                "max-excluded-share = {} must be between 0 and 1",
+                self.max_excluded_share
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// Why a configuration was excluded.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Reason {
+    /// The joint-correction iteration failed (the message says why).
+    Unsolvable(String),
+    /// A per-configuration check of the solve failed.
+    Flagged(Flag),
+    /// The fit residual is a gross error.
+    Residual {
+        /// The residual `‖ζ‖`, mm.
+        residual_mm: f64,
+        /// The limit it exceeds, mm.
+        limit_mm: f64,
+    },
+    /// The measurement is unlike the others': far from the geometry identified from all.
+    Inconsistent {
+        /// The distance of the measured targets from the identified geometry's, mm.
+        deviation_mm: f64,
+        /// The limit it exceeds, mm.
+        limit_mm: f64,
+    },
+}
+
+impl std::fmt::Display for Reason {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Reason::Unsolvable(why) => write!(f, "cannot be solved: {why}"),
+            Reason::Flagged(flag) => write!(f, "{flag}"),
+            Reason::Residual {
+                residual_mm,
+                limit_mm,
+            } => write!(
+                f,
+                "fit residual {residual_mm:.4} mm above the limit {limit_mm:.4} mm (a wrong \
+                 coordinate or a swapped target?)"
+            ),
+            Reason::Inconsistent {
+                deviation_mm,
+                limit_mm,
+            } => write!(
+                f,
+                "the targets are {deviation_mm:.4} mm from where the geometry identified from \
+                 all configurations puts them (limit {limit_mm:.4} mm; a wrong coordinate?)"
+            ),
+        }
+    }
+}
+
+impl Reason {
+    /// A short name of the kind of reason, for counts.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Reason::Unsolvable(_) => "cannot be solved",
+            Reason::Flagged(Flag::NotConverged) => "did not converge",
+            Reason::Flagged(Flag::LargeCorrection { .. }) => "correction above the bound",
+            Reason::Flagged(Flag::LegsDisagreeWithPose { .. }) => "legs disagree with the pose",
+            Reason::Residual { .. } => "fit residual",
+            Reason::Inconsistent { .. } => "unlike the others",
+        }
+    }
+}
+
+/// The decision about every configuration of an input.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Screening {
+    /// The reasons for each configuration, in input order; empty for a kept one.
+    pub reasons: Vec<Vec<Reason>>,
+    /// The residual limit applied, mm (`None` for a corrections input, which has no residuals).
+    pub residual_limit_mm: Option<f64>,
+}
+
+impl Screening {
+    /// Whether configuration `index` is kept.
+    pub fn kept(&self, index: usize) -> bool {
+        self.reasons[index].is_empty()
+    }
+
+    /// The number of excluded configurations.
+    pub fn excluded(&self) -> usize {
+        self.reasons.iter().filter(|r| !r.is_empty()).count()
+    }
+}
+
+/// Screens the solved configurations of a measurements file (`outcomes[k]` solved from
+/// `measurements[k]` on `geometry`): per-configuration flags, the fit residual and consistency
+/// with the other configurations. Refuses ([`Error::Refused`]) when more than
+/// [`ScreeningOptions::max_excluded_share`] is excluded.
+pub fn screen_measured(
+    geometry: &Geometry,
+    measurements: &[MeasuredConfiguration],
+    outcomes: &[Outcome],
+    options: &ScreeningOptions,
+) -> Result<Screening> {
+    options.validate()?;
+    let mut reasons: Vec<Vec<Reason>> = outcomes
+        .iter()
+        .map(|o| match &o.solution {
+            Err(why) => vec![Reason::Unsolvable(why.clone())],
+            Ok(_) => o.flags.iter().cloned().map(Reason::Flagged).collect(),
+        })
+        .collect();
+    let residuals: Vec<f64> = outcomes
+        .iter()
+        .filter_map(|o| o.solution.as_ref().ok().map(|s| s.residual_mm))
+        .collect();
+    let residual_limit_mm = median(&residuals)
+        .map(|median| (options.residual_factor * median).max(options.residual_floor_mm));
+    if let Some(limit_mm) = residual_limit_mm {
+        for (outcome, reasons) in outcomes.iter().zip(&mut reasons) {
+            if let Ok(s) = &outcome.solution
+                && s.residual_mm > limit_mm
+            {
+                reasons.push(Reason::Residual {
+                    residual_mm: s.residual_mm,
+                    limit_mm,
+                });
+            }
+        }
+    }
+    if options.identification_factor.is_finite() {
+        check_against_identification(geometry, measurements, &mut reasons, options);
+    }
+    decide(
+        Screening {
+            reasons,
+            residual_limit_mm,
+        },
+        options,
+    )
+}
+
+/// Screens the rows of a corrections file, which has no target points: the correction bound
+/// `max_correction_mm` only. Refuses as [`screen_measured`] does.
+pub fn screen_corrections(
+    rows: &[JointCorrection],
+    max_correction_mm: f64,
+    options: &ScreeningOptions,
+) -> Result<Screening> {
+    options.validate()?;
+    let reasons: Vec<Vec<Reason>> = rows
+        .iter()
+        .map(|row| {
+            let largest = row.corrections.iter().fold(0.0_f64, |m, d| m.max(d.abs()));
+            if largest > max_correction_mm {
+                vec![Reason::Flagged(Flag::LargeCorrection { max_mm: largest })]
+            } else {
+                Vec::new()
+            }
+        })
+        .collect();
+    decide(
+        Screening {
+            reasons,
+            residual_limit_mm: None,
+        },
+        options,
+    )
+}
+
+/// Refuses when too much is excluded; otherwise passes the screening on.
+fn decide(screening: Screening, options: &ScreeningOptions) -> Result<Screening> {
+    let total = screening.reasons.len();
+    let excluded = screening.excluded();
+    if total == 0 || (excluded as f64) <= options.max_excluded_share * total as f64 {
+        return Ok(screening);
+    }
+    let mut kinds: Vec<(&'static str, usize)> = Vec::new();
+    for reason in screening.reasons.iter().flatten() {
+        match kinds.iter_mut().find(|(kind, _)| *kind == reason.kind()) {
+            Some((_, count)) => *count += 1,
+            None => kinds.push((reason.kind(), 1)),
+        }
+    }
+    kinds.sort_by_key(|(_, count)| std::cmp::Reverse(*count));
+    let counts: Vec<String> = kinds
+        .iter()
+        .map(|(kind, count)| format!("{kind}: {count}"))
+        .collect();
+    Err(Error::Refused(format!(
+        "{excluded} of {total} configurations would be excluded as gross errors (more than {:.0} \
+         %; {}): the data as a whole must be wrong — a swapped or misnamed column, another \
+         machine's geometry file, inches instead of mm",
+        100.0 * options.max_excluded_share,
+        counts.join(", ")
+    )))
+}
+
+/// Adds [`Reason::Inconsistent`] to every configuration (among those with no reason yet) whose
+/// measured targets are far from where the geometry identified from the others puts them.
+///
+/// A wrong row pulls the first identification towards itself, which can push clean rows over a
+/// tight limit (on noise-free data); so the identification is repeated on the rows within the
+/// limit, and every row judged again against it, until the set of rows within the limit stops
+/// changing (at most [`IDENTIFICATION_PASSES`] times). Too few configurations to identify from
+/// ([`MIN_ROWS_FOR_IDENTIFICATION`]), or an identification that fails, leave the check out.
+fn check_against_identification(
+    geometry: &Geometry,
+    measurements: &[MeasuredConfiguration],
+    reasons: &mut [Vec<Reason>],
+    options: &ScreeningOptions,
+) {
+    let candidates: Vec<MeasuredConfiguration> = (0..measurements.len())
+        .filter(|&i| reasons[i].is_empty())
+        .map(|i| measurements[i].clone())
+        .collect();
+    let indices: Vec<usize> = (0..measurements.len())
+        .filter(|&i| reasons[i].is_empty())
+        .collect();
+    let mut within = vec![true; candidates.len()];
+    let mut judged = None;
+    for _ in 0..IDENTIFICATION_PASSES {
+        let fitted: Vec<MeasuredConfiguration> = candidates
+            .iter()
+            .zip(&within)
+            .filter(|(_, w)| **w)
+            .map(|(row, _)| row.clone())
+            .collect();
+        if fitted.len() < MIN_ROWS_FOR_IDENTIFICATION {
+            return;
+        }
+        let Ok(identified) = identify(geometry, &fitted, &IdentifyOptions::default()) else {
+            return;
+        };
+        let Ok(distances) = target_residuals(&identified.geometry, &candidates) else {
+            return;
+        };
+        let fitted_distances: Vec<f64> = distances
+            .iter()
+            .zip(&within)
+            .filter(|(_, w)| **w)
+            .map(|(d, _)| *d)
+            .collect();
+        let Some(median) = median(&fitted_distances) else {
+            return;
+        };
+        let limit_mm =
+            (options.identification_factor * median).max(options.identification_floor_mm);
+        let next: Vec<bool> = distances.iter().map(|d| *d <= limit_mm).collect();
+        let settled = next == within;
+        within = next;
+        judged = Some((distances, limit_mm));
+        if settled {
+            break;
+        }
+    }
+    let Some((distances, limit_mm)) = judged else {
+        return;
+    };
+    for ((&index, &deviation_mm), ok) in indices.iter().zip(&distances).zip(&within) {
+        if !ok {
+            reasons[index].push(Reason::Inconsistent {
+                deviation_mm,
+                limit_mm,
+            });
+        }
+    }
+}
+
+/// How many times the consistency check identifies the geometry at most.
+const IDENTIFICATION_PASSES: usize = 4;
+
+/// The consistency check identifies 42 parameters from 9 equations per configuration: it needs
+/// at least this many configurations (4 equations per parameter); below it, it is off.
+pub const MIN_ROWS_FOR_IDENTIFICATION: usize = 20;
+
+/// The median of `values` (`None` when empty).
+fn median(values: &[f64]) -> Option<f64> {
+    if values.is_empty() {
+        return None;
+    }
+    let mut sorted = values.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    let middle = sorted.len() / 2;
+    Some(if sorted.len().is_multiple_of(2) {
+        0.5 * (sorted[middle - 1] + sorted[middle])
+    } else {
+        sorted[middle]
+    })
+}
+
+/// `value` for a message: 4 decimals when it is of ordinary size, else in scientific notation (a
+/// 1e308 mm reading is not printed as 309 digits).
+pub fn quantity(value: f64) -> String {
+    if value.abs() < 1e6 {
+        format!("{value:.4}")
+    } else {
+        format!("{value:.3e}")
+    }
+}
