@@ -10,7 +10,7 @@ use clap::{Parser, Subcommand};
 use hexacomp_client::{
     Client, ClientOptions, CompensatedPoint, DEFAULT_INSTANCE, MAX_BATCH, PointStatus, RequestKind,
 };
-use hexacomp_core::compensator::{self, Compensated};
+use hexacomp_core::compensator::{self, Compensated, StatusCounts};
 use hexacomp_core::records::NamedCompensation;
 use hexacomp_formats::{read_joints, read_poses, write_compensated};
 
@@ -134,10 +134,11 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 })
                 .collect();
             hexacomp_formats::write_file(&output, |file| write_compensated(file, &rows))?;
+            let counts: StatusCounts = rows.iter().map(|r| r.point.status).collect();
             let generations: std::collections::BTreeSet<u64> =
                 results.iter().map(|r| r.generation).collect();
             eprintln!(
-                "compensated {} points → {} (model generations {generations:?})",
+                "compensated {} points → {} ({counts}; model generations {generations:?})",
                 rows.len(),
                 output.display()
             );

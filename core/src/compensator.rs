@@ -7,7 +7,7 @@ use crate::kinematics::{LegStatus, inverse_kinematics, stroke_status};
 use crate::model::Model;
 use crate::pose::Pose;
 
-pub use hexacomp_point_status::PointStatus;
+pub use hexacomp_point_status::{PointStatus, StatusCounts};
 
 /// One compensated point.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -38,41 +38,82 @@ fn temporary_prefix(path: &Path) -> std::io::Result<String> {
 /// A file being written: nothing appears at the target until [`NewFile::commit`], which replaces
 /// the target whole and durably. Dropped uncommitted, the temporary is removed and the target is
 /// untouched.
+///
+/// A symbolic link at the target is followed: the file it points to is replaced, the link kept.
+/// A target that exists and is not a regular file (`/dev/stdout`, `/dev/null`, a FIFO) is written
+/// in place: a stream has no old content to keep, and replacing the device node would be wrong.
+/// A replaced file keeps its permission bits; a new one gets `0666` less the umask.
 pub struct NewFile {
     target: PathBuf,
-    file: BufWriter<NamedTempFile>,
+    output: Output,
+}
+
+/// Where a [`NewFile`]'s bytes go.
+enum Output {
+    /// A temporary beside the regular file it replaces on commit.
+    Replacing(BufWriter<NamedTempFile>),
+    /// A stream written in place.
+    Stream(BufWriter<std::fs::File>),
 }
 
 impl NewFile {
     /// Starts writing the file at `path` (created or replaced on commit).
     pub fn create(path: &Path) -> std::io::Result<Self> {
+        let target = match std::fs::symlink_metadata(path) {
+            Ok(meta) if meta.file_type().is_symlink() => std::fs::canonicalize(path)?,
+            _ => path.to_path_buf(),
+        };
+        let existing = std::fs::metadata(&target).ok();
+        if let Some(meta) = existing.as_ref().filter(|m| !m.is_file()) {
+            if meta.is_dir() {
+                return Err(std::io::Error::other("is a folder, not a file"));
+            }
+            let stream = std::fs::OpenOptions::new().write(true).open(&target)?;
+            return Ok(Self {
+                target,
+                output: Output::Stream(BufWriter::new(stream)),
+            });
+        }
+        let mode = existing.map_or(0o666, |m| m.permissions().mode() & 0o7777);
         let file = tempfile::Builder::new()
-            .prefix(&temporary_prefix(path)?)
+            .prefix(&temporary_prefix(&target)?)
             .suffix(".tmp")
-            .permissions(std::fs::Permissions::from_mode(0o666))
-            .tempfile_in(parent_of(path))?;
+            .permissions(std::fs::Permissions::from_mode(mode))
+            .tempfile_in(parent_of(&target))?;
         Ok(Self {
-            target: path.to_path_buf(),
-            file: BufWriter::new(file),
+            target,
+            output: Output::Replacing(BufWriter::new(file)),
         })
     }
 
-    /// Flushes the content to disk, renames it over the target and flushes the directory.
+    /// Flushes the content to disk, renames it over the target and flushes the directory (for a
+    /// stream: flushes it).
     pub fn commit(self) -> std::io::Result<()> {
-        let file = self.file.into_inner().map_err(|e| e.into_error())?;
-        file.as_file().sync_all()?;
-        file.persist(&self.target).map_err(|e| e.error)?;
-        sync_directory_of(&self.target)
+        match self.output {
+            Output::Stream(mut stream) => stream.flush(),
+            Output::Replacing(file) => {
+                let file = file.into_inner().map_err(|e| e.into_error())?;
+                file.as_file().sync_all()?;
+                file.persist(&self.target).map_err(|e| e.error)?;
+                sync_directory_of(&self.target)
+            }
+        }
     }
 }
 
 impl Write for NewFile {
     fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
-        self.file.write(buf)
+        match &mut self.output {
+            Output::Replacing(file) => file.write(buf),
+            Output::Stream(stream) => stream.write(buf),
+        }
     }
 
     fn flush(&mut self) -> std::io::Result<()> {
-        self.file.flush()
+        match &mut self.output {
+            Output::Replacing(file) => file.flush(),
+            Output::Stream(stream) => stream.flush(),
+        }
     }
 }
 
@@ -100,6 +141,14 @@ impl NewDirectory {
             Ok(meta) if meta.file_type().is_symlink() => std::fs::canonicalize(path)?,
             _ => path.to_path_buf(),
         };
+        if target.file_name().is_none() || target.ends_with(".") {
+            return Err(std::io::Error::other(
+                "names no folder of its own (such as `.` or `..`): give the folder by name",
+            ));
+        }
+        if std::fs::metadata(&target).is_ok_and(|m| !m.is_dir()) {
+            return Err(std::io::Error::other("exists and is not a folder"));
+        }
         let staging = tempfile::Builder::new()
             .prefix(&temporary_prefix(&target)?)
             .suffix(".tmp")
@@ -116,9 +165,14 @@ impl NewDirectory {
     /// Flushes the new folder and puts it in the target's place: an existing target is exchanged
     /// with it in one `renameat2(RENAME_EXCHANGE)` and then removed, so that at every moment the
     /// target is either the whole old folder or the whole new one.
-    pub fn commit(self) -> std::io::Result<()> {
+    ///
+    /// An error means the target was not replaced. Once it is, what follows cannot undo it: a
+    /// failure to flush the directory or to remove the old folder is returned as `Ok(Some(_))`,
+    /// a warning to pass on (the new folder is in place).
+    pub fn commit(self) -> std::io::Result<Option<String>> {
         std::fs::File::open(self.staging.path())?.sync_all()?;
-        if std::fs::symlink_metadata(&self.target).is_ok() {
+        let replaced = std::fs::symlink_metadata(&self.target).is_ok();
+        if replaced {
             rustix::fs::renameat_with(
                 rustix::fs::CWD,
                 self.staging.path(),
@@ -126,17 +180,24 @@ impl NewDirectory {
                 &self.target,
                 rustix::fs::RenameFlags::EXCHANGE,
             )?;
-            sync_directory_of(&self.target)?;
-            // The staging path now holds the old folder: dropping it removes it.
-            self.staging.close()
         } else {
-            let staging = self.staging.keep();
-            if let Err(e) = std::fs::rename(&staging, &self.target) {
-                let _ = std::fs::remove_dir_all(&staging);
-                return Err(e);
-            }
-            sync_directory_of(&self.target)
+            std::fs::rename(self.staging.path(), &self.target)?;
         }
+        let mut warnings = Vec::new();
+        if let Err(e) = sync_directory_of(&self.target) {
+            warnings.push(format!(
+                "the folder's parent could not be flushed to disk: {e}"
+            ));
+        }
+        // After an exchange the staging path holds the old folder; after a rename it is gone.
+        let old = self.staging.keep();
+        if replaced && let Err(e) = std::fs::remove_dir_all(&old) {
+            warnings.push(format!(
+                "the previous folder, now at {}, could not be removed: {e}",
+                old.display()
+            ));
+        }
+        Ok((!warnings.is_empty()).then(|| warnings.join("; ")))
     }
 }
 
@@ -179,7 +240,10 @@ mod tests {
         let mode = std::fs::metadata(&replaced).unwrap().permissions().mode() & 0o777;
         assert_eq!(mode, plain);
         let folder = dir.path().join("folder");
-        NewDirectory::create(&folder).unwrap().commit().unwrap();
+        assert_eq!(
+            NewDirectory::create(&folder).unwrap().commit().unwrap(),
+            None
+        );
         let plain_folder = dir.path().join("plain-folder");
         std::fs::create_dir(&plain_folder).unwrap();
         let mode_of = |p: &Path| std::fs::metadata(p).unwrap().permissions().mode() & 0o777;
@@ -225,12 +289,12 @@ mod tests {
         let first = NewDirectory::create(&target).unwrap();
         replace_file(&first.path().join("a.csv"), b"1").unwrap();
         replace_file(&first.path().join("old-only.csv"), b"1").unwrap();
-        first.commit().unwrap();
+        assert_eq!(first.commit().unwrap(), None);
         assert_eq!(names(&target), ["a.csv", "old-only.csv"]);
 
         let second = NewDirectory::create(&target).unwrap();
         replace_file(&second.path().join("a.csv"), b"2").unwrap();
-        second.commit().unwrap();
+        assert_eq!(second.commit().unwrap(), None);
         assert_eq!(names(&target), ["a.csv"]);
         assert_eq!(std::fs::read(target.join("a.csv")).unwrap(), b"2");
         assert_eq!(names(dir.path()), ["calibration"]);
@@ -259,7 +323,7 @@ mod tests {
         std::os::unix::fs::symlink(&real, &link).unwrap();
         let new = NewDirectory::create(&link).unwrap();
         replace_file(&new.path().join("x"), b"new").unwrap();
-        new.commit().unwrap();
+        assert_eq!(new.commit().unwrap(), None);
         assert!(
             std::fs::symlink_metadata(&link)
                 .unwrap()
@@ -267,6 +331,35 @@ mod tests {
                 .is_symlink()
         );
         assert_eq!(std::fs::read(real.join("x")).unwrap(), b"new");
+    }
+
+    #[test]
+    fn a_stream_is_written_in_place_and_a_link_to_a_file_is_followed() {
+        let dir = tempfile::tempdir().unwrap();
+        // /dev/null stays the device (it would become a plain file if renamed over).
+        replace_file(Path::new("/dev/null"), b"into the void").unwrap();
+        assert!(!std::fs::metadata("/dev/null").unwrap().is_file());
+        let real = dir.path().join("v3.hxm");
+        std::fs::write(&real, b"old").unwrap();
+        std::fs::set_permissions(&real, std::fs::Permissions::from_mode(0o640)).unwrap();
+        let link = dir.path().join("model.hxm");
+        std::os::unix::fs::symlink("v3.hxm", &link).unwrap();
+        replace_file(&link, b"new").unwrap();
+        assert!(std::fs::symlink_metadata(&link).unwrap().is_symlink());
+        assert_eq!(std::fs::read(&real).unwrap(), b"new");
+        let mode = std::fs::metadata(&real).unwrap().permissions().mode() & 0o777;
+        assert_eq!(mode, 0o640, "a replaced file keeps its permissions");
+    }
+
+    #[test]
+    fn a_folder_target_that_is_a_file_or_dot_is_refused_at_once() {
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("cal");
+        std::fs::write(&file, b"x").unwrap();
+        assert!(NewDirectory::create(&file).is_err());
+        assert!(NewDirectory::create(Path::new(".")).is_err());
+        assert!(NewDirectory::create(&dir.path().join("sub/..")).is_err());
+        assert_eq!(std::fs::read(&file).unwrap(), b"x");
     }
 
     #[test]

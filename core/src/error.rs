@@ -27,7 +27,10 @@ pub enum Error {
     },
 
     /// A leg length lies outside the actuator stroke (forward kinematics input).
-    #[error("leg {leg} length {length_mm:.6} mm is outside the stroke [{min_mm}, {max_mm}] mm")]
+    #[error(
+        "leg {leg} length {} mm is outside the stroke [{min_mm}, {max_mm}] mm",
+        crate::error::compact(*length_mm, 6)
+    )]
     OutOfStroke {
         /// Leg number, 1–6.
         leg: usize,
@@ -106,8 +109,12 @@ pub enum ModelFileProblem {
         /// Version this build reads.
         supported: u16,
     },
-    /// The file is shorter than its header says.
-    #[error("truncated: {actual} bytes, expected {expected}")]
+    /// The file is shorter than its header says: cut short, or the header's length field is
+    /// damaged (the two cannot be told apart: the checksum covers the field).
+    #[error(
+        "{actual} bytes, but the header announces {expected}: the file is truncated, or its \
+         header's length field is damaged"
+    )]
     Truncated {
         /// Bytes present.
         actual: usize,
@@ -135,3 +142,13 @@ pub enum ModelFileProblem {
 
 /// `Result` with the core [`enum@Error`].
 pub type Result<T> = std::result::Result<T, Error>;
+
+/// `value` for a message: `decimals` decimals when it is of ordinary size (below 10⁶), else in
+/// scientific notation (a 1e308 mm value read from a file is not printed as 309 digits).
+pub fn compact(value: f64, decimals: usize) -> String {
+    if value.abs() < 1e6 {
+        format!("{value:.decimals$}")
+    } else {
+        format!("{value:.3e}")
+    }
+}

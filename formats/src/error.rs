@@ -7,11 +7,16 @@ use thiserror::Error;
 #[non_exhaustive]
 pub enum Error {
     /// The file, or one of its rows or columns, is invalid, or it could not be read or created.
-    #[error("{file}:{line}: {}{message}", column.as_ref().map(|c| format!("column {c}: ")).unwrap_or_default())]
+    #[error(
+        "{file}{}: {}{message}",
+        if *line == 0 { String::new() } else { format!(":{line}") },
+        column.as_ref().map(|c| format!("column {c}: ")).unwrap_or_default()
+    )]
     Format {
         /// The file's path as given.
         file: String,
-        /// 1-based line number (1 is the header); 0 when the problem is the file as a whole.
+        /// 1-based line number (1 is the header); 0 when the problem is the file as a whole
+        /// (then not printed).
         line: u64,
         /// The column concerned, when one is.
         column: Option<String>,

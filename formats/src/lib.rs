@@ -91,6 +91,29 @@ impl<T> IntoIterator for Records<T> {
     }
 }
 
+/// The longest text an error message quotes from a file, in characters.
+const QUOTE_LIMIT: usize = 40;
+
+/// `text` quoted for a message, cut after [`QUOTE_LIMIT`] characters (a 200 MB field is not
+/// echoed whole).
+fn quote(text: &str) -> String {
+    match text.char_indices().nth(QUOTE_LIMIT) {
+        None => format!("{text:?}"),
+        Some((cut, _)) => format!("{:?}… ({} bytes)", &text[..cut], text.len()),
+    }
+}
+
+/// The identity of an id for duplicate checks: the number of a numeric id (`007` → `7`), the
+/// text of any other.
+fn id_key(id: &str) -> &str {
+    if id.bytes().all(|b| b.is_ascii_digit()) {
+        let trimmed = id.trim_start_matches('0');
+        if trimmed.is_empty() { "0" } else { trimmed }
+    } else {
+        id
+    }
+}
+
 /// A parsed CSV file: header, and each data row with its line number.
 struct Table {
     file: String,
@@ -125,13 +148,32 @@ impl Table {
             message: format!("not UTF-8 text: {e}"),
         })?;
         // Comment and blank lines are dropped here, keeping each remaining line's number, so
-        // that messages name the line as the user's editor shows it.
+        // that messages name the line as the user's editor shows it. A blank line between rows
+        // is refused: a row may have been lost there (blank lines after the last row are fine).
         let mut kept_lines = Vec::new();
         let mut data = String::with_capacity(text.len());
+        let mut blank_since_last_row = None;
         for (index, line) in text.lines().enumerate() {
             let trimmed = line.trim();
-            if trimmed.is_empty() || trimmed.starts_with('#') {
+            if trimmed.is_empty() {
+                // Header and at least one row read: a blank line now is between rows.
+                if kept_lines.len() >= 2 {
+                    blank_since_last_row.get_or_insert(index as u64 + 1);
+                }
                 continue;
+            }
+            if trimmed.starts_with('#') {
+                continue;
+            }
+            if let Some(blank) = blank_since_last_row.take() {
+                return Err(Error::Format {
+                    file: file.clone(),
+                    line: blank,
+                    column: None,
+                    message: "blank line between rows (was a row lost here?): remove it, or make \
+                              it a # comment"
+                        .into(),
+                });
             }
             kept_lines.push(index as u64 + 1);
             data.push_str(line);
@@ -173,7 +215,7 @@ impl Table {
             if columns.insert(name.to_string(), index).is_some() {
                 return Err(fail(
                     header_line,
-                    Some(name),
+                    Some(&quote(name)),
                     "column appears twice in the header".into(),
                 ));
             }
@@ -223,21 +265,30 @@ impl Table {
         Ok(out)
     }
 
-    /// The ids of all rows, checked non-empty and unique.
+    /// The ids of all rows, checked non-empty and unique (numeric ids by their number: `1` and
+    /// `01` are the same configuration to a reader).
     fn ids(&self) -> Result<Vec<String>> {
         let [id] = self.require(["id"])?;
-        let mut seen: HashMap<&str, u64> = HashMap::new();
+        let mut seen: HashMap<&str, (u64, &str)> = HashMap::new();
         let mut ids = Vec::with_capacity(self.rows.len());
         for (line, record) in &self.rows {
             let value = &record[id];
             if value.is_empty() {
                 return Err(self.error(*line, Some("id"), "empty id".into()));
             }
-            if let Some(first) = seen.insert(value, *line) {
+            if let Some((first, spelled)) = seen.insert(id_key(value), (*line, value)) {
+                let same = if spelled == value {
+                    String::new()
+                } else {
+                    format!(", as {}", quote(spelled))
+                };
                 return Err(self.error(
                     *line,
                     Some("id"),
-                    format!("duplicate id {value:?} (first on line {first})"),
+                    format!(
+                        "duplicate id {} (first on line {first}{same})",
+                        quote(value)
+                    ),
                 ));
             }
             ids.push(value.to_string());
@@ -257,13 +308,17 @@ impl Table {
         for k in 0..N {
             let text = &record[indices[k]];
             let value: f64 = text.parse().map_err(|_| {
-                self.error(*line, Some(names[k]), format!("{text:?} is not a number"))
+                self.error(
+                    *line,
+                    Some(names[k]),
+                    format!("{} is not a number", quote(text)),
+                )
             })?;
             if !value.is_finite() {
                 return Err(self.error(
                     *line,
                     Some(names[k]),
-                    format!("{text} is not a finite number"),
+                    format!("{} is not a finite number", quote(text)),
                 ));
             }
             out[k] = value;

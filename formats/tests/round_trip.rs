@@ -130,7 +130,10 @@ fn nan_is_refused_with_line_and_column() {
     let err = read_poses(&path).unwrap_err();
     assert_eq!(
         err.to_string(),
-        format!("{}:4: column y: NaN is not a finite number", path.display())
+        format!(
+            "{}:4: column y: \"NaN\" is not a finite number",
+            path.display()
+        )
     );
 }
 
@@ -192,4 +195,72 @@ fn records_keep_the_line_the_editor_shows_past_comments_and_blank_lines() {
     assert_eq!(ids, ["p1", "p2"]);
     assert_eq!((records.line(0), records.line(1)), (4, 6));
     assert_eq!(records.file, path.display().to_string());
+}
+
+#[test]
+fn a_blank_line_between_rows_is_refused_with_its_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write(
+        &dir,
+        "p.csv",
+        "id,x,y,z,a,b,c\n1,0,0,300,0,0,0\n\n# later\n2,0,0,301,0,0,0\n\n\n",
+    );
+    let (line, column, message) = format_error(read_poses(&path));
+    assert_eq!((line, column), (3, None));
+    assert!(message.starts_with("blank line between rows"), "{message}");
+    // Blank lines before the first row and after the last one are not between rows.
+    let path = write(
+        &dir,
+        "q.csv",
+        "id,x,y,z,a,b,c\n\n1,0,0,300,0,0,0\n2,0,0,301,0,0,0\n\n\n",
+    );
+    assert_eq!(read_poses(&path).unwrap().len(), 2);
+}
+
+#[test]
+fn numeric_ids_that_are_the_same_number_are_duplicates() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write(
+        &dir,
+        "p.csv",
+        "id,x,y,z,a,b,c\n1,0,0,300,0,0,0\n01,0,0,301,0,0,0\n",
+    );
+    let (line, column, message) = format_error(read_poses(&path));
+    assert_eq!((line, column.as_deref()), (3, Some("id")));
+    assert_eq!(message, "duplicate id \"01\" (first on line 2, as \"1\")");
+    // Other ids are compared as written.
+    let path = write(
+        &dir,
+        "q.csv",
+        "id,x,y,z,a,b,c\na1,0,0,300,0,0,0\na01,0,0,301,0,0,0\n0,0,0,302,0,0,0\n",
+    );
+    assert_eq!(read_poses(&path).unwrap().len(), 3);
+}
+
+#[test]
+fn an_error_quotes_at_most_40_characters_of_a_field_and_no_line_0() {
+    let dir = tempfile::tempdir().unwrap();
+    let huge = "9".repeat(100_000) + "x";
+    let path = write(
+        &dir,
+        "p.csv",
+        &format!("id,x,y,z,a,b,c\n1,{huge},0,300,0,0,0\n"),
+    );
+    let message = read_poses(&path).unwrap_err().to_string();
+    assert!(message.len() < 200, "{} bytes", message.len());
+    assert!(
+        message.ends_with(&format!(
+            "\"{}\"… (100001 bytes) is not a number",
+            "9".repeat(40)
+        )),
+        "{message}"
+    );
+    let empty = write(&dir, "c.csv", "");
+    assert_eq!(
+        read_poses(&empty).unwrap_err().to_string(),
+        format!(
+            "{}: the file is empty: expected a header row",
+            empty.display()
+        )
+    );
 }

@@ -56,9 +56,73 @@ impl PointStatus {
     }
 }
 
+/// How many points had each status: a summary for a user, printed as the statuses other than
+/// `ok` with their counts (`3 clamped, 1 outside_trained_range`), or `all ok`.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct StatusCounts([usize; PointStatus::ALL.len()]);
+
+impl StatusCounts {
+    /// Counts one more point of `status`.
+    pub fn add(&mut self, status: PointStatus) {
+        self.0[status as usize] += 1;
+    }
+
+    /// The points counted with `status`.
+    pub fn count(&self, status: PointStatus) -> usize {
+        self.0[status as usize]
+    }
+}
+
+impl FromIterator<PointStatus> for StatusCounts {
+    fn from_iter<I: IntoIterator<Item = PointStatus>>(statuses: I) -> Self {
+        let mut counts = Self::default();
+        statuses.into_iter().for_each(|s| counts.add(s));
+        counts
+    }
+}
+
+impl core::fmt::Display for StatusCounts {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        let mut first = true;
+        for status in PointStatus::ALL {
+            let count = self.count(status);
+            if status == PointStatus::Ok || count == 0 {
+                continue;
+            }
+            if !first {
+                f.write_str(", ")?;
+            }
+            write!(f, "{count} {}", status.name())?;
+            first = false;
+        }
+        if first {
+            f.write_str("all ok")?;
+        }
+        Ok(())
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+    extern crate std;
+    use std::string::ToString;
+
+    #[test]
+    fn counts_print_the_statuses_that_are_not_ok() {
+        let counts: StatusCounts = [
+            PointStatus::Ok,
+            PointStatus::Clamped,
+            PointStatus::NoModel,
+            PointStatus::Clamped,
+        ]
+        .into_iter()
+        .collect();
+        assert_eq!(counts.count(PointStatus::Clamped), 2);
+        assert_eq!(counts.to_string(), "2 clamped, 1 no_model");
+        let all_ok: StatusCounts = [PointStatus::Ok; 3].into_iter().collect();
+        assert_eq!(all_ok.to_string(), "all ok");
+    }
 
     #[test]
     fn wire_values_round_trip_and_unknown_values_are_none() {

@@ -123,3 +123,129 @@ fn a_client_timeout_of_0_ms_is_refused_before_connecting() {
         stderr(&output)
     );
 }
+
+#[test]
+fn an_option_without_effect_is_an_error_and_a_negative_range_parses() {
+    // Without --from-linuxcnc (and --workspace-radius) these options would be ignored.
+    for args in [
+        &["geometry", "--tilt-max=5"][..],
+        &["geometry", "--leg-range", "280,430"],
+        &[
+            "geometry",
+            "--from-linuxcnc",
+            "x.ini",
+            "--z-range",
+            "250,320",
+        ],
+    ] {
+        let output = run("hexacomp-trainer", args);
+        assert_eq!(
+            output.status.code(),
+            Some(2),
+            "{args:?}: {}",
+            stderr(&output)
+        );
+        assert!(
+            stderr(&output).contains("required arguments were not provided"),
+            "{args:?}: {}",
+            stderr(&output)
+        );
+    }
+    // `--yaw-range -10,10` is a range, not an option: it gets as far as reading the ini.
+    let output = run(
+        "hexacomp-trainer",
+        &[
+            "geometry",
+            "--from-linuxcnc",
+            "missing.ini",
+            "--workspace-radius",
+            "30",
+            "--z-range",
+            "250,320",
+            "--tilt-max",
+            "5",
+            "--yaw-range",
+            "-10,10",
+        ],
+    );
+    assert!(
+        stderr(&output).contains("missing.ini"),
+        "{}",
+        stderr(&output)
+    );
+    // predict names both of its possible inputs.
+    let output = run(
+        "hexacomp-trainer",
+        &["predict", "--model", "m.hxm", "--out", "o.csv"],
+    );
+    assert!(
+        stderr(&output).contains("--poses <FILE>|--joints <FILE>"),
+        "{}",
+        stderr(&output)
+    );
+}
+
+#[test]
+fn simulate_names_the_file_line_and_configuration_it_cannot_measure() {
+    let dir = tempfile::tempdir().unwrap();
+    let plan = dir.path().join("far.csv");
+    std::fs::write(&plan, "id,x,y,z,a,b,c\n1,0,0,300,0,0,0\n2,0,0,520,0,0,0\n").unwrap();
+    let out = dir.path().join("m.csv");
+    let output = run(
+        "hexacomp-trainer",
+        &[
+            "simulate",
+            "--plan",
+            plan.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ],
+    );
+    let message = stderr(&output);
+    assert!(!output.status.success(), "{message}");
+    // The geometry's own stroke, not the virtual machine's.
+    assert!(
+        message.contains(&format!(
+            "{}:3: configuration 2: the pose needs leg 1 at",
+            plan.display()
+        )) && message.contains("outside the geometry's stroke [280, 430] mm"),
+        "{message}"
+    );
+    assert!(!out.exists());
+}
+
+#[test]
+fn client_compensate_summarises_the_statuses_it_wrote() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_, model) = hexacomp_tests::save_smooth_model(dir.path(), 3);
+    let instance = hexacomp_tests::unique_instance("compensate-summary");
+    let _service =
+        hexacomp_tests::ServiceProcess::with_model(&instance, &dir.path().join("state"), &model);
+    let poses = dir.path().join("poses.csv");
+    // Two poses in the workspace, one far above it (out of stroke).
+    std::fs::write(
+        &poses,
+        "id,x,y,z,a,b,c\n1,0,0,300,0,0,0\n2,5,0,310,0,0,0\n3,0,0,520,0,0,0\n",
+    )
+    .unwrap();
+    let out = dir.path().join("out.csv");
+    let output = run(
+        "hexacomp-client",
+        &[
+            "--instance",
+            &instance,
+            "compensate",
+            "--input",
+            poses.to_str().unwrap(),
+            "--output",
+            out.to_str().unwrap(),
+        ],
+    );
+    assert!(output.status.success(), "{}", stderr(&output));
+    assert!(
+        stderr(&output).contains("compensated 3 points → ")
+            && stderr(&output).contains("(1 out_of_stroke; model generations"),
+        "{}",
+        stderr(&output)
+    );
+}

@@ -251,6 +251,21 @@ fn a_failing_calibrate_leaves_the_previous_folder_whole() {
         "the old folder's files are gone"
     );
 
+    // `.` and a file are not folders calibrate can replace: refused before any work.
+    for target in [".", "inches.csv"] {
+        let output = run_in(
+            d,
+            "hexacomp-trainer",
+            &["calibrate", "--count", "40", "--out-dir", target],
+        );
+        let report = text(&output.stderr);
+        assert!(!output.status.success(), "{target}: {report}");
+        assert!(
+            !report.contains("Selection of hidden nodes"),
+            "{target}: trained first"
+        );
+    }
+
     // A folder holding files calibrate did not write is refused, not replaced.
     std::fs::write(d.join("cal/notes.txt"), b"mine").unwrap();
     let output = run_in(

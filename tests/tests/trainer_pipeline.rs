@@ -202,7 +202,7 @@ fn bad_measurement_files_are_refused_with_file_line_and_column() {
         ],
     );
     assert!(
-        text(&output.stderr).contains("nan.csv:3: column x: NaN is not a finite number"),
+        text(&output.stderr).contains("nan.csv:3: column x: \"NaN\" is not a finite number"),
         "{}",
         text(&output.stderr)
     );
@@ -245,6 +245,11 @@ fn gross_errors_are_excluded_by_line_and_a_file_of_them_is_refused() {
         report.contains("18 of 20 configurations kept, 2 excluded"),
         "{report}"
     );
+    // 18 rows are too few to identify 42 parameters from: the user is told the check is off.
+    assert!(
+        report.contains("note: the consistency check (against the identified geometry) was left out: 18 configurations, it needs 20"),
+        "{report}"
+    );
     let written = read_corrections(&d.join("c.csv")).unwrap();
     let ids: Vec<&str> = written.iter().map(|c| c.id.as_str()).collect();
     let expected: Vec<String> = (1..=20)
@@ -268,9 +273,22 @@ fn gross_errors_are_excluded_by_line_and_a_file_of_them_is_refused() {
     );
     let report = text(&output.stderr);
     assert!(!output.status.success(), "{report}");
+    // The refusal names the file, and every row is listed with its line before it.
+    let inches_csv = d.join("inches.csv").display().to_string();
     assert!(
-        report.contains("20 of 20 configurations would be excluded") && report.contains("inches"),
+        report.contains(&format!(
+            "error: {inches_csv}: refused: 20 of 20 configurations would be excluded"
+        )),
         "{report}"
     );
+    for id in 1..=20 {
+        assert!(
+            report.contains(&format!(
+                "excluded: configuration {id} ({inches_csv}:{}): ",
+                id + 1
+            )),
+            "{report}"
+        );
+    }
     assert_eq!(std::fs::read(d.join("c.csv")).unwrap(), before);
 }

@@ -216,14 +216,14 @@ impl std::fmt::Display for Flag {
                     f,
                     "correction of {} mm is implausibly large (a wrong coordinate, or a \
                      measurement in other units?)",
-                    crate::screening::quantity(*max_mm)
+                    hexacomp_core::error::compact(*max_mm, 4)
                 )
             }
             Flag::LegsDisagreeWithPose { max_mm } => write!(
                 f,
                 "commanded legs differ from the pose's inverse kinematics by {} mm (a wrong \
                  geometry file, or swapped leg columns?)",
-                crate::screening::quantity(*max_mm)
+                hexacomp_core::error::compact(*max_mm, 4)
             ),
         }
     }
@@ -239,11 +239,28 @@ pub struct Checks {
     pub legs_tolerance_mm: f64,
 }
 
+impl Checks {
+    /// Checks that every threshold is usable (infinite: the check is off).
+    pub fn validate(&self) -> Result<()> {
+        for (name, value) in [
+            ("max-correction", self.max_correction_mm),
+            ("legs-tolerance", self.legs_tolerance_mm),
+        ] {
+            if value.is_nan() || value <= 0.0 {
+                return Err(Error::InvalidSetting(format!(
+                    "{name} = {value} must be a number > 0"
+                )));
+            }
+        }
+        Ok(())
+    }
+}
+
 impl Default for Checks {
     fn default() -> Self {
         Self {
             max_correction_mm: 5.0,
-            legs_tolerance_mm: 1e-4,
+            legs_tolerance_mm: 1e-3,
         }
     }
 }
@@ -280,6 +297,7 @@ pub fn solve_all(
     checks: &Checks,
 ) -> Result<Vec<Outcome>> {
     options.validate()?;
+    checks.validate()?;
     Ok(rows
         .iter()
         .map(|row| solve_row(geometry, row, options, checks))

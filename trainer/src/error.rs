@@ -43,8 +43,13 @@ pub enum Error {
 
     /// The input as a whole was refused: so much of it is a gross error that the data must be
     /// wrong (the message says what was found and the likely causes).
-    #[error("refused: {0}")]
-    Refused(String),
+    #[error("refused: {reason}")]
+    Refused {
+        /// What was found and the likely causes.
+        reason: String,
+        /// The decision about every configuration, so that a caller can list them.
+        screening: Box<crate::screening::Screening>,
+    },
 
     /// The data cannot support the requested computation (too few configurations, none usable).
     #[error("insufficient data: {0}")]

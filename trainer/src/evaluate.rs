@@ -135,21 +135,22 @@ pub fn evaluate(
             ..Default::default()
         },
         train: options.train.clone(),
+        // The paper's comparison trains every method on every correction it solves (the virtual
+        // platform makes no gross errors): the ordinary compensator's erratic corrections near
+        // singular configurations are what it shows, and screening would hide them.
+        checks: Checks {
+            max_correction_mm: f64::INFINITY,
+            ..Checks::default()
+        },
+        screening: ScreeningOptions::keep_all(),
         ..Default::default()
     };
-    // The paper's ordinary compensator: the same pipeline with λ = 0, trained on every
-    // correction it solves — its erratic corrections near singular configurations are what the
-    // comparison shows, and the gross-error screening would hide them.
+    // The paper's ordinary compensator: the same pipeline with λ = 0.
     let ordinary_pipeline = Pipeline {
         solver: SolverOptions {
             robust: false,
             ..robust_pipeline.solver
         },
-        checks: Checks {
-            max_correction_mm: f64::INFINITY,
-            ..robust_pipeline.checks
-        },
-        screening: ScreeningOptions::keep_all(),
         ..robust_pipeline.clone()
     };
     let mut platform = VirtualPlatform::new(

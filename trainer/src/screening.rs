@@ -29,7 +29,7 @@
 use hexacomp_core::Geometry;
 use hexacomp_core::records::{JointCorrection, MeasuredConfiguration};
 
-use crate::corrections::{Flag, Outcome};
+use crate::corrections::{Checks, Flag, Outcome};
 use crate::error::{Error, Result};
 use crate::identify::{IdentifyOptions, identify, target_residuals};
 
@@ -170,6 +170,8 @@ pub struct Screening {
     pub reasons: Vec<Vec<Reason>>,
     /// The residual limit applied, mm (`None` for a corrections input, which has no residuals).
     pub residual_limit_mm: Option<f64>,
+    /// What the user should know about the checks themselves (one left out, and why).
+    pub notes: Vec<String>,
 }
 
 impl Screening {
@@ -220,13 +222,20 @@ pub fn screen_measured(
             }
         }
     }
-    if options.identification_factor.is_finite() {
-        check_against_identification(geometry, measurements, &mut reasons, options);
+    let mut notes = Vec::new();
+    if options.identification_factor.is_finite()
+        && let Err(why) =
+            check_against_identification(geometry, measurements, &mut reasons, options)
+    {
+        notes.push(format!(
+            "the consistency check (against the identified geometry) was left out: {why}"
+        ));
     }
     decide(
         Screening {
             reasons,
             residual_limit_mm,
+            notes,
         },
         options,
     )
@@ -240,6 +249,11 @@ pub fn screen_corrections(
     options: &ScreeningOptions,
 ) -> Result<Screening> {
     options.validate()?;
+    Checks {
+        max_correction_mm,
+        ..Checks::default()
+    }
+    .validate()?;
     let reasons: Vec<Vec<Reason>> = rows
         .iter()
         .map(|row| {
@@ -255,16 +269,25 @@ pub fn screen_corrections(
         Screening {
             reasons,
             residual_limit_mm: None,
+            notes: Vec::new(),
         },
         options,
     )
 }
 
+/// An input is refused only when more than this many configurations are excluded, whatever
+/// their share.
+pub const MIN_EXCLUDED_TO_REFUSE: usize = 2;
+
 /// Refuses when too much is excluded; otherwise passes the screening on.
 fn decide(screening: Screening, options: &ScreeningOptions) -> Result<Screening> {
     let total = screening.reasons.len();
     let excluded = screening.excluded();
-    if total == 0 || (excluded as f64) <= options.max_excluded_share * total as f64 {
+    // A share of a tiny file is not evidence: one bad row of four is a bad row.
+    if total == 0
+        || excluded <= MIN_EXCLUDED_TO_REFUSE
+        || (excluded as f64) <= options.max_excluded_share * total as f64
+    {
         return Ok(screening);
     }
     let mut kinds: Vec<(&'static str, usize)> = Vec::new();
@@ -279,38 +302,43 @@ fn decide(screening: Screening, options: &ScreeningOptions) -> Result<Screening>
         .iter()
         .map(|(kind, count)| format!("{kind}: {count}"))
         .collect();
-    Err(Error::Refused(format!(
+    let reason = format!(
         "{excluded} of {total} configurations would be excluded as gross errors (more than {:.0} \
          %; {}): the data as a whole must be wrong — a swapped or misnamed column, another \
          machine's geometry file, inches instead of mm",
         100.0 * options.max_excluded_share,
         counts.join(", ")
-    )))
+    );
+    Err(Error::Refused {
+        reason,
+        screening: Box::new(screening),
+    })
 }
 
 /// Adds [`Reason::Inconsistent`] to every configuration (among those with no reason yet) whose
-/// measured targets are far from where the geometry identified from the others puts them.
+/// measured targets are far from where the geometry identified from the configurations within
+/// the limit puts them.
 ///
 /// A wrong row pulls the first identification towards itself, which can push clean rows over a
 /// tight limit (on noise-free data); so the identification is repeated on the rows within the
-/// limit, and every row judged again against it, until the set of rows within the limit stops
-/// changing (at most [`IDENTIFICATION_PASSES`] times). Too few configurations to identify from
-/// ([`MIN_ROWS_FOR_IDENTIFICATION`]), or an identification that fails, leave the check out.
+/// limit, and every row judged again against it, until that set stops changing (at most
+/// [`IDENTIFICATION_PASSES`] times; a later pass that cannot be made keeps the last decision).
+/// A configuration the identified geometry cannot reach at all is excluded too. The check is
+/// left out — and the returned error says why — when there are too few configurations
+/// ([`MIN_ROWS_FOR_IDENTIFICATION`]) or the first identification fails.
 fn check_against_identification(
     geometry: &Geometry,
     measurements: &[MeasuredConfiguration],
     reasons: &mut [Vec<Reason>],
     options: &ScreeningOptions,
-) {
-    let candidates: Vec<MeasuredConfiguration> = (0..measurements.len())
-        .filter(|&i| reasons[i].is_empty())
-        .map(|i| measurements[i].clone())
-        .collect();
+) -> std::result::Result<(), String> {
     let indices: Vec<usize> = (0..measurements.len())
         .filter(|&i| reasons[i].is_empty())
         .collect();
+    let candidates: Vec<MeasuredConfiguration> =
+        indices.iter().map(|&i| measurements[i].clone()).collect();
     let mut within = vec![true; candidates.len()];
-    let mut judged = None;
+    let mut judged: Option<(Vec<f64>, f64)> = None;
     for _ in 0..IDENTIFICATION_PASSES {
         let fitted: Vec<MeasuredConfiguration> = candidates
             .iter()
@@ -319,23 +347,34 @@ fn check_against_identification(
             .map(|(row, _)| row.clone())
             .collect();
         if fitted.len() < MIN_ROWS_FOR_IDENTIFICATION {
-            return;
+            if judged.is_none() {
+                return Err(format!(
+                    "{} configurations, it needs {MIN_ROWS_FOR_IDENTIFICATION}",
+                    fitted.len()
+                ));
+            }
+            break;
         }
-        let Ok(identified) = identify(geometry, &fitted, &IdentifyOptions::default()) else {
-            return;
+        let identified = match identify(geometry, &fitted, &IdentifyOptions::default()) {
+            Ok(identified) => identified,
+            Err(e) if judged.is_none() => return Err(e.to_string()),
+            Err(_) => break,
         };
-        let Ok(distances) = target_residuals(&identified.geometry, &candidates) else {
-            return;
-        };
+        // Unreachable by the identified geometry: as far as can be.
+        let distances: Vec<f64> = candidates
+            .iter()
+            .map(|row| {
+                target_residuals(&identified.geometry, std::slice::from_ref(row))
+                    .map_or(f64::INFINITY, |d| d[0])
+            })
+            .collect();
         let fitted_distances: Vec<f64> = distances
             .iter()
             .zip(&within)
             .filter(|(_, w)| **w)
             .map(|(d, _)| *d)
             .collect();
-        let Some(median) = median(&fitted_distances) else {
-            return;
-        };
+        let median = median(&fitted_distances).unwrap_or(0.0);
         let limit_mm =
             (options.identification_factor * median).max(options.identification_floor_mm);
         let next: Vec<bool> = distances.iter().map(|d| *d <= limit_mm).collect();
@@ -346,9 +385,7 @@ fn check_against_identification(
             break;
         }
     }
-    let Some((distances, limit_mm)) = judged else {
-        return;
-    };
+    let (distances, limit_mm) = judged.expect("the first pass judged or returned");
     for ((&index, &deviation_mm), ok) in indices.iter().zip(&distances).zip(&within) {
         if !ok {
             reasons[index].push(Reason::Inconsistent {
@@ -357,6 +394,7 @@ fn check_against_identification(
             });
         }
     }
+    Ok(())
 }
 
 /// How many times the consistency check identifies the geometry at most.
@@ -381,12 +419,46 @@ fn median(values: &[f64]) -> Option<f64> {
     })
 }
 
-/// `value` for a message: 4 decimals when it is of ordinary size, else in scientific notation (a
-/// 1e308 mm reading is not printed as 309 digits).
-pub fn quantity(value: f64) -> String {
-    if value.abs() < 1e6 {
-        format!("{value:.4}")
-    } else {
-        format!("{value:.3e}")
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use hexacomp_core::LEGS;
+
+    fn corrections(wrong: &[usize]) -> Vec<JointCorrection> {
+        (0..4)
+            .map(|i| JointCorrection {
+                id: (i + 1).to_string(),
+                legs: [350.0; LEGS],
+                corrections: if wrong.contains(&i) {
+                    [9.0; LEGS]
+                } else {
+                    [0.1; LEGS]
+                },
+            })
+            .collect()
+    }
+
+    #[test]
+    fn one_bad_row_of_four_is_excluded_and_three_refuse_the_file() {
+        let options = ScreeningOptions::default();
+        let screening = screen_corrections(&corrections(&[2]), 5.0, &options).unwrap();
+        assert_eq!(screening.excluded(), 1);
+        assert!(!screening.kept(2));
+        match screen_corrections(&corrections(&[0, 1, 2]), 5.0, &options) {
+            Err(Error::Refused { screening, .. }) => assert_eq!(screening.excluded(), 3),
+            other => panic!("{other:?}"),
+        }
+    }
+
+    #[test]
+    fn unusable_thresholds_are_refused() {
+        let rows = corrections(&[]);
+        assert!(screen_corrections(&rows, f64::NAN, &ScreeningOptions::default()).is_err());
+        let nan_factor = ScreeningOptions {
+            residual_factor: f64::NAN,
+            ..ScreeningOptions::default()
+        };
+        assert!(screen_corrections(&rows, 5.0, &nan_factor).is_err());
+        assert!(screen_corrections(&rows, f64::INFINITY, &ScreeningOptions::keep_all()).is_ok());
     }
 }

@@ -153,30 +153,27 @@ fn training_range(inputs: &[[f64; LEGS]], commanded: &[[f64; LEGS]]) -> [[f64; 2
     })
 }
 
-/// The model's correction bounds per leg, mm: from the 2nd to the 98th percentile of the
-/// measured corrections (linearly interpolated), widened on each side by 3/4 of that spread plus
-/// 0.01 mm (so that a leg whose corrections barely vary still has room for noise). Percentiles,
-/// not the minimum and maximum, so that one wrong correction left in the data cannot open the
-/// bounds (a 1e308 mm row would make the run-time clamp do nothing). The clamp holds
-/// corrections inside them.
+/// The model's correction bounds per leg, mm: from the `k`-th smallest to the `k`-th largest of
+/// the measured corrections, `k` = max(1, ⌈0.02·(n − 1)⌉) (the 2nd and 98th percentiles, and
+/// never the extreme values of 3 or more), widened on each side by 3/4 of that spread plus
+/// 0.01 mm (so that a leg whose corrections barely vary still has room for noise). Not the
+/// minimum and maximum, so that one wrong correction left in the data cannot open the bounds (a
+/// 1e308 mm row would make the run-time clamp do nothing). The clamp holds corrections inside
+/// them.
 pub fn correction_bounds(targets: &[[f64; LEGS]]) -> [[f64; 2]; LEGS] {
     std::array::from_fn(|leg| {
         let mut values: Vec<f64> = targets.iter().map(|t| t[leg]).collect();
         values.sort_by(f64::total_cmp);
-        let (lo, hi) = (percentile(&values, 0.02), percentile(&values, 0.98));
+        let n = values.len();
+        let k = if n >= 3 {
+            ((0.02 * (n - 1) as f64).ceil() as usize).clamp(1, (n - 1) / 2)
+        } else {
+            0
+        };
+        let (lo, hi) = (values[k], values[n - 1 - k]);
         let margin = 0.75 * (hi - lo) + 0.01;
         [lo - margin, hi + margin]
     })
-}
-
-/// The `p` quantile (0–1) of the ascending, non-empty `sorted`, linearly interpolated between
-/// neighbouring values.
-fn percentile(sorted: &[f64], p: f64) -> f64 {
-    let position = p * (sorted.len() - 1) as f64;
-    let below = position.floor() as usize;
-    let above = (below + 1).min(sorted.len() - 1);
-    let fraction = position - below as f64;
-    sorted[below] + fraction * (sorted[above] - sorted[below])
 }
 
 /// Trains a model on corrections rows for the geometry with fingerprint `geometry`.

@@ -133,7 +133,7 @@ fn calibrate(machine: &Machine, measurements: &[MeasuredConfiguration]) -> Resul
     let pipeline = Pipeline::default();
     let solved = match pipeline.solve(&machine.geometry, measurements) {
         Ok(solved) => solved,
-        Err(Error::Refused(why)) => return Result::Refused(why),
+        Err(Error::Refused { reason, .. }) => return Result::Refused(reason),
         Err(e) => panic!("{e}"),
     };
     let excluded = solved
@@ -215,7 +215,7 @@ fn every_kind_is_excluded_or_refused_on_the_default_machine() {
         let mut rows = machine.measurements.clone();
         kind.put_into(&mut rows);
         match pipeline.solve(&machine.geometry, &rows) {
-            Err(Error::Refused(why)) => assert!(kind.whole_file(), "{kind:?}: {why}"),
+            Err(Error::Refused { reason, .. }) => assert!(kind.whole_file(), "{kind:?}: {reason}"),
             Err(e) => panic!("{kind:?}: {e}"),
             Ok(solved) => {
                 assert!(!kind.whole_file(), "{kind:?} was not refused");

@@ -329,18 +329,17 @@ fn training_range_covers_the_commanded_and_the_equivalent_legs_of_every_row() {
     }
 }
 
-/// The `p` quantile of `values`, linearly interpolated (as numpy's default).
-fn quantile(values: &[f64], p: f64) -> f64 {
+/// The `k`-th smallest and `k`-th largest of `values`, `k` = max(1, ⌈0.02·(n − 1)⌉).
+fn inner_range(values: &[f64]) -> (f64, f64) {
     let mut sorted = values.to_vec();
     sorted.sort_by(f64::total_cmp);
-    let position = p * (sorted.len() - 1) as f64;
-    let (below, fraction) = (position.floor() as usize, position.fract());
-    let above = (below + 1).min(sorted.len() - 1);
-    sorted[below] * (1.0 - fraction) + sorted[above] * fraction
+    let n = sorted.len();
+    let k = ((0.02 * (n - 1) as f64).ceil() as usize).max(1);
+    (sorted[k], sorted[n - 1 - k])
 }
 
 #[test]
-fn correction_bounds_are_the_2_to_98_percentiles_widened_by_three_quarters_of_their_spread() {
+fn correction_bounds_are_the_2nd_to_98th_percentiles_widened_by_three_quarters_of_their_spread() {
     let data = rows(36, 5, 0.002);
     for architecture in [Architecture::Coupled, Architecture::Decoupled] {
         let model = fit(
@@ -351,7 +350,7 @@ fn correction_bounds_are_the_2_to_98_percentiles_widened_by_three_quarters_of_th
         .model;
         for leg in 0..LEGS {
             let values: Vec<f64> = data.iter().map(|r| r.corrections[leg]).collect();
-            let (lo, hi) = (quantile(&values, 0.02), quantile(&values, 0.98));
+            let (lo, hi) = inner_range(&values);
             // 3/4 of the spread, and 10 µm more so that constant corrections get a range.
             let margin = 0.75 * (hi - lo) + 0.01;
             let [got_lo, got_hi] = model.correction_bounds[leg];
@@ -380,21 +379,23 @@ fn correction_bounds_are_the_2_to_98_percentiles_widened_by_three_quarters_of_th
 
 #[test]
 fn one_absurd_correction_does_not_open_the_bounds() {
-    let data = rows(100, 5, 0.002);
-    let clean: Vec<[f64; LEGS]> = data.iter().map(|r| r.corrections).collect();
-    let mut wrong = clean.clone();
-    wrong[40][2] = 1e308;
-    let (clean, wrong) = (correction_bounds(&clean), correction_bounds(&wrong));
-    let [lo, hi] = range_of(&data, |r| r.corrections[2]);
-    // The wrong value moves the 98th percentile by at most one neighbour's step: the bounds
-    // stay within the clean ones widened by the data's own spread.
-    assert!(
-        wrong[2][1] < clean[2][1] + (hi - lo),
-        "{:?} {:?}",
-        wrong[2],
-        clean[2]
-    );
-    assert_eq!(wrong[0], clean[0]);
+    for count in [10, 50, 100] {
+        let data = rows(count, 5, 0.002);
+        let clean: Vec<[f64; LEGS]> = data.iter().map(|r| r.corrections).collect();
+        let mut wrong = clean.clone();
+        wrong[count / 2][2] = 1e308;
+        let (clean, wrong) = (correction_bounds(&clean), correction_bounds(&wrong));
+        let [lo, hi] = range_of(&data, |r| r.corrections[2]);
+        // The wrong value moves the bound by at most one neighbour's step: the bounds stay
+        // within the clean ones widened by the data's own spread.
+        assert!(
+            wrong[2][1] < clean[2][1] + (hi - lo),
+            "{count} rows: {:?} {:?}",
+            wrong[2],
+            clean[2]
+        );
+        assert_eq!(wrong[0], clean[0]);
+    }
 }
 
 /// The model file bytes with the creation time (the only wall-clock field) set to zero.

@@ -17,14 +17,13 @@ use hexacomp_trainer::plan::PlanOptions;
 use hexacomp_trainer::train::{Architecture, TrainOptions, Trained};
 use hexacomp_virtual::{DEFAULT_MACHINE_SEED, ErrorModel, ErrorVariant, VirtualPlatform};
 
-use super::solve::{MeasuredScreeningArgs, print_solve_exclusions, write_outcomes};
+use super::solve::{MeasuredScreeningArgs, solve_screened, write_outcomes};
 use super::train::{
     InputArg, arch_name, print_selection, train_with_progress, write_selection_plot,
 };
-use hexacomp_core::durable::NewDirectory;
 use hexacomp_formats::write_file;
 
-use super::write_bytes;
+use super::{ResultsFolder, write_bytes};
 use hexacomp_trainer::table::Table;
 
 /// Calibrate in one command: plan → measure (the virtual platform, or --measurements from a real
@@ -87,8 +86,7 @@ impl Stages {
     }
 }
 
-/// Every file `calibrate` writes into its folder. An existing folder holding anything else is
-/// refused rather than replaced: it is not a calibration folder.
+/// Every file `calibrate` writes into its folder.
 const CALIBRATION_FILES: [&str; 8] = [
     "poses.csv",
     "measurements.csv",
@@ -100,45 +98,12 @@ const CALIBRATION_FILES: [&str; 8] = [
     "model.hxm",
 ];
 
-/// Refuses an existing `dir` that holds anything `calibrate` does not write.
-fn refuse_foreign_folder(dir: &Path) -> anyhow::Result<()> {
-    let entries = match std::fs::read_dir(dir) {
-        Ok(entries) => entries,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(()),
-        Err(e) => return Err(e).with_context(|| format!("reading {}", dir.display())),
-    };
-    let mut foreign = Vec::new();
-    for entry in entries {
-        let name = entry
-            .with_context(|| format!("reading {}", dir.display()))?
-            .file_name();
-        if !CALIBRATION_FILES.iter().any(|known| name == *known) {
-            foreign.push(name.to_string_lossy().into_owned());
-        }
-    }
-    foreign.sort();
-    anyhow::ensure!(
-        foreign.is_empty(),
-        "{} is replaced as a whole by calibrate, but holds files calibrate did not write ({}): \
-         give another --out-dir",
-        dir.display(),
-        foreign.join(", ")
-    );
-    Ok(())
-}
-
 pub fn run(geometry: &Geometry, args: &CalibrateArgs) -> anyhow::Result<()> {
     let total = Instant::now();
     let mut stages = Stages::default();
-    refuse_foreign_folder(&args.out_dir)?;
-    if let Some(parent) = args.out_dir.parent().filter(|p| !p.as_os_str().is_empty()) {
-        std::fs::create_dir_all(parent)
-            .with_context(|| format!("creating {}", parent.display()))?;
-    }
     // Everything is written into a new folder that replaces --out-dir as a unit at the end: a
     // calibration that fails leaves the previous folder whole.
-    let folder = NewDirectory::create(&args.out_dir)
-        .with_context(|| format!("creating a new folder beside {}", args.out_dir.display()))?;
+    let folder = ResultsFolder::create(&args.out_dir, "calibrate", &CALIBRATION_FILES)?;
     let dir = folder.path();
     let error_model = ErrorModel::variant(args.error_variant);
     let mut platform = VirtualPlatform::new(geometry, &error_model, args.machine_seed, args.seed)?;
@@ -170,8 +135,7 @@ pub fn run(geometry: &Geometry, args: &CalibrateArgs) -> anyhow::Result<()> {
     );
 
     let start = Instant::now();
-    let solved = pipeline.solve(geometry, &measurements)?;
-    print_solve_exclusions(&solved, &measurements);
+    let solved = solve_screened(&pipeline, geometry, &measurements)?;
     let kept = solved.kept();
     write_outcomes(&dir.join("corrections.csv"), &kept)?;
     stages.record("solve corrections", start);
@@ -224,9 +188,7 @@ pub fn run(geometry: &Geometry, args: &CalibrateArgs) -> anyhow::Result<()> {
             args.validation.max(1)
         );
     }
-    folder
-        .commit()
-        .with_context(|| format!("replacing {}", args.out_dir.display()))?;
+    folder.commit()?;
     println!(
         "model.hxm = the {} model (lower validation RMSE); files in {}",
         arch_name(*best_arch),
@@ -256,9 +218,18 @@ fn acquire(
 ) -> anyhow::Result<Records<MeasuredConfiguration>> {
     let written = dir.join("measurements.csv");
     if let Some(path) = &args.measurements {
+        // The copy is what is solved: a file the instrument is still appending to cannot
+        // differ between the two.
         let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
         write_bytes(&written, &bytes)?;
-        return Ok(read_measurements(path)?);
+        let mut records = match read_measurements(&written) {
+            Ok(records) => records,
+            // The same bytes fail the same way when read from the user's file, whose name the
+            // message should carry (not the staging folder's).
+            Err(e) => return Err(read_measurements(path).err().unwrap_or(e).into()),
+        };
+        records.file = path.display().to_string();
+        return Ok(records);
     }
     let (poses, measured) = pipeline.measure_virtual(platform)?;
     write_file(&dir.join("poses.csv"), |w| write_poses(w, &poses))?;

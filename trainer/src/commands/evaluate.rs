@@ -2,7 +2,6 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::Context;
 use hexacomp_core::Geometry;
 use hexacomp_core::stats::{ErrorStats, PoseErrorStats};
 use hexacomp_trainer::evaluate::{Evaluation, EvaluationOptions, Method, evaluate};
@@ -10,6 +9,7 @@ use hexacomp_trainer::svg::{Chart, Series};
 use hexacomp_trainer::train::TrainOptions;
 use hexacomp_virtual::{DEFAULT_MACHINE_SEED, ErrorModel, ErrorVariant};
 
+use super::ResultsFolder;
 use super::train::InputArg;
 use hexacomp_trainer::table::Table;
 
@@ -66,12 +66,20 @@ pub fn run(geometry: &Geometry, args: &EvaluateArgs) -> anyhow::Result<()> {
     };
     let evaluation = evaluate(geometry, &options, &|stage| eprintln!("{stage}…"))?;
     print_evaluation(&evaluation, args.validation);
-    std::fs::create_dir_all(&args.out_dir)
-        .with_context(|| format!("creating {}", args.out_dir.display()))?;
-    write_figures(&evaluation, &args.out_dir)?;
+    let folder = ResultsFolder::create(&args.out_dir, "evaluate", &FIGURES)?;
+    write_figures(&evaluation, folder.path())?;
+    folder.commit()?;
     eprintln!("figures → {}", args.out_dir.display());
     Ok(())
 }
+
+/// Every file `evaluate` writes into its folder.
+const FIGURES: [&str; 4] = [
+    "fig12_position.svg",
+    "fig12_orientation.svg",
+    "fig13_position.svg",
+    "fig13_orientation.svg",
+];
 
 /// Prints Table 2 (largest size), Fig. 13's numbers, Table 1 and the input comparison.
 pub fn print_evaluation(evaluation: &Evaluation, validation: usize) {

@@ -29,23 +29,23 @@ pub struct GeometryArgs {
     from_linuxcnc: Option<PathBuf>,
 
     /// With --from-linuxcnc: leg stroke MIN,MAX in mm (default: the ini's joint limits).
-    #[arg(long, value_name = "MIN,MAX", value_parser = parse_pair)]
+    #[arg(long, value_name = "MIN,MAX", value_parser = parse_pair, requires = "from_linuxcnc", allow_hyphen_values = true)]
     leg_range: Option<[f64; 2]>,
 
     /// With --from-linuxcnc: workspace radius, mm (with --z-range, --tilt-max, --yaw-range).
-    #[arg(long, value_name = "MM", requires_all = ["z_range", "tilt_max", "yaw_range"])]
+    #[arg(long, value_name = "MM", requires_all = ["from_linuxcnc", "z_range", "tilt_max", "yaw_range"])]
     workspace_radius: Option<f64>,
 
     /// With --from-linuxcnc: workspace height range ZMIN,ZMAX of the platform origin, mm.
-    #[arg(long, value_name = "ZMIN,ZMAX", value_parser = parse_pair)]
+    #[arg(long, value_name = "ZMIN,ZMAX", value_parser = parse_pair, requires = "workspace_radius", allow_hyphen_values = true)]
     z_range: Option<[f64; 2]>,
 
     /// With --from-linuxcnc: largest tilt of the platform, degrees.
-    #[arg(long, value_name = "DEG")]
+    #[arg(long, value_name = "DEG", requires = "workspace_radius")]
     tilt_max: Option<f64>,
 
     /// With --from-linuxcnc: yaw range CMIN,CMAX, degrees.
-    #[arg(long, value_name = "CMIN,CMAX", value_parser = parse_pair)]
+    #[arg(long, value_name = "CMIN,CMAX", value_parser = parse_pair, requires = "workspace_radius", allow_hyphen_values = true)]
     yaw_range: Option<[f64; 2]>,
 }
 

@@ -8,7 +8,7 @@ use hexacomp_formats::read_measurements;
 use hexacomp_trainer::identify::{IdentifyOptions, PARAMETERS, identify};
 use hexacomp_trainer::pipeline::Pipeline;
 
-use super::solve::{MeasuredScreeningArgs, print_solve_exclusions};
+use super::solve::{MeasuredScreeningArgs, solve_screened};
 
 /// Identify the platform's geometric parameters from point measurements (the paper's model-based
 /// comparison method) and write them as a geometry file.
@@ -54,8 +54,7 @@ pub fn run(geometry: &Geometry, args: &IdentifyArgs) -> anyhow::Result<()> {
         screening: args.screening.options(),
         ..Default::default()
     };
-    let solved = pipeline.solve(geometry, &file)?;
-    print_solve_exclusions(&solved, &file);
+    let solved = solve_screened(&pipeline, geometry, &file)?;
     let rows = solved.kept_of(&file);
     let options = IdentifyOptions {
         max_iterations: args.max_iterations,

@@ -44,3 +44,78 @@ impl Files<'_> {
             .try_for_each(|output| hexacomp_formats::refuse_same_file(output, &inputs))
     }
 }
+
+/// A folder of results being written: replaced as a unit when complete
+/// ([`hexacomp_core::durable::NewDirectory`]). An existing folder holding anything but the
+/// command's own files is refused rather than replaced (its other files would be lost).
+pub struct ResultsFolder {
+    folder: hexacomp_core::durable::NewDirectory,
+    target: std::path::PathBuf,
+}
+
+impl ResultsFolder {
+    /// Starts the folder `dir` of `command`, which writes only files named in `own`.
+    pub fn create(dir: &Path, command: &str, own: &[&str]) -> anyhow::Result<Self> {
+        use anyhow::Context;
+        refuse_foreign_files(dir, command, own)?;
+        if let Some(parent) = dir.parent().filter(|p| !p.as_os_str().is_empty()) {
+            std::fs::create_dir_all(parent)
+                .with_context(|| format!("creating {}", parent.display()))?;
+        }
+        let folder = hexacomp_core::durable::NewDirectory::create(dir)
+            .with_context(|| format!("{}: cannot make its replacement", dir.display()))?;
+        Ok(Self {
+            folder,
+            target: dir.to_path_buf(),
+        })
+    }
+
+    /// Where to write the files.
+    pub fn path(&self) -> &Path {
+        self.folder.path()
+    }
+
+    /// Puts the folder in place of the old one (a cleanup that fails afterwards is a warning).
+    pub fn commit(self) -> anyhow::Result<()> {
+        use anyhow::Context;
+        let warning = self
+            .folder
+            .commit()
+            .with_context(|| format!("replacing {}", self.target.display()))?;
+        if let Some(warning) = warning {
+            eprintln!(
+                "warning: {} was replaced, but {warning}",
+                self.target.display()
+            );
+        }
+        Ok(())
+    }
+}
+
+/// Refuses an existing `dir` that holds anything `command` does not write (`own`).
+fn refuse_foreign_files(dir: &Path, command: &str, own: &[&str]) -> anyhow::Result<()> {
+    use anyhow::Context;
+    let entries = match std::fs::read_dir(dir) {
+        Ok(entries) => entries,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(()),
+        Err(e) => return Err(e).with_context(|| format!("reading {}", dir.display())),
+    };
+    let mut foreign = Vec::new();
+    for entry in entries {
+        let name = entry
+            .with_context(|| format!("reading {}", dir.display()))?
+            .file_name();
+        if !own.iter().any(|known| name == *known) {
+            foreign.push(name.to_string_lossy().into_owned());
+        }
+    }
+    foreign.sort();
+    anyhow::ensure!(
+        foreign.is_empty(),
+        "{} is replaced as a whole by {command}, but holds files {command} did not write ({}): \
+         give another folder",
+        dir.display(),
+        foreign.join(", ")
+    );
+    Ok(())
+}

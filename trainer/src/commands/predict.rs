@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 
 use hexacomp_core::Geometry;
-use hexacomp_core::compensator::{PointStatus, compensate_legs, compensate_pose};
+use hexacomp_core::compensator::{StatusCounts, compensate_legs, compensate_pose};
 use hexacomp_core::model::Model;
 use hexacomp_core::records::NamedCompensation;
 use hexacomp_formats::{read_joints, read_poses, write_compensated};
@@ -17,17 +17,13 @@ use hexacomp_formats::write_file;
 /// bounds, output q + Δq. Output: a compensated CSV, `id,q1..q6` (legs to command, mm),
 /// `dq1..dq6` (mm), `status` (ok, out_of_stroke, outside_trained_range, clamped, invalid_input).
 #[derive(Debug, clap::Args)]
+#[command(group(clap::ArgGroup::new("input").required(true).args(["poses", "joints"])))]
 pub struct PredictArgs {
     /// The model file.
     #[arg(long, value_name = "FILE")]
     model: PathBuf,
     /// Poses CSV (`id,x,y,z,a,b,c`, mm and degrees).
-    #[arg(
-        long,
-        value_name = "FILE",
-        conflicts_with = "joints",
-        required_unless_present = "joints"
-    )]
+    #[arg(long, value_name = "FILE")]
     poses: Option<PathBuf>,
     /// Nominal leg lengths CSV (`id,q1..q6`, mm) instead of poses.
     #[arg(long, value_name = "FILE")]
@@ -72,23 +68,11 @@ pub fn run(geometry: &Geometry, args: &PredictArgs) -> anyhow::Result<()> {
         (None, None) => anyhow::bail!("give --poses or --joints"),
     };
     write_file(&args.out, |w| write_compensated(w, &rows))?;
-    let not_ok: Vec<String> = PointStatus::ALL
-        .iter()
-        .filter(|s| **s != PointStatus::Ok)
-        .filter_map(|s| {
-            let n = rows.iter().filter(|r| r.point.status == *s).count();
-            (n > 0).then(|| format!("{n} {}", s.name()))
-        })
-        .collect();
+    let counts: StatusCounts = rows.iter().map(|r| r.point.status).collect();
     eprintln!(
-        "compensated {} points → {}{}",
+        "compensated {} points → {} ({counts})",
         rows.len(),
-        args.out.display(),
-        if not_ok.is_empty() {
-            String::new()
-        } else {
-            format!(" ({})", not_ok.join(", "))
-        }
+        args.out.display()
     );
     Ok(())
 }

@@ -2,7 +2,9 @@
 
 use std::path::PathBuf;
 
-use hexacomp_core::Geometry;
+use anyhow::Context;
+use hexacomp_core::error::compact;
+use hexacomp_core::{Geometry, inverse_kinematics};
 use hexacomp_formats::{read_poses, write_measurements};
 use hexacomp_trainer::acquire::measure_plan;
 use hexacomp_virtual::{DEFAULT_MACHINE_SEED, ErrorModel, ErrorVariant, VirtualPlatform};
@@ -50,7 +52,30 @@ pub fn run(geometry: &Geometry, args: &SimulateArgs) -> anyhow::Result<()> {
     let plan = read_poses(&args.plan)?;
     let model = ErrorModel::variant(args.error_variant);
     let mut platform = VirtualPlatform::new(geometry, &model, args.machine_seed, args.seed)?;
-    let rows = measure_plan(&mut platform, &plan)?;
+    let mut rows = Vec::with_capacity(plan.len());
+    for (index, row) in plan.iter().enumerate() {
+        let at = || {
+            format!(
+                "{}:{}: configuration {}",
+                plan.file,
+                plan.line(index),
+                row.id
+            )
+        };
+        let legs = inverse_kinematics(geometry, &row.pose()).lengths;
+        let [min, max] = geometry.leg_range;
+        if let Some((leg, length)) = (1..).zip(legs).find(|(_, l)| !(min..=max).contains(l)) {
+            anyhow::bail!(
+                "{}: the pose needs leg {leg} at {} mm, outside the geometry's stroke [{min}, \
+                 {max}] mm",
+                at(),
+                compact(length, 3)
+            );
+        }
+        let measured = measure_plan(&mut platform, std::slice::from_ref(row))
+            .with_context(|| format!("{}: cannot be measured on the virtual machine", at()))?;
+        rows.extend(measured);
+    }
     write_file(&args.out, |w| write_measurements(w, &rows))?;
     eprintln!(
         "measured {} configurations on virtual machine {} ({} errors) → {}",

@@ -5,11 +5,12 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use hexacomp_core::Geometry;
+use hexacomp_core::records::JointCorrection;
 use hexacomp_core::records::MeasuredConfiguration;
 use hexacomp_formats::{Records, read_measurements, write_corrections};
 use hexacomp_trainer::corrections::{Checks, Outcome, Solution, SolverOptions};
 use hexacomp_trainer::pipeline::{Pipeline, Solved};
-use hexacomp_trainer::screening::{Screening, ScreeningOptions};
+use hexacomp_trainer::screening::{Screening, ScreeningOptions, screen_corrections};
 
 use hexacomp_formats::write_file;
 
@@ -87,9 +88,8 @@ pub fn run(geometry: &Geometry, args: &SolveArgs) -> anyhow::Result<()> {
         ..Default::default()
     };
     let start = Instant::now();
-    let solved = pipeline.solve(geometry, &rows)?;
+    let solved = solve_screened(&pipeline, geometry, &rows)?;
     let elapsed = start.elapsed();
-    print_solve_exclusions(&solved, &rows);
     let kept = solved.kept();
     anyhow::ensure!(
         !kept.is_empty(),
@@ -162,14 +162,21 @@ pub fn write_outcomes(path: &Path, outcomes: &[&Outcome]) -> anyhow::Result<usiz
     Ok(corrections.len())
 }
 
-/// Prints every excluded configuration of `file` with its id and line (`row(index)`) and
-/// reasons, then how many were kept and excluded.
-pub fn print_exclusions(screening: &Screening, file: &str, row: impl Fn(usize) -> (String, u64)) {
+/// Prints every excluded configuration of `records` with its file, line and id and reasons,
+/// then how many were kept and excluded, and any note on the checks.
+fn print_exclusions<T>(screening: &Screening, records: &Records<T>, id: impl Fn(&T) -> &str) {
     for (index, reasons) in screening.reasons.iter().enumerate() {
-        let (id, line) = row(index);
         for reason in reasons {
-            eprintln!("excluded: configuration {id} ({file}:{line}): {reason}");
+            eprintln!(
+                "excluded: configuration {} ({}:{}): {reason}",
+                id(&records[index]),
+                records.file,
+                records.line(index)
+            );
         }
+    }
+    for note in &screening.notes {
+        eprintln!("note: {note}");
     }
     let total = screening.reasons.len();
     eprintln!(
@@ -183,11 +190,54 @@ pub fn print_exclusions(screening: &Screening, file: &str, row: impl Fn(usize) -
     );
 }
 
-/// [`print_exclusions`] of the solve of `measurements`.
-pub fn print_solve_exclusions(solved: &Solved, measurements: &Records<MeasuredConfiguration>) {
-    print_exclusions(&solved.screening, &measurements.file, |index| {
-        (solved.outcomes[index].id.clone(), measurements.line(index))
-    });
+/// Prints the screening of `records` (every excluded row, the counts), and turns a refusal into
+/// an error that names the file, after listing its rows.
+fn decided<T, R>(
+    result: hexacomp_trainer::Result<R>,
+    screening_of: impl Fn(&R) -> &Screening,
+    records: &Records<T>,
+    id: impl Fn(&T) -> &str,
+) -> anyhow::Result<R> {
+    match result {
+        Ok(value) => {
+            print_exclusions(screening_of(&value), records, id);
+            Ok(value)
+        }
+        Err(hexacomp_trainer::Error::Refused { reason, screening }) => {
+            print_exclusions(&screening, records, id);
+            anyhow::bail!("{}: refused: {reason}", records.file)
+        }
+        Err(e) => Err(e.into()),
+    }
+}
+
+/// Solves and screens `measurements` with `pipeline`, printing the exclusions; a refused file is
+/// an error naming it, after its rows are listed.
+pub fn solve_screened(
+    pipeline: &Pipeline,
+    geometry: &Geometry,
+    measurements: &Records<MeasuredConfiguration>,
+) -> anyhow::Result<Solved> {
+    decided(
+        pipeline.solve(geometry, measurements),
+        |solved| &solved.screening,
+        measurements,
+        |row| &row.id,
+    )
+}
+
+/// Screens the rows of a corrections file (the bound of `args`), printing the exclusions; a
+/// refused file is an error naming it, after its rows are listed.
+pub fn screen_corrections_file(
+    rows: &Records<JointCorrection>,
+    args: &ScreeningArgs,
+) -> anyhow::Result<Screening> {
+    decided(
+        screen_corrections(rows, args.max_correction_mm(), &args.options()),
+        |screening| screening,
+        rows,
+        |row| &row.id,
+    )
 }
 
 /// How gross errors among corrections are found and decided (the options of `train`; with
@@ -227,10 +277,15 @@ pub struct MeasuredScreeningArgs {
     /// residual (pure noise exceeds 3× once in 10 000).
     #[arg(long, default_value_t = ScreeningOptions::default().residual_factor)]
     residual_factor: f64,
-    /// Exclude a configuration whose targets are further from the geometry identified from all
-    /// configurations than this many times the median distance.
+    /// Exclude a configuration whose targets are further from the geometry identified from the
+    /// other configurations than this many times the median distance.
     #[arg(long, default_value_t = ScreeningOptions::default().identification_factor)]
     identification_factor: f64,
+    /// Exclude a configuration whose commanded legs differ from the inverse kinematics of its
+    /// commanded pose by more than this, mm (a wrong geometry file, swapped leg columns; files
+    /// must give poses and legs to enough decimals to meet it).
+    #[arg(long, default_value_t = Checks::default().legs_tolerance_mm, value_name = "MM")]
+    legs_tolerance: f64,
 }
 
 impl MeasuredScreeningArgs {
@@ -238,7 +293,7 @@ impl MeasuredScreeningArgs {
     pub fn checks(&self) -> Checks {
         Checks {
             max_correction_mm: self.corrections.max_correction_mm(),
-            ..Checks::default()
+            legs_tolerance_mm: self.legs_tolerance,
         }
     }
 

@@ -8,9 +8,8 @@ use hexacomp_core::model::NetworkInput;
 use hexacomp_core::records::JointCorrection;
 use hexacomp_formats::read_corrections;
 use hexacomp_trainer::pipeline::Pipeline;
-use hexacomp_trainer::screening::screen_corrections;
 
-use super::solve::{ScreeningArgs, print_exclusions};
+use super::solve::{ScreeningArgs, screen_corrections_file};
 use hexacomp_trainer::svg::{Chart, Series};
 use hexacomp_trainer::train::{Architecture, Selection, TrainOptions, Trained};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -107,14 +106,7 @@ impl From<InputArg> for NetworkInput {
 pub fn run(geometry: &Geometry, args: &TrainArgs) -> anyhow::Result<()> {
     anyhow::ensure!(args.hidden_max >= 1, "--hidden-max must be at least 1");
     let file = read_corrections(&args.corrections)?;
-    let screening = screen_corrections(
-        &file,
-        args.screening.max_correction_mm(),
-        &args.screening.options(),
-    )?;
-    print_exclusions(&screening, &file.file, |index| {
-        (file[index].id.clone(), file.line(index))
-    });
+    let screening = screen_corrections_file(&file, &args.screening)?;
     let rows: Vec<JointCorrection> = file
         .iter()
         .enumerate()
