@@ -10,9 +10,8 @@ use clap::{Parser, Subcommand};
 use hexacomp_client::{
     Client, ClientOptions, CompensatedPoint, DEFAULT_INSTANCE, MAX_BATCH, PointStatus, RequestKind,
 };
-use hexacomp_core::compensator::{self, Compensated, StatusCounts};
-use hexacomp_core::records::NamedCompensation;
-use hexacomp_formats::{read_joints, read_poses, write_compensated};
+use hexacomp_core::compensator::{self, Compensated};
+use hexacomp_formats::{PointsFile, bytes_progress, compensate_file};
 
 /// Talk to a running hexacomp-service.
 #[derive(Debug, Parser)]
@@ -102,45 +101,37 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             output,
             joints,
         } => {
-            let (ids, points, kind): (Vec<String>, Vec<[f64; 6]>, _) = if joints {
-                let rows = read_joints(&input)?;
-                (
-                    rows.iter().map(|r| r.id.clone()).collect(),
-                    rows.iter().map(|r| r.legs).collect(),
-                    RequestKind::Joints,
-                )
+            let (file, kind) = if joints {
+                (PointsFile::Joints(&input), RequestKind::Joints)
             } else {
-                let rows = read_poses(&input)?;
-                (
-                    rows.iter().map(|r| r.id.clone()).collect(),
-                    rows.iter().map(|r| r.pose_mm_deg).collect(),
-                    RequestKind::Poses,
-                )
+                (PointsFile::Poses(&input), RequestKind::Poses)
             };
-            let mut results = vec![CompensatedPoint::empty(); points.len()];
-            for (chunk, out) in points.chunks(MAX_BATCH).zip(results.chunks_mut(MAX_BATCH)) {
-                client.compensate_batch(kind, chunk, out)?;
-            }
-            let rows: Vec<NamedCompensation> = ids
-                .into_iter()
-                .zip(&results)
-                .map(|(id, r)| NamedCompensation {
-                    id,
-                    point: Compensated {
+            let mut generations = std::collections::BTreeSet::new();
+            let mut answers = vec![CompensatedPoint::empty(); MAX_BATCH];
+            let progress = bytes_progress(&input);
+            let summary = compensate_file::<anyhow::Error>(
+                file,
+                &output,
+                MAX_BATCH,
+                |points, out| {
+                    let answers = &mut answers[..points.len()];
+                    client.compensate_batch(kind, points, answers)?;
+                    out.extend(answers.iter().map(|r| Compensated {
                         legs: r.legs,
                         corrections: r.corrections,
                         status: compensator_status(r.status),
-                    },
-                })
-                .collect();
-            hexacomp_formats::write_file(&output, |file| write_compensated(file, &rows))?;
-            let counts: StatusCounts = rows.iter().map(|r| r.point.status).collect();
-            let generations: std::collections::BTreeSet<u64> =
-                results.iter().map(|r| r.generation).collect();
+                    }));
+                    generations.extend(answers.iter().map(|r| r.generation));
+                    Ok(())
+                },
+                |bytes| progress.set_position(bytes),
+            )?;
+            progress.finish_and_clear();
             eprintln!(
-                "compensated {} points → {} ({counts}; model generations {generations:?})",
-                rows.len(),
-                output.display()
+                "compensated {} points → {} ({}; model generations {generations:?})",
+                summary.points,
+                output.display(),
+                summary.statuses
             );
         }
     }

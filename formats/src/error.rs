@@ -48,3 +48,13 @@ pub enum Error {
 
 /// `Result` with the formats [`enum@Error`].
 pub type Result<T> = std::result::Result<T, Error>;
+
+impl Error {
+    /// A failure to write the file at `path`: nothing was replaced.
+    pub fn write(path: &std::path::Path, error: std::io::Error) -> Self {
+        Error::Write {
+            file: path.display().to_string(),
+            message: error.to_string(),
+        }
+    }
+}

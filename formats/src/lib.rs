@@ -15,9 +15,11 @@
 #![warn(missing_docs)]
 
 mod error;
+mod lines;
+mod points_file;
 
 use std::collections::HashMap;
-use std::io::{Read, Write};
+use std::io::{BufRead, Write};
 use std::path::Path;
 
 use glam::DVec3;
@@ -28,6 +30,10 @@ use hexacomp_core::records::{
 };
 
 pub use error::{Error, Result};
+pub use lines::MAX_LINE_BYTES;
+pub use points_file::{FileSummary, PointsFile, bytes_progress, compensate_file};
+
+use lines::DataLines;
 
 /// Pose columns after `id`: `x, y, z` (mm), `a, b, c` (deg).
 pub const POSE_COLUMNS: [&str; 6] = ["x", "y", "z", "a", "b", "c"];
@@ -114,15 +120,101 @@ fn id_key(id: &str) -> &str {
     }
 }
 
-/// A parsed CSV file: header, and each data row with its line number.
-struct Table {
-    file: String,
+/// The header of a CSV file: each column's index by name, and the number of fields.
+struct Header {
     columns: HashMap<String, usize>,
-    rows: Vec<(u64, csv::StringRecord)>,
+    width: usize,
 }
 
-impl Table {
-    fn read(path: &Path) -> Result<Self> {
+impl Header {
+    /// Reads the first data line of `lines` as the header.
+    fn read<R: BufRead>(lines: &mut DataLines<R>) -> Result<Self> {
+        let file = lines.file().to_string();
+        let fail = |line: u64, column: Option<String>, message: String| Error::Format {
+            file: file.clone(),
+            line,
+            column,
+            message,
+        };
+        let Some((line, header)) = lines.next_line()? else {
+            return Err(fail(
+                0,
+                None,
+                "the file is empty: expected a header row".into(),
+            ));
+        };
+        let mut columns = HashMap::new();
+        for (index, name) in header.iter().enumerate() {
+            if columns.insert(name.to_string(), index).is_some() {
+                return Err(fail(
+                    line,
+                    Some(quote(name)),
+                    "column appears twice in the header".into(),
+                ));
+            }
+        }
+        Ok(Self {
+            columns,
+            width: header.len(),
+        })
+    }
+}
+
+/// A CSV file read row by row: the header's columns, and each row checked against them.
+/// Memory is bounded by the longest line plus 16 bytes per row for the duplicate-id check, not
+/// by the file.
+pub struct Rows<T> {
+    lines: DataLines<std::io::BufReader<std::fs::File>>,
+    header: Header,
+    id: usize,
+    /// A 64-bit hash of every id seen (its [`id_key`]) and the line it was on.
+    seen: HashMap<u64, u64>,
+    make: fn(&Row) -> Result<T>,
+}
+
+/// One row being read: its line, id and fields.
+struct Row<'a> {
+    file: &'a str,
+    header: &'a Header,
+    line: u64,
+    id: &'a str,
+    record: &'a csv::StringRecord,
+}
+
+impl Row<'_> {
+    fn error(&self, column: Option<&str>, message: String) -> Error {
+        Error::Format {
+            file: self.file.to_string(),
+            line: self.line,
+            column: column.map(str::to_string),
+            message,
+        }
+    }
+
+    /// The finite numbers of the named columns.
+    fn numbers<const N: usize>(&self, names: [&str; N]) -> Result<[f64; N]> {
+        let mut out = [0.0; N];
+        for (slot, name) in out.iter_mut().zip(names) {
+            let text = &self.record[self.header.columns[name]];
+            let value: f64 = text
+                .parse()
+                .map_err(|_| self.error(Some(name), format!("{} is not a number", quote(text))))?;
+            if !value.is_finite() {
+                return Err(self.error(
+                    Some(name),
+                    format!("{} is not a finite number", quote(text)),
+                ));
+            }
+            *slot = value;
+        }
+        Ok(out)
+    }
+}
+
+impl<T> Rows<T> {
+    /// Opens `path`, reads its header and checks that it has `id` and every column of
+    /// `required`; `make` turns each row into a record.
+    fn open(path: &Path, required: &[&[&str]], make: fn(&Row) -> Result<T>) -> Result<Self> {
         let file = path.display().to_string();
         let reader = std::fs::File::open(path).map_err(|e| Error::Format {
             file: file.clone(),
@@ -130,291 +222,203 @@ impl Table {
             column: None,
             message: e.to_string(),
         })?;
-        Self::parse(file, reader)
-    }
-
-    fn parse(file: String, mut reader: impl Read) -> Result<Self> {
-        let mut text = Vec::new();
-        reader.read_to_end(&mut text).map_err(|e| Error::Format {
-            file: file.clone(),
-            line: 0,
-            column: None,
-            message: e.to_string(),
-        })?;
-        let text = String::from_utf8(text).map_err(|e| Error::Format {
-            file: file.clone(),
-            line: 0,
-            column: None,
-            message: format!("not UTF-8 text: {e}"),
-        })?;
-        // Comment and blank lines are dropped here, keeping each remaining line's number, so
-        // that messages name the line as the user's editor shows it. A blank line between rows
-        // is refused: a row may have been lost there (blank lines after the last row are fine).
-        let mut kept_lines = Vec::new();
-        let mut data = String::with_capacity(text.len());
-        let mut blank_since_last_row = None;
-        for (index, line) in text.lines().enumerate() {
-            let trimmed = line.trim();
-            if trimmed.is_empty() {
-                // Header and at least one row read: a blank line now is between rows.
-                if kept_lines.len() >= 2 {
-                    blank_since_last_row.get_or_insert(index as u64 + 1);
-                }
-                continue;
-            }
-            if trimmed.starts_with('#') {
-                continue;
-            }
-            if let Some(blank) = blank_since_last_row.take() {
+        let mut lines = DataLines::new(file, std::io::BufReader::new(reader));
+        let header = Header::read(&mut lines)?;
+        for name in std::iter::once("id").chain(required.iter().flat_map(|c| c.iter().copied())) {
+            if !header.columns.contains_key(name) {
                 return Err(Error::Format {
-                    file: file.clone(),
-                    line: blank,
-                    column: None,
-                    message: "blank line between rows (was a row lost here?): remove it, or make \
-                              it a # comment"
-                        .into(),
+                    file: lines.file().to_string(),
+                    line: 1,
+                    column: Some(name.to_string()),
+                    message: "required column is missing from the header".into(),
                 });
             }
-            kept_lines.push(index as u64 + 1);
-            data.push_str(line);
-            data.push('\n');
-        }
-        let line_at = |data_line: u64| {
-            let index = data_line.saturating_sub(1) as usize;
-            kept_lines.get(index).copied().unwrap_or(0)
-        };
-        let mut csv = csv::ReaderBuilder::new()
-            .trim(csv::Trim::All)
-            .flexible(true)
-            .has_headers(false)
-            .from_reader(data.as_bytes());
-        let mut records = csv.records();
-        let fail = |line: u64, column: Option<&str>, message: String| Error::Format {
-            file: file.clone(),
-            line,
-            column: column.map(str::to_string),
-            message,
-        };
-        let csv_error = |e: csv::Error| {
-            let line = e.position().map_or(0, |p| line_at(p.line()));
-            fail(line, None, e.to_string())
-        };
-        let header = match records.next() {
-            Some(record) => record.map_err(csv_error)?,
-            None => {
-                return Err(fail(
-                    0,
-                    None,
-                    "the file is empty: expected a header row".into(),
-                ));
-            }
-        };
-        let header_line = header.position().map_or(1, |p| line_at(p.line()));
-        let mut columns = HashMap::new();
-        for (index, name) in header.iter().enumerate() {
-            if columns.insert(name.to_string(), index).is_some() {
-                return Err(fail(
-                    header_line,
-                    Some(&quote(name)),
-                    "column appears twice in the header".into(),
-                ));
-            }
-        }
-        let width = header.len();
-        let mut rows = Vec::new();
-        for record in records {
-            let record = record.map_err(csv_error)?;
-            let line = record.position().map_or(0, |p| line_at(p.line()));
-            if record.len() != width {
-                return Err(fail(
-                    line,
-                    None,
-                    format!("row has {} fields, the header has {width}", record.len()),
-                ));
-            }
-            rows.push((line, record));
         }
         Ok(Self {
-            file,
-            columns,
-            rows,
+            id: header.columns["id"],
+            lines,
+            header,
+            seen: HashMap::new(),
+            make,
         })
     }
 
-    fn error(&self, line: u64, column: Option<&str>, message: String) -> Error {
-        Error::Format {
-            file: self.file.clone(),
+    /// The file's path as given.
+    pub fn file(&self) -> &str {
+        self.lines.file()
+    }
+
+    /// Bytes of the file read so far (for progress).
+    pub fn bytes_read(&self) -> u64 {
+        self.lines.bytes_read()
+    }
+
+    /// The next row and its line; `None` after the last one.
+    fn next_row(&mut self) -> Result<Option<(u64, T)>> {
+        let Some((line, record)) = self.lines.next_line()? else {
+            return Ok(None);
+        };
+        let row = Row {
+            file: self.lines.file(),
+            header: &self.header,
             line,
-            column: column.map(str::to_string),
-            message,
+            id: &record[self.id.min(record.len().saturating_sub(1))],
+            record: &record,
+        };
+        if record.len() != self.header.width {
+            return Err(row.error(
+                None,
+                format!(
+                    "row has {} fields, the header has {}",
+                    record.len(),
+                    self.header.width
+                ),
+            ));
         }
+        if row.id.is_empty() {
+            return Err(row.error(Some("id"), "empty id".into()));
+        }
+        let key = {
+            use std::hash::{Hash, Hasher};
+            let mut hasher = std::hash::DefaultHasher::new();
+            id_key(row.id).hash(&mut hasher);
+            hasher.finish()
+        };
+        if let Some(first) = self.seen.insert(key, line) {
+            let numeric = if row.id.bytes().all(|b| b.is_ascii_digit()) {
+                "; numeric ids are compared by value"
+            } else {
+                ""
+            };
+            return Err(row.error(
+                Some("id"),
+                format!(
+                    "duplicate id {} (first on line {first}{numeric})",
+                    quote(row.id)
+                ),
+            ));
+        }
+        Ok(Some((line, (self.make)(&row)?)))
     }
 
-    /// Indices of the named columns, or an error naming the first missing one.
-    fn require<const N: usize>(&self, names: [&str; N]) -> Result<[usize; N]> {
-        let mut out = [0; N];
-        for (slot, name) in out.iter_mut().zip(names) {
-            *slot = *self.columns.get(name).ok_or_else(|| {
-                self.error(
-                    1,
-                    Some(name),
-                    "required column is missing from the header".into(),
-                )
-            })?;
+    /// Every row, with the lines they came from.
+    fn collect(mut self) -> Result<Records<T>> {
+        let mut items = Vec::new();
+        let mut lines = Vec::new();
+        while let Some((line, item)) = self.next_row()? {
+            items.push(item);
+            lines.push(line);
         }
-        Ok(out)
-    }
-
-    /// The ids of all rows, checked non-empty and unique (numeric ids by their number: `1` and
-    /// `01` are the same configuration to a reader).
-    fn ids(&self) -> Result<Vec<String>> {
-        let [id] = self.require(["id"])?;
-        let mut seen: HashMap<&str, (u64, &str)> = HashMap::new();
-        let mut ids = Vec::with_capacity(self.rows.len());
-        for (line, record) in &self.rows {
-            let value = &record[id];
-            if value.is_empty() {
-                return Err(self.error(*line, Some("id"), "empty id".into()));
-            }
-            if let Some((first, spelled)) = seen.insert(id_key(value), (*line, value)) {
-                let same = if spelled == value {
-                    String::new()
-                } else {
-                    format!(", as {}", quote(spelled))
-                };
-                return Err(self.error(
-                    *line,
-                    Some("id"),
-                    format!(
-                        "duplicate id {} (first on line {first}{same})",
-                        quote(value)
-                    ),
-                ));
-            }
-            ids.push(value.to_string());
-        }
-        Ok(ids)
-    }
-
-    /// The finite numbers of the named columns in row `row`.
-    fn numbers<const N: usize>(
-        &self,
-        row: usize,
-        names: [&str; N],
-        indices: [usize; N],
-    ) -> Result<[f64; N]> {
-        let (line, record) = &self.rows[row];
-        let mut out = [0.0; N];
-        for k in 0..N {
-            let text = &record[indices[k]];
-            let value: f64 = text.parse().map_err(|_| {
-                self.error(
-                    *line,
-                    Some(names[k]),
-                    format!("{} is not a number", quote(text)),
-                )
-            })?;
-            if !value.is_finite() {
-                return Err(self.error(
-                    *line,
-                    Some(names[k]),
-                    format!("{} is not a finite number", quote(text)),
-                ));
-            }
-            out[k] = value;
-        }
-        Ok(out)
+        Ok(Records {
+            file: self.lines.file().to_string(),
+            items,
+            lines,
+        })
     }
 }
 
-impl Table {
-    /// `make(row)` for every row, collected with the rows' lines.
-    fn records<T>(self, make: impl Fn(&Self, usize) -> Result<T>) -> Result<Records<T>> {
-        let items = (0..self.rows.len())
-            .map(|row| make(&self, row))
-            .collect::<Result<Vec<T>>>()?;
-        Ok(Records {
-            lines: self.rows.iter().map(|(line, _)| *line).collect(),
-            file: self.file,
-            items,
-        })
+impl<T> Iterator for Rows<T> {
+    /// A row and its line, or the error that ends the file.
+    type Item = Result<(u64, T)>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        self.next_row().transpose()
     }
+}
+
+fn pose_row(row: &Row) -> Result<NamedPose> {
+    Ok(NamedPose {
+        id: row.id.to_string(),
+        pose_mm_deg: row.numbers(POSE_COLUMNS)?,
+    })
+}
+
+fn joints_row(row: &Row) -> Result<NamedLegs> {
+    Ok(NamedLegs {
+        id: row.id.to_string(),
+        legs: row.numbers(LEG_COLUMNS)?,
+    })
 }
 
 /// Reads a poses file (`id,x,y,z,a,b,c`).
 pub fn read_poses(path: &Path) -> Result<Records<NamedPose>> {
-    let table = Table::read(path)?;
-    let ids = table.ids()?;
-    let pose_cols = table.require(POSE_COLUMNS)?;
-    table.records(|table, row| {
-        Ok(NamedPose {
-            id: ids[row].clone(),
-            pose_mm_deg: table.numbers(row, POSE_COLUMNS, pose_cols)?,
-        })
-    })
+    stream_poses(path)?.collect()
+}
+
+/// Opens a poses file to read row by row (memory independent of its length).
+pub fn stream_poses(path: &Path) -> Result<Rows<NamedPose>> {
+    Rows::open(path, &[&POSE_COLUMNS], pose_row)
 }
 
 /// Reads a measurements file (`id,x,y,z,a,b,c,q1..q6,p1x..p3z`).
 pub fn read_measurements(path: &Path) -> Result<Records<MeasuredConfiguration>> {
-    let table = Table::read(path)?;
-    let ids = table.ids()?;
-    let pose_cols = table.require(POSE_COLUMNS)?;
-    let leg_cols = table.require(LEG_COLUMNS)?;
-    let target_cols = table.require(TARGET_COLUMNS)?;
-    table.records(|table, row| {
-        let p = table.numbers(row, TARGET_COLUMNS, target_cols)?;
-        Ok(MeasuredConfiguration {
-            id: ids[row].clone(),
-            pose_mm_deg: table.numbers(row, POSE_COLUMNS, pose_cols)?,
-            legs: table.numbers(row, LEG_COLUMNS, leg_cols)?,
-            targets: std::array::from_fn(|j| DVec3::new(p[3 * j], p[3 * j + 1], p[3 * j + 2])),
-        })
-    })
+    Rows::open(
+        path,
+        &[&POSE_COLUMNS, &LEG_COLUMNS, &TARGET_COLUMNS],
+        |row| {
+            let p = row.numbers(TARGET_COLUMNS)?;
+            Ok(MeasuredConfiguration {
+                id: row.id.to_string(),
+                pose_mm_deg: row.numbers(POSE_COLUMNS)?,
+                legs: row.numbers(LEG_COLUMNS)?,
+                targets: std::array::from_fn(|j| DVec3::new(p[3 * j], p[3 * j + 1], p[3 * j + 2])),
+            })
+        },
+    )?
+    .collect()
 }
 
 /// Reads a corrections file (`id,q1..q6,dq1..dq6`, diagnostic columns ignored).
 pub fn read_corrections(path: &Path) -> Result<Records<JointCorrection>> {
-    let table = Table::read(path)?;
-    let ids = table.ids()?;
-    let leg_cols = table.require(LEG_COLUMNS)?;
-    let dq_cols = table.require(CORRECTION_COLUMNS)?;
-    table.records(|table, row| {
+    Rows::open(path, &[&LEG_COLUMNS, &CORRECTION_COLUMNS], |row| {
         Ok(JointCorrection {
-            id: ids[row].clone(),
-            legs: table.numbers(row, LEG_COLUMNS, leg_cols)?,
-            corrections: table.numbers(row, CORRECTION_COLUMNS, dq_cols)?,
+            id: row.id.to_string(),
+            legs: row.numbers(LEG_COLUMNS)?,
+            corrections: row.numbers(CORRECTION_COLUMNS)?,
         })
-    })
+    })?
+    .collect()
 }
 
 /// Reads a joints file (`id,q1..q6`).
 pub fn read_joints(path: &Path) -> Result<Records<NamedLegs>> {
-    let table = Table::read(path)?;
-    let ids = table.ids()?;
-    let leg_cols = table.require(LEG_COLUMNS)?;
-    table.records(|table, row| {
-        Ok(NamedLegs {
-            id: ids[row].clone(),
-            legs: table.numbers(row, LEG_COLUMNS, leg_cols)?,
-        })
-    })
+    stream_joints(path)?.collect()
+}
+
+/// Opens a joints file to read row by row (memory independent of its length).
+pub fn stream_joints(path: &Path) -> Result<Rows<NamedLegs>> {
+    Rows::open(path, &[&LEG_COLUMNS], joints_row)
 }
 
 /// Writes a compensated-output file: `id,q1..q6` (the legs to command), `dq1..dq6`, `status`.
 pub fn write_compensated<W: Write>(writer: W, rows: &[NamedCompensation]) -> std::io::Result<()> {
+    let mut csv = write_compensated_header(writer)?;
+    for row in rows {
+        write_compensated_row(&mut csv, row)?;
+    }
+    csv.flush()
+}
+
+/// Starts a compensated-output file: writes its header.
+fn write_compensated_header<W: Write>(writer: W) -> std::io::Result<csv::Writer<W>> {
     let mut head = header(&[&LEG_COLUMNS, &CORRECTION_COLUMNS]);
     head.push("status");
-    write_rows(
-        writer,
-        &head,
-        rows.iter().map(|r| {
-            std::iter::once(r.id.clone())
-                .chain(cells(&r.point.legs))
-                .chain(cells(&r.point.corrections))
-                .chain(std::iter::once(r.point.status.name().to_string()))
-                .collect()
-        }),
-    )
+    let mut csv = csv::Writer::from_writer(writer);
+    csv.write_record(&head)?;
+    Ok(csv)
+}
+
+/// Writes one row of a compensated-output file.
+fn write_compensated_row<W: Write>(
+    csv: &mut csv::Writer<W>,
+    row: &NamedCompensation,
+) -> std::io::Result<()> {
+    let cells: Vec<String> = std::iter::once(row.id.clone())
+        .chain(cells(&row.point.legs))
+        .chain(cells(&row.point.corrections))
+        .chain(std::iter::once(row.point.status.name().to_string()))
+        .collect();
+    Ok(csv.write_record(&cells)?)
 }
 
 /// Writes a CSV file: a header and rows of already formatted cells.
@@ -504,10 +508,7 @@ pub fn write_file(
     path: &Path,
     write: impl FnOnce(&mut NewFile) -> std::io::Result<()>,
 ) -> Result<()> {
-    let failed = |e: std::io::Error| Error::Write {
-        file: path.display().to_string(),
-        message: e.to_string(),
-    };
+    let failed = |e: std::io::Error| Error::write(path, e);
     let mut file = NewFile::create(path).map_err(failed)?;
     write(&mut file).map_err(failed)?;
     file.commit().map_err(failed)

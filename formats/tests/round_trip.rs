@@ -147,7 +147,10 @@ fn duplicate_ids_name_both_lines() {
     );
     let (line, column, message) = format_error(read_poses(&path));
     assert_eq!((line, column.as_deref()), (3, Some("id")));
-    assert_eq!(message, "duplicate id \"1\" (first on line 2)");
+    assert_eq!(
+        message,
+        "duplicate id \"1\" (first on line 2; numeric ids are compared by value)"
+    );
 }
 
 #[test]
@@ -227,7 +230,10 @@ fn numeric_ids_that_are_the_same_number_are_duplicates() {
     );
     let (line, column, message) = format_error(read_poses(&path));
     assert_eq!((line, column.as_deref()), (3, Some("id")));
-    assert_eq!(message, "duplicate id \"01\" (first on line 2, as \"1\")");
+    assert_eq!(
+        message,
+        "duplicate id \"01\" (first on line 2; numeric ids are compared by value)"
+    );
     // Other ids are compared as written.
     let path = write(
         &dir,
@@ -262,5 +268,36 @@ fn an_error_quotes_at_most_40_characters_of_a_field_and_no_line_0() {
             "{}: the file is empty: expected a header row",
             empty.display()
         )
+    );
+}
+
+#[test]
+fn a_line_longer_than_a_mebibyte_is_refused_without_being_read_whole() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write(&dir, "p.csv", &"x".repeat(200 << 20));
+    let (line, column, message) = format_error(read_poses(&path));
+    assert_eq!((line, column), (1, None));
+    assert_eq!(
+        message,
+        "line longer than 1 MiB: not a CSV file of hexacomp"
+    );
+}
+
+#[test]
+fn a_file_streams_row_by_row_and_stops_at_its_first_bad_row() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write(
+        &dir,
+        "p.csv",
+        "id,x,y,z,a,b,c\n1,0,0,300,0,0,0\n# note\n2,0,0,301,0,0,0\n3,0,x,302,0,0,0\n4,0,0,303,0,0,0\n",
+    );
+    let mut rows = hexacomp_formats::stream_poses(&path).unwrap();
+    let (line, first) = rows.next().unwrap().unwrap();
+    assert_eq!((line, first.id.as_str()), (2, "1"));
+    assert_eq!(rows.next().unwrap().unwrap().0, 4);
+    let error = rows.next().unwrap().unwrap_err().to_string();
+    assert!(
+        error.ends_with("p.csv:5: column y: \"x\" is not a number"),
+        "{error}"
     );
 }

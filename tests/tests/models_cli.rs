@@ -285,3 +285,74 @@ fn calibrate_runs_the_whole_pipeline_and_summarises() {
     );
     Model::load(&out_dir.join("model.hxm"), &Geometry::prototype()).unwrap();
 }
+
+/// The peak resident memory (VmHWM, KiB) that `child` reached, polled until it exits, and its
+/// exit status.
+fn peak_memory_kib(mut child: std::process::Child) -> (std::process::ExitStatus, u64) {
+    let mut peak = 0;
+    loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            return (status, peak);
+        }
+        let status = std::fs::read_to_string(format!("/proc/{}/status", child.id()));
+        let hwm = status.ok().and_then(|s| {
+            s.lines()
+                .find_map(|l| l.strip_prefix("VmHWM:"))
+                .and_then(|v| v.trim().trim_end_matches("kB").trim().parse::<u64>().ok())
+        });
+        peak = peak.max(hwm.unwrap_or(0));
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+}
+
+#[test]
+fn predict_streams_a_large_file_in_far_less_memory_than_its_size() {
+    use std::io::Write;
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let (_, model) = hexacomp_tests::save_smooth_model(d, 1);
+    let poses = d.join("poses.csv");
+    let mut file = std::io::BufWriter::new(std::fs::File::create(&poses).unwrap());
+    writeln!(file, "id,x,y,z,a,b,c").unwrap();
+    for i in 0..400_000u32 {
+        let t = f64::from(i) * 1e-4;
+        writeln!(
+            file,
+            "{i},{:.12},{:.12},{:.12},{:.12},{:.12},{:.12}",
+            20.0 * t.sin(),
+            20.0 * t.cos(),
+            300.0 + 10.0 * (3.0 * t).sin(),
+            2.0 * (5.0 * t).sin(),
+            2.0 * (7.0 * t).cos(),
+            3.0 * (2.0 * t).sin()
+        )
+        .unwrap();
+    }
+    drop(file);
+    let size_kib = std::fs::metadata(&poses).unwrap().len() / 1024;
+    let out = d.join("out.csv");
+    let child = std::process::Command::new(hexacomp_tests::binary("hexacomp-trainer"))
+        .args([
+            "predict",
+            "--model",
+            p(&model),
+            "--poses",
+            p(&poses),
+            "--out",
+            p(&out),
+        ])
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let (status, peak_kib) = peak_memory_kib(child);
+    assert!(status.success());
+    assert_eq!(
+        std::fs::read_to_string(&out).unwrap().lines().count(),
+        400_001
+    );
+    // Reading the whole file first took about 5 times its size; streaming, a fraction of it.
+    assert!(
+        peak_kib > 0 && peak_kib < size_kib,
+        "peak {peak_kib} KiB for a {size_kib} KiB file"
+    );
+}

@@ -162,7 +162,7 @@ fn bad_measurement_files_are_refused_with_file_line_and_column() {
         (
             "dup.csv",
             format!("{}\n{}\n{}\n", lines[0], lines[1], lines[1]),
-            "dup.csv:3: column id: duplicate id \"1\" (first on line 2)",
+            "dup.csv:3: column id: duplicate id \"1\" (first on line 2; numeric ids are compared by value)",
         ),
     ];
     for (name, content, expected) in cases {

@@ -3,12 +3,16 @@
 use std::path::PathBuf;
 
 use hexacomp_core::Geometry;
-use hexacomp_core::compensator::{StatusCounts, compensate_legs, compensate_pose};
+use hexacomp_core::Pose;
+use hexacomp_core::compensator::{Compensated, compensate_legs, compensate_pose};
 use hexacomp_core::model::Model;
-use hexacomp_core::records::NamedCompensation;
-use hexacomp_formats::{read_joints, read_poses, write_compensated};
+use hexacomp_formats::{PointsFile, bytes_progress, compensate_file};
 
-use hexacomp_formats::write_file;
+/// How one point of the input file (pose in mm and degrees, or legs in mm) is compensated.
+type PointCompensation<'a> = dyn Fn(&[f64; 6]) -> Compensated + 'a;
+
+/// Rows compensated between progress updates.
+const BLOCK: usize = 4096;
 
 /// Compensate poses (or nominal leg lengths) offline with a model: exactly the numbers the
 /// service returns.
@@ -50,29 +54,32 @@ impl PredictArgs {
 
 pub fn run(geometry: &Geometry, args: &PredictArgs) -> anyhow::Result<()> {
     let model = Model::load(&args.model, geometry)?;
-    let rows: Vec<NamedCompensation> = match (&args.poses, &args.joints) {
-        (Some(path), _) => read_poses(path)?
-            .into_iter()
-            .map(|r| NamedCompensation {
-                point: compensate_pose(geometry, Some(&model), &r.pose()),
-                id: r.id,
-            })
-            .collect(),
-        (None, Some(path)) => read_joints(path)?
-            .into_iter()
-            .map(|r| NamedCompensation {
-                point: compensate_legs(geometry, Some(&model), &r.legs),
-                id: r.id,
-            })
-            .collect(),
+    let (input, compensate): (_, &PointCompensation) = match (&args.poses, &args.joints) {
+        (Some(path), _) => (PointsFile::Poses(path), &|pose| {
+            compensate_pose(geometry, Some(&model), &Pose::from_mm_deg(*pose))
+        }),
+        (None, Some(path)) => (PointsFile::Joints(path), &|legs| {
+            compensate_legs(geometry, Some(&model), legs)
+        }),
         (None, None) => anyhow::bail!("give --poses or --joints"),
     };
-    write_file(&args.out, |w| write_compensated(w, &rows))?;
-    let counts: StatusCounts = rows.iter().map(|r| r.point.status).collect();
+    let progress = bytes_progress(input.path());
+    let summary = compensate_file::<hexacomp_formats::Error>(
+        input,
+        &args.out,
+        BLOCK,
+        |points, out| {
+            out.extend(points.iter().map(compensate));
+            Ok(())
+        },
+        |bytes| progress.set_position(bytes),
+    )?;
+    progress.finish_and_clear();
     eprintln!(
-        "compensated {} points → {} ({counts})",
-        rows.len(),
-        args.out.display()
+        "compensated {} points → {} ({})",
+        summary.points,
+        args.out.display(),
+        summary.statuses
     );
     Ok(())
 }
