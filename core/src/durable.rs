@@ -59,31 +59,53 @@ enum Output {
 impl NewFile {
     /// Starts writing the file at `path` (created or replaced on commit).
     pub fn create(path: &Path) -> std::io::Result<Self> {
-        let target = match std::fs::symlink_metadata(path) {
-            Ok(meta) if meta.file_type().is_symlink() => std::fs::canonicalize(path)?,
-            _ => path.to_path_buf(),
-        };
+        if is_descriptor_path(path) {
+            // `/dev/stdout` and the like name a descriptor the caller was given (a pipe, a
+            // terminal, a file opened by the shell with `>>`): written in place, appending, so
+            // that a log the shell opened for appending is not written over from its start.
+            let stream = std::fs::OpenOptions::new().append(true).open(path)?;
+            return Ok(Self::stream(path, stream));
+        }
+        let target = follow_links(path)?;
         let existing = std::fs::metadata(&target).ok();
         if let Some(meta) = existing.as_ref().filter(|m| !m.is_file()) {
             if meta.is_dir() {
                 return Err(std::io::Error::other("is a folder, not a file"));
             }
             let stream = std::fs::OpenOptions::new().write(true).open(&target)?;
-            return Ok(Self {
-                target,
-                output: Output::Stream(BufWriter::new(stream)),
-            });
+            return Ok(Self::stream(&target, stream));
         }
-        let mode = existing.map_or(0o666, |m| m.permissions().mode() & 0o7777);
+        let mode = match &existing {
+            Some(meta) if meta.permissions().mode() & 0o222 == 0 => {
+                return Err(std::io::Error::new(
+                    std::io::ErrorKind::PermissionDenied,
+                    "the file is read-only: it is not replaced",
+                ));
+            }
+            Some(meta) => meta.permissions().mode() & 0o777,
+            None => 0o666,
+        };
         let file = tempfile::Builder::new()
             .prefix(&temporary_prefix(&target)?)
             .suffix(".tmp")
             .permissions(std::fs::Permissions::from_mode(mode))
             .tempfile_in(parent_of(&target))?;
+        if existing.is_some() {
+            // The umask applied at creation; a replaced file keeps exactly its old mode.
+            file.as_file()
+                .set_permissions(std::fs::Permissions::from_mode(mode))?;
+        }
         Ok(Self {
             target,
             output: Output::Replacing(BufWriter::new(file)),
         })
+    }
+
+    fn stream(path: &Path, file: std::fs::File) -> Self {
+        Self {
+            target: path.to_path_buf(),
+            output: Output::Stream(BufWriter::new(file)),
+        }
     }
 
     /// Flushes the content to disk, renames it over the target and flushes the directory (for a
@@ -115,6 +137,35 @@ impl Write for NewFile {
             Output::Stream(stream) => stream.flush(),
         }
     }
+}
+
+/// Whether `path` names a file descriptor of the process rather than a file: `/dev/stdout`,
+/// `/dev/stderr`, `/dev/fd/N`, `/proc/self/fd/N`.
+fn is_descriptor_path(path: &Path) -> bool {
+    path == Path::new("/dev/stdout")
+        || path == Path::new("/dev/stderr")
+        || path.starts_with("/dev/fd")
+        || path.starts_with("/proc/self/fd")
+}
+
+/// The file `path` finally names, following symbolic links one at a time (a dangling link names
+/// the file it would point to, which is then created).
+fn follow_links(path: &Path) -> std::io::Result<PathBuf> {
+    let mut current = path.to_path_buf();
+    for _ in 0..40 {
+        match std::fs::symlink_metadata(&current) {
+            Ok(meta) if meta.file_type().is_symlink() => {
+                let next = std::fs::read_link(&current)?;
+                current = if next.is_absolute() {
+                    next
+                } else {
+                    parent_of(&current).join(next)
+                };
+            }
+            _ => return Ok(current),
+        }
+    }
+    Err(std::io::Error::other("too many levels of symbolic links"))
 }
 
 /// Replaces the file at `path` with `bytes`: whole or not at all, durable once this returns.
@@ -349,6 +400,22 @@ mod tests {
         assert_eq!(std::fs::read(&real).unwrap(), b"new");
         let mode = std::fs::metadata(&real).unwrap().permissions().mode() & 0o777;
         assert_eq!(mode, 0o640, "a replaced file keeps its permissions");
+    }
+
+    #[test]
+    fn a_dangling_link_creates_its_target_and_a_read_only_file_is_not_replaced() {
+        let dir = tempfile::tempdir().unwrap();
+        let link = dir.path().join("latest.csv");
+        std::os::unix::fs::symlink("run42.csv", &link).unwrap();
+        replace_file(&link, b"42").unwrap();
+        assert_eq!(std::fs::read(dir.path().join("run42.csv")).unwrap(), b"42");
+        assert!(std::fs::symlink_metadata(&link).unwrap().is_symlink());
+        let locked = dir.path().join("locked.csv");
+        std::fs::write(&locked, b"keep").unwrap();
+        std::fs::set_permissions(&locked, std::fs::Permissions::from_mode(0o444)).unwrap();
+        let error = replace_file(&locked, b"new").unwrap_err();
+        assert_eq!(error.kind(), std::io::ErrorKind::PermissionDenied);
+        assert_eq!(std::fs::read(&locked).unwrap(), b"keep");
     }
 
     #[test]

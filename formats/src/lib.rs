@@ -124,6 +124,8 @@ fn id_key(id: &str) -> &str {
 struct Header {
     columns: HashMap<String, usize>,
     width: usize,
+    /// The header's line in the file.
+    line: u64,
 }
 
 impl Header {
@@ -156,6 +158,7 @@ impl Header {
         Ok(Self {
             columns,
             width: header.len(),
+            line,
         })
     }
 }
@@ -228,7 +231,7 @@ impl<T> Rows<T> {
             if !header.columns.contains_key(name) {
                 return Err(Error::Format {
                     file: lines.file().to_string(),
-                    line: 1,
+                    line: header.line,
                     column: Some(name.to_string()),
                     message: "required column is missing from the header".into(),
                 });

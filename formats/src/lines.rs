@@ -1,7 +1,8 @@
 //! The data lines of a CSV file, read one at a time: memory bounded by the longest line, not the
-//! file. Comment lines (`#`) are skipped anywhere; blank lines before the first row and after
-//! the last are skipped, and one between rows is refused (a row may have been lost there). Line
-//! numbers are the ones an editor shows.
+//! file. Comment lines (`#`) are skipped anywhere; blank lines before the header and after the
+//! last row are skipped, and one after the header is refused (a row may have been lost there).
+//! A byte-order mark at the start is dropped. Each row is one line: a quoted field cannot span
+//! lines. Line numbers are the ones an editor shows.
 
 use std::io::BufRead;
 
@@ -80,13 +81,23 @@ impl<R: BufRead> DataLines<R> {
                     ),
                 ));
             }
-            let text = std::str::from_utf8(&self.buffer)
+            let mut text = std::str::from_utf8(&self.buffer)
                 .map_err(|e| self.error(self.line, format!("not UTF-8 text: {e}")))?;
+            if self.line == 1 {
+                // A spreadsheet's "CSV UTF-8" starts with a byte-order mark.
+                text = text.strip_prefix('\u{feff}').unwrap_or(text);
+            }
+            if text.trim_end_matches(['\n', '\r']).contains('\r') {
+                return Err(self.error(
+                    self.line,
+                    "a carriage return inside the line: lines must end in LF or CR LF".into(),
+                ));
+            }
             let trimmed = text.trim();
             if trimmed.is_empty() {
-                // Header and at least one row read: a blank line now is between rows (or after
-                // the last one, which is only known at the next data line).
-                if self.data_lines >= 2 {
+                // After the header, a blank line is between rows (where one may have been lost)
+                // or after the last one, which is only known at the next data line.
+                if self.data_lines >= 1 {
                     self.blank_since_row.get_or_insert(self.line);
                 }
                 continue;
@@ -100,6 +111,12 @@ impl<R: BufRead> DataLines<R> {
                     "blank line between rows (was a row lost here?): remove it, or make it a # \
                      comment"
                         .into(),
+                ));
+            }
+            if text.matches('"').count() % 2 == 1 {
+                return Err(self.error(
+                    self.line,
+                    "an unbalanced quote: a quoted field must end on its own line".into(),
                 ));
             }
             self.data_lines += 1;

@@ -106,6 +106,17 @@ pub fn compensate_file<E: From<Error>>(
         }
         results.clear();
         compensate(&values, &mut results)?;
+        if results.len() != ids.len() {
+            return Err(Error::Write {
+                file: output.display().to_string(),
+                message: format!(
+                    "{} points compensated for {} read: nothing written",
+                    results.len(),
+                    ids.len()
+                ),
+            }
+            .into());
+        }
         for (id, point) in ids.drain(..).zip(&results) {
             summary.statuses.add(point.status);
             write_compensated_row(&mut csv, &NamedCompensation { id, point: *point })

@@ -191,12 +191,12 @@ fn records_keep_the_line_the_editor_shows_past_comments_and_blank_lines() {
     let path = write(
         &dir,
         "poses.csv",
-        "# planned on Monday\nid,x,y,z,a,b,c\n\np1,0,0,280,0,0,0\n# moved\np2,1,0,280,0,0,0\n",
+        "# planned on Monday\n\nid,x,y,z,a,b,c\n# first\np1,0,0,280,0,0,0\n# moved\np2,1,0,280,0,0,0\n",
     );
     let records = read_poses(&path).unwrap();
     let ids: Vec<&str> = records.iter().map(|r| r.id.as_str()).collect();
     assert_eq!(ids, ["p1", "p2"]);
-    assert_eq!((records.line(0), records.line(1)), (4, 6));
+    assert_eq!((records.line(0), records.line(1)), (5, 7));
     assert_eq!(records.file, path.display().to_string());
 }
 
@@ -211,11 +211,14 @@ fn a_blank_line_between_rows_is_refused_with_its_line() {
     let (line, column, message) = format_error(read_poses(&path));
     assert_eq!((line, column), (3, None));
     assert!(message.starts_with("blank line between rows"), "{message}");
-    // Blank lines before the first row and after the last one are not between rows.
+    // After the header too (the first row may be the one lost).
+    let path = write(&dir, "r.csv", "id,x,y,z,a,b,c\n\n1,0,0,300,0,0,0\n");
+    assert_eq!(format_error(read_poses(&path)).0, 2);
+    // Blank lines before the header and after the last row are not between rows.
     let path = write(
         &dir,
         "q.csv",
-        "id,x,y,z,a,b,c\n\n1,0,0,300,0,0,0\n2,0,0,301,0,0,0\n\n\n",
+        "\n# export\n\nid,x,y,z,a,b,c\n1,0,0,300,0,0,0\n2,0,0,301,0,0,0\n\n\n",
     );
     assert_eq!(read_poses(&path).unwrap().len(), 2);
 }
@@ -299,5 +302,41 @@ fn a_file_streams_row_by_row_and_stops_at_its_first_bad_row() {
     assert!(
         error.ends_with("p.csv:5: column y: \"x\" is not a number"),
         "{error}"
+    );
+}
+
+#[test]
+fn a_byte_order_mark_is_dropped_and_quotes_crs_and_missing_columns_are_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write(
+        &dir,
+        "bom.csv",
+        "\u{feff}id,x,y,z,a,b,c\r\n1,0,0,300,0,0,0\r\n",
+    );
+    assert_eq!(read_poses(&path).unwrap()[0].pose_mm_deg[2], 300.0);
+    let path = write(
+        &dir,
+        "quote.csv",
+        "id,x,y,z,a,b,c,note\n1,0,0,300,0,0,0,\"two\n2,0,0,301,0,0,0,lines\"\n",
+    );
+    let (line, _, message) = format_error(read_poses(&path));
+    assert_eq!(line, 2);
+    assert!(message.starts_with("an unbalanced quote"), "{message}");
+    let path = write(&dir, "cr.csv", "id,x,y,z,a,b,c\r1,0,0,300,0,0,0\r");
+    let (line, _, message) = format_error(read_poses(&path));
+    assert_eq!(line, 1);
+    assert!(
+        message.starts_with("a carriage return inside the line"),
+        "{message}"
+    );
+    // A missing column is reported on the header's own line, past comments.
+    let path = write(&dir, "m.csv", "# export\nid,x,y,z,a,b\n");
+    assert_eq!(
+        format_error(read_poses(&path)),
+        (
+            2,
+            Some("c".into()),
+            "required column is missing from the header".into()
+        )
     );
 }

@@ -278,3 +278,32 @@ fn a_failing_calibrate_leaves_the_previous_folder_whole() {
     assert!(report.contains("notes.txt"), "{report}");
     assert_eq!(std::fs::read(d.join("cal/notes.txt")).unwrap(), b"mine");
 }
+
+#[test]
+fn an_output_to_dev_stdout_goes_down_the_pipe() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let (_, model) = hexacomp_tests::save_smooth_model(d, 2);
+    ok(
+        d,
+        "hexacomp-trainer",
+        &["plan", "--count", "5", "--out", "poses.csv"],
+    );
+    let output = run_in(
+        d,
+        "hexacomp-trainer",
+        &[
+            "predict",
+            "--model",
+            model.to_str().unwrap(),
+            "--poses",
+            "poses.csv",
+            "--out",
+            "/dev/stdout",
+        ],
+    );
+    assert!(output.status.success(), "{}", text(&output.stderr));
+    let written = text(&output.stdout);
+    assert!(written.starts_with("id,q1,q2,q3,q4,q5,q6,dq1"), "{written}");
+    assert_eq!(written.lines().count(), 6);
+}

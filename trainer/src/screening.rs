@@ -115,7 +115,7 @@ pub enum Reason {
         /// The limit it exceeds, mm.
         limit_mm: f64,
     },
-    /// The measurement is unlike the others': far from the geometry identified from all.
+    /// The measurement is unlike the others': far from the geometry identified from the rows.
     Inconsistent {
         /// The distance of the measured targets from the identified geometry's, mm.
         deviation_mm: f64,
@@ -143,7 +143,7 @@ impl std::fmt::Display for Reason {
             } => write!(
                 f,
                 "the targets are {deviation_mm:.4} mm from where the geometry identified from \
-                 all configurations puts them (limit {limit_mm:.4} mm; a wrong coordinate?)"
+                 the configurations puts them (limit {limit_mm:.4} mm; a wrong coordinate?)"
             ),
         }
     }
@@ -377,7 +377,11 @@ fn check_against_identification(
         let median = median(&fitted_distances).unwrap_or(0.0);
         let limit_mm =
             (options.identification_factor * median).max(options.identification_floor_mm);
-        let next: Vec<bool> = distances.iter().map(|d| *d <= limit_mm).collect();
+        // An unreachable row (infinite distance) is never within, even under an infinite limit.
+        let next: Vec<bool> = distances
+            .iter()
+            .map(|d| d.is_finite() && *d <= limit_mm)
+            .collect();
         let settled = next == within;
         within = next;
         judged = Some((distances, limit_mm));

@@ -159,12 +159,15 @@ fn training_range(inputs: &[[f64; LEGS]], commanded: &[[f64; LEGS]]) -> [[f64; 2
 /// 0.01 mm (so that a leg whose corrections barely vary still has room for noise). Not the
 /// minimum and maximum, so that one wrong correction left in the data cannot open the bounds (a
 /// 1e308 mm row would make the run-time clamp do nothing). The clamp holds corrections inside
-/// them.
+/// them. Without corrections, ±0.01 mm.
 pub fn correction_bounds(targets: &[[f64; LEGS]]) -> [[f64; 2]; LEGS] {
     std::array::from_fn(|leg| {
         let mut values: Vec<f64> = targets.iter().map(|t| t[leg]).collect();
         values.sort_by(f64::total_cmp);
         let n = values.len();
+        if n == 0 {
+            return [-0.01, 0.01];
+        }
         let k = if n >= 3 {
             ((0.02 * (n - 1) as f64).ceil() as usize).clamp(1, (n - 1) / 2)
         } else {

@@ -41,19 +41,19 @@ pub struct CalibrateArgs {
     #[arg(long, value_name = "FILE")]
     measurements: Option<PathBuf>,
     /// Configurations to plan and measure on the virtual platform.
-    #[arg(long, default_value_t = 150)]
+    #[arg(long, default_value_t = 150, conflicts_with = "measurements")]
     count: usize,
     /// Seed of the plan, the noise and the training.
     #[arg(long, default_value_t = 1)]
     seed: u64,
     /// Seed that draws the virtual machine.
-    #[arg(long, default_value_t = DEFAULT_MACHINE_SEED)]
+    #[arg(long, default_value_t = DEFAULT_MACHINE_SEED, conflicts_with = "measurements")]
     machine_seed: u64,
     /// Error variant of the virtual machine.
-    #[arg(long, default_value_t = ErrorVariant::Paper)]
+    #[arg(long, default_value_t = ErrorVariant::Paper, conflicts_with = "measurements")]
     error_variant: ErrorVariant,
     /// Fresh poses for the final check on the virtual platform.
-    #[arg(long, default_value_t = 100)]
+    #[arg(long, default_value_t = 100, conflicts_with = "measurements")]
     validation: usize,
     /// Network input (see `train --help`).
     #[arg(long, value_enum, default_value_t = InputArg::Equivalent)]

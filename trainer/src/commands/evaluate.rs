@@ -64,9 +64,10 @@ pub fn run(geometry: &Geometry, args: &EvaluateArgs) -> anyhow::Result<()> {
             ..Default::default()
         },
     };
+    // Made first: a folder that cannot be replaced is refused before the evaluation's minutes.
+    let folder = ResultsFolder::create(&args.out_dir, "evaluate", &FIGURES)?;
     let evaluation = evaluate(geometry, &options, &|stage| eprintln!("{stage}…"))?;
     print_evaluation(&evaluation, args.validation);
-    let folder = ResultsFolder::create(&args.out_dir, "evaluate", &FIGURES)?;
     write_figures(&evaluation, folder.path())?;
     folder.commit()?;
     eprintln!("figures → {}", args.out_dir.display());

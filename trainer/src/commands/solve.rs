@@ -26,7 +26,7 @@ use hexacomp_formats::write_file;
 /// Gross errors are excluded, each listed with its line, id and reason: a configuration that
 /// cannot be solved or does not converge, whose commanded legs disagree with the pose, whose
 /// correction exceeds --max-correction, whose fit residual is more than --residual-factor × the
-/// median, or whose targets are far from the geometry identified from all configurations
+/// median, or whose targets are far from the geometry identified from the configurations
 /// (docs/calibration.md, "Gross errors").
 /// When more than --max-excluded-share of the file would be excluded, the file is refused and
 /// nothing is written: the data as a whole must be wrong. An existing output is replaced only by
@@ -278,7 +278,8 @@ pub struct MeasuredScreeningArgs {
     #[arg(long, default_value_t = ScreeningOptions::default().residual_factor)]
     residual_factor: f64,
     /// Exclude a configuration whose targets are further from the geometry identified from the
-    /// other configurations than this many times the median distance.
+    /// configurations (repeated without those beyond the limit) than this many times the median
+    /// distance.
     #[arg(long, default_value_t = ScreeningOptions::default().identification_factor)]
     identification_factor: f64,
     /// Exclude a configuration whose commanded legs differ from the inverse kinematics of its
