@@ -186,12 +186,10 @@ pub struct NewDirectory {
 
 impl NewDirectory {
     /// Starts filling the folder at `path` (created, or replaced as a whole, on commit). A
-    /// symbolic link at `path` is resolved: the folder it points to is the one replaced.
+    /// symbolic link at `path` is followed as [`NewFile`] follows one: the folder it points to is
+    /// the one replaced, the link kept.
     pub fn create(path: &Path) -> std::io::Result<Self> {
-        let target = match std::fs::symlink_metadata(path) {
-            Ok(meta) if meta.file_type().is_symlink() => std::fs::canonicalize(path)?,
-            _ => path.to_path_buf(),
-        };
+        let target = follow_links(path)?;
         if target.file_name().is_none() || target.ends_with(".") {
             return Err(std::io::Error::other(
                 "names no folder of its own (such as `.` or `..`): give the folder by name",
@@ -423,9 +421,10 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let file = dir.path().join("cal");
         std::fs::write(&file, b"x").unwrap();
-        assert!(NewDirectory::create(&file).is_err());
-        assert!(NewDirectory::create(Path::new(".")).is_err());
-        assert!(NewDirectory::create(&dir.path().join("sub/..")).is_err());
+        let message = |path: &Path| NewDirectory::create(path).err().unwrap().to_string();
+        assert!(message(&file).contains("not a folder"));
+        assert!(message(Path::new(".")).contains("give the folder by name"));
+        assert!(message(&dir.path().join("sub/..")).contains("give the folder by name"));
         assert_eq!(std::fs::read(&file).unwrap(), b"x");
     }
 

@@ -261,23 +261,25 @@ impl<T> Rows<T> {
         let Some((line, record)) = self.lines.next_line()? else {
             return Ok(None);
         };
-        let row = Row {
-            file: self.lines.file(),
-            header: &self.header,
-            line,
-            id: &record[self.id.min(record.len().saturating_sub(1))],
-            record: &record,
-        };
         if record.len() != self.header.width {
-            return Err(row.error(
-                None,
-                format!(
+            return Err(Error::Format {
+                file: self.lines.file().to_string(),
+                line,
+                column: None,
+                message: format!(
                     "row has {} fields, the header has {}",
                     record.len(),
                     self.header.width
                 ),
-            ));
+            });
         }
+        let row = Row {
+            file: self.lines.file(),
+            header: &self.header,
+            line,
+            id: &record[self.id],
+            record: &record,
+        };
         if row.id.is_empty() {
             return Err(row.error(Some("id"), "empty id".into()));
         }

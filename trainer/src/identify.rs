@@ -13,10 +13,11 @@
 //! a fraction of the largest: parameter combinations the measurements cannot see stay at their
 //! nominal values. Compensation is then the identified geometry's inverse kinematics.
 
+use glam::DVec3;
 use hexacomp_core::kinematics::target_points;
 use hexacomp_core::records::MeasuredConfiguration;
 use hexacomp_core::screw::{ActuationScrews, point_matrix};
-use hexacomp_core::{ForwardOptions, Geometry, LEGS, Pose, forward_kinematics};
+use hexacomp_core::{ForwardOptions, Geometry, LEGS, Pose, TARGETS, forward_kinematics};
 use nalgebra::{DMatrix, DVector, SMatrix};
 
 use crate::error::{Error, Result};
@@ -116,15 +117,24 @@ pub fn identify(
     })
 }
 
-/// Per configuration of `rows` (in order), the norm of its nine target residuals
-/// `r_Pm − r_Pc` at `geometry`, mm: how far the targets that `geometry` (an identified one)
-/// predicts for the commanded legs are from the measured ones.
-pub fn target_residuals(geometry: &Geometry, rows: &[MeasuredConfiguration]) -> Result<Vec<f64>> {
-    let mut poses: Vec<Pose> = rows.iter().map(MeasuredConfiguration::pose).collect();
-    let (_, residual) = linearise(geometry, rows, &mut poses)?;
-    Ok((0..rows.len())
-        .map(|k| residual.rows(9 * k, 9).norm())
-        .collect())
+/// The norm of `row`'s nine target residuals `r_Pm − r_Pc` at `geometry`, mm: how far the
+/// targets that `geometry` (an identified one) predicts for the commanded legs are from the
+/// measured ones. `None` when `geometry` cannot reach the commanded legs (forward kinematics
+/// fails from the commanded pose).
+pub fn target_distance(geometry: &Geometry, row: &MeasuredConfiguration) -> Option<f64> {
+    let pose =
+        forward_kinematics(geometry, &row.legs, &row.pose(), &ForwardOptions::default()).ok()?;
+    let squared: f64 = misfits(geometry, row, &pose)
+        .iter()
+        .map(|d| d.length_squared())
+        .sum();
+    Some(squared.sqrt())
+}
+
+/// The measured minus the computed target points of `row` at `pose` (base frame, mm).
+fn misfits(geometry: &Geometry, row: &MeasuredConfiguration, pose: &Pose) -> [DVec3; TARGETS] {
+    let computed = target_points(geometry, pose);
+    std::array::from_fn(|j| row.targets[j] - computed[j])
 }
 
 /// `error` of an iterate, with the likely cause when the last step's data determined fewer
@@ -177,10 +187,9 @@ fn linearise(
         jacobian
             .view_mut((9 * k, 0), (9, PARAMETERS))
             .copy_from(&block);
-        let computed = target_points(geometry, pose);
-        for j in 0..3 {
+        for (j, misfit) in misfits(geometry, row, pose).iter().enumerate() {
             for axis in 0..3 {
-                residual[9 * k + 3 * j + axis] = row.targets[j][axis] - computed[j][axis];
+                residual[9 * k + 3 * j + axis] = misfit[axis];
             }
         }
     }

@@ -31,7 +31,7 @@ use hexacomp_core::records::{JointCorrection, MeasuredConfiguration};
 
 use crate::corrections::{Checks, Flag, Outcome};
 use crate::error::{Error, Result};
-use crate::identify::{IdentifyOptions, identify, target_residuals};
+use crate::identify::{IdentifyOptions, identify, target_distance};
 
 /// Thresholds of the population checks and of the refusal.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -363,10 +363,7 @@ fn check_against_identification(
         // Unreachable by the identified geometry: as far as can be.
         let distances: Vec<f64> = candidates
             .iter()
-            .map(|row| {
-                target_residuals(&identified.geometry, std::slice::from_ref(row))
-                    .map_or(f64::INFINITY, |d| d[0])
-            })
+            .map(|row| target_distance(&identified.geometry, row).unwrap_or(f64::INFINITY))
             .collect();
         let fitted_distances: Vec<f64> = distances
             .iter()
