@@ -7,7 +7,7 @@ use hexacomp_core::Geometry;
 use hexacomp_core::model::Model;
 use hexacomp_trainer::pipeline::Pipeline;
 use hexacomp_trainer::plan::PlanOptions;
-use hexacomp_trainer::train::{Architecture, TrainOptions};
+use hexacomp_trainer::train::{Architecture, TrainOptions, training_work};
 use hexacomp_virtual::{ErrorModel, ErrorVariant, VirtualPlatform};
 use indicatif::{ProgressBar, ProgressStyle};
 
@@ -61,18 +61,24 @@ pub fn calibrate(
         ..Default::default()
     };
     let (_, measurements) = pipeline.measure_virtual(platform)?;
-    let bar = ProgressBar::new((6 * pipeline.train.hidden_sizes.len()) as u64);
+    let bar = ProgressBar::new(training_work(
+        measurements.len(),
+        Architecture::Decoupled,
+        &pipeline.train,
+    ));
     bar.set_style(
-        ProgressStyle::with_template("training decoupled networks [{bar:30}] {pos}/{len} fits")
-            .expect("valid template")
-            .progress_chars("=> "),
+        ProgressStyle::with_template(
+            "training decoupled networks [{bar:30}] {percent}% ({elapsed}, about {eta} left)",
+        )
+        .expect("valid template")
+        .progress_chars("=> "),
     );
     let calibration = pipeline
         .calibrate(
             &geometry,
             &measurements,
             &[Architecture::Decoupled],
-            &|_| bar.inc(1),
+            &|_, n| bar.inc(n),
         )
         .context("calibrating the virtual platform")?;
     bar.finish_and_clear();

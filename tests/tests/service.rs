@@ -38,7 +38,7 @@ fn small_model(dir: &Path, seed: u64) -> (Model, PathBuf) {
         VirtualPlatform::new(&g, &ErrorModel::default(), DEFAULT_MACHINE_SEED, seed).unwrap();
     let (_, measurements) = pipeline.measure_virtual(&mut platform).unwrap();
     let calibration = pipeline
-        .calibrate(&g, &measurements, &[Architecture::Decoupled], &|_| {})
+        .calibrate(&g, &measurements, &[Architecture::Decoupled], &|_, _| {})
         .unwrap();
     let model = calibration.models[0].1.model.clone();
     let path = dir.join(format!("model-{seed}.hxm"));

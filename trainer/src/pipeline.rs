@@ -109,39 +109,39 @@ impl Pipeline {
         })
     }
 
-    /// Trains networks of `architecture` on `corrections` for `geometry`; `fit_done` is called
-    /// after each fit of the hidden-size sweep (for progress bars).
+    /// Trains networks of `architecture` on `corrections` for `geometry`; `progress(n)` reports
+    /// `n` more units of [`crate::train::training_work`] done (for progress bars).
     pub fn train(
         &self,
         geometry: &Geometry,
         corrections: &[JointCorrection],
         architecture: Architecture,
-        fit_done: &(dyn Fn() + Sync),
+        progress: &(dyn Fn(u64) + Sync),
     ) -> Result<Trained> {
         train(
             corrections,
             architecture,
             geometry.fingerprint(),
             &self.train,
-            fit_done,
+            progress,
         )
     }
 
     /// Solves `measurements` and trains each of `architectures` on the corrections;
-    /// `fit_done(architecture)` after each fit.
+    /// `progress(architecture, n)` as [`Pipeline::train`] reports it.
     pub fn calibrate(
         &self,
         geometry: &Geometry,
         measurements: &[MeasuredConfiguration],
         architectures: &[Architecture],
-        fit_done: &(dyn Fn(Architecture) + Sync),
+        progress: &(dyn Fn(Architecture, u64) + Sync),
     ) -> Result<Calibration> {
         let solved = self.solve(geometry, measurements)?;
         let models = architectures
             .iter()
             .map(|&architecture| {
-                let fit = || fit_done(architecture);
-                self.train(geometry, &solved.corrections, architecture, &fit)
+                let done = |n| progress(architecture, n);
+                self.train(geometry, &solved.corrections, architecture, &done)
                     .map(|trained| (architecture, trained))
             })
             .collect::<Result<_>>()?;

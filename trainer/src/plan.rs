@@ -38,6 +38,31 @@ impl Default for PlanOptions {
 
 /// `options.count` configurations over `geometry`'s workspace (mm, rad).
 pub fn plan(geometry: &Geometry, options: &PlanOptions) -> Result<Vec<Pose>> {
+    plan_with_progress(geometry, options, &|_| {})
+}
+
+/// The work of a plan, in the units [`plan_with_progress`] reports: a candidate weighed against
+/// one configuration chosen before it. Best-candidate sampling weighs every candidate against
+/// every configuration already chosen, so the work grows with the square of the count
+/// (`candidates · count · (count + 1) / 2`); plain random draws (one candidate) cost one unit per
+/// configuration. Saturates at `u64::MAX`.
+pub fn plan_work(options: &PlanOptions) -> u64 {
+    let count = options.count as u128;
+    let work = if options.candidates <= 1 {
+        count
+    } else {
+        options.candidates as u128 * count * (count + 1) / 2
+    };
+    u64::try_from(work).unwrap_or(u64::MAX)
+}
+
+/// [`plan`], reporting `progress(n)` as `n` more units of [`plan_work`] are done (for a
+/// progress bar with an estimated time left).
+pub fn plan_with_progress(
+    geometry: &Geometry,
+    options: &PlanOptions,
+    progress: &dyn Fn(u64),
+) -> Result<Vec<Pose>> {
     if options.candidates == 0 {
         return Err(Error::InvalidSetting(
             "a plan needs at least one candidate per configuration".into(),
@@ -45,9 +70,17 @@ pub fn plan(geometry: &Geometry, options: &PlanOptions) -> Result<Vec<Pose>> {
     }
     let mut sampler = WorkspaceSampler::new(geometry, options.seed, options.sampler)?;
     let scale = Normaliser::new(geometry);
-    let mut chosen: Vec<Pose> = Vec::with_capacity(options.count);
-    let mut chosen_coords: Vec<[f64; 6]> = Vec::with_capacity(options.count);
-    for _ in 0..options.count {
+    let mut chosen: Vec<Pose> = Vec::new();
+    if options.candidates == 1 {
+        // Nothing to weigh: plain uniform draws.
+        for _ in 0..options.count {
+            chosen.push(sampler.sample()?);
+            progress(1);
+        }
+        return Ok(chosen);
+    }
+    let mut chosen_coords: Vec<[f64; 6]> = Vec::new();
+    for k in 0..options.count {
         let mut best: Option<(f64, Pose, [f64; 6])> = None;
         for _ in 0..options.candidates {
             let candidate = sampler.sample()?;
@@ -63,6 +96,7 @@ pub fn plan(geometry: &Geometry, options: &PlanOptions) -> Result<Vec<Pose>> {
         let (_, pose, coords) = best.expect("at least one candidate");
         chosen.push(pose);
         chosen_coords.push(coords);
+        progress((options.candidates as u64).saturating_mul(k as u64 + 1));
     }
     Ok(chosen)
 }
@@ -163,6 +197,31 @@ mod tests {
             s > 1.2 * r,
             "spread plan nearest-neighbour mean {s} vs random {r}"
         );
+    }
+
+    #[test]
+    fn progress_adds_up_to_the_work_of_the_plan() {
+        let g = Geometry::prototype();
+        for candidates in [1, 10] {
+            let options = PlanOptions {
+                count: 20,
+                candidates,
+                ..Default::default()
+            };
+            let reported = std::cell::Cell::new(0);
+            plan_with_progress(&g, &options, &|n| reported.set(reported.get() + n)).unwrap();
+            assert_eq!(
+                reported.get(),
+                plan_work(&options),
+                "{candidates} candidates"
+            );
+        }
+        let huge = PlanOptions {
+            count: 100_000_000,
+            ..Default::default()
+        };
+        // 10 candidates × 1e8 × (1e8 + 1) / 2: quadratic, and still counted exactly.
+        assert_eq!(plan_work(&huge), 50_000_000_500_000_000);
     }
 
     #[test]

@@ -3,7 +3,8 @@
 //! Each network is fitted by Levenberg–Marquardt on the mean squared error (Eq. 15): steps of
 //! Eq. 16 with the analytic Jacobian `J`, updates of Eq. 17, an adaptive μ (÷10 after an
 //! accepted step, ×10 after a rejected one), stopping when an accepted step changes the loss by
-//! less than a relative tolerance; several restarts from standard-normal weights (the paper's
+//! less than a relative tolerance, at an iteration cap, or when no step lowers the loss however
+//! damped ([`FitStops`] counts which); several restarts from standard-normal weights (the paper's
 //! initialisation), keeping the one with the lowest training loss. The hidden-node count is
 //! chosen by holdout validation (Eq. 18; Eq. 21 for the decoupled networks) over a sweep of
 //! sizes: the smallest size whose validation RMSE is within 2 % of the best. The final model is
@@ -98,6 +99,62 @@ impl Selection {
     }
 }
 
+/// How the Levenberg–Marquardt fits of a training ended, counted over every restart of every
+/// fit (the sweep's and the final refits).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct FitStops {
+    /// An accepted step lowered the loss by less than [`TrainOptions::relative_tolerance`].
+    pub settled: usize,
+    /// [`TrainOptions::max_iterations`] steps were taken.
+    pub iteration_cap: usize,
+    /// No step lowered the loss, however strongly damped.
+    pub no_descent: usize,
+}
+
+impl FitStops {
+    /// Every fit counted.
+    pub fn total(&self) -> usize {
+        self.settled + self.iteration_cap + self.no_descent
+    }
+
+    fn count(&mut self, stop: Stop) {
+        match stop {
+            Stop::Settled => self.settled += 1,
+            Stop::IterationCap => self.iteration_cap += 1,
+            Stop::NoDescent => self.no_descent += 1,
+        }
+    }
+
+    fn add(mut self, other: FitStops) -> Self {
+        self.settled += other.settled;
+        self.iteration_cap += other.iteration_cap;
+        self.no_descent += other.no_descent;
+        self
+    }
+}
+
+impl std::fmt::Display for FitStops {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} fits: {} settled (loss change below the tolerance), {} at the iteration cap, \
+             {} found no lower loss",
+            self.total(),
+            self.settled,
+            self.iteration_cap,
+            self.no_descent
+        )
+    }
+}
+
+/// Why one Levenberg–Marquardt fit ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Stop {
+    Settled,
+    IterationCap,
+    NoDescent,
+}
+
 /// What training produced.
 #[derive(Debug, Clone)]
 pub struct Trained {
@@ -109,6 +166,8 @@ pub struct Trained {
     pub validation_rmse_mm: f64,
     /// Wall-clock seconds of the whole training.
     pub seconds: f64,
+    /// How its fits ended.
+    pub stops: FitStops,
 }
 
 /// Inputs (network input legs, mm) and targets (corrections, mm) of training rows.
@@ -179,14 +238,61 @@ pub fn correction_bounds(targets: &[[f64; LEGS]]) -> [[f64; 2]; LEGS] {
     })
 }
 
+/// The work of a training of `architecture` on `rows` configurations, in the units of [`train`]'s
+/// progress, which reaches exactly this when the training ends. A unit is one entry of one
+/// iteration's `JᵀJ` (residual rows × weights², what dominates an iteration's time), counted
+/// for every iteration a fit may take; the final fit is counted at the largest hidden size,
+/// since its size is chosen only after the sweep. Saturates at `u64::MAX`.
+pub fn training_work(rows: usize, architecture: Architecture, options: &TrainOptions) -> u64 {
+    let (networks, outputs) = match architecture {
+        Architecture::Coupled => (1, LEGS),
+        Architecture::Decoupled => (LEGS, 1),
+    };
+    let training = rows.saturating_sub(validation_count(rows, options.validation_fraction));
+    let final_samples = if options.refit_on_all { rows } else { training };
+    let largest = options.hidden_sizes.iter().copied().max().unwrap_or(0);
+    let sweep = options
+        .hidden_sizes
+        .iter()
+        .map(|&hidden| fit_work(training, outputs, hidden, options))
+        .fold(0, u64::saturating_add);
+    sweep
+        .saturating_add(fit_work(final_samples, outputs, largest, options))
+        .saturating_mul(networks as u64)
+}
+
+/// The work of one iteration of a fit of `hidden` nodes and `outputs` outputs on `samples`
+/// samples (see [`training_work`]).
+fn iteration_work(samples: usize, outputs: usize, hidden: usize) -> u64 {
+    let weights = Network::weight_count(hidden, outputs) as u64;
+    (samples as u64)
+        .saturating_mul(outputs as u64)
+        .saturating_mul(weights * weights)
+}
+
+/// The work of a whole fit, every restart and iteration it may take (see [`training_work`]).
+fn fit_work(samples: usize, outputs: usize, hidden: usize, options: &TrainOptions) -> u64 {
+    iteration_work(samples, outputs, hidden)
+        .saturating_mul(options.max_iterations as u64)
+        .saturating_mul(options.restarts as u64)
+}
+
+/// How many of `count` configurations are held out for validation: `fraction` of them, rounded,
+/// at least one and leaving at least one to train on.
+fn validation_count(count: usize, fraction: f64) -> usize {
+    ((count as f64 * fraction).round() as usize).clamp(1, count.saturating_sub(1).max(1))
+}
+
 /// Trains a model on corrections rows for the geometry with fingerprint `geometry`.
-/// `progress` is called once per fit of the sweep (for progress bars), from worker threads.
+/// `progress(n)` reports `n` more units of the [`training_work`] done (for progress bars with an
+/// estimated time left), from worker threads: once per iteration, and a fit that stops early
+/// reports the iterations it did not need.
 pub fn train(
     rows: &[JointCorrection],
     architecture: Architecture,
     geometry: Fingerprint,
     options: &TrainOptions,
-    progress: &(dyn Fn() + Sync),
+    progress: &(dyn Fn(u64) + Sync),
 ) -> Result<Trained> {
     let start = Instant::now();
     if rows.len() < 6 {
@@ -207,11 +313,16 @@ pub fn train(
         Architecture::Coupled => vec![(0..LEGS).collect()],
         Architecture::Decoupled => (0..LEGS).map(|leg| vec![leg]).collect(),
     };
-    let (mut networks, selections): (Vec<Network>, Vec<Selection>) = outputs
-        .iter()
-        .enumerate()
-        .map(|(net_index, legs)| select_and_fit(&split, legs, options, net_index, progress))
-        .unzip();
+    let mut networks = Vec::with_capacity(outputs.len());
+    let mut selections = Vec::with_capacity(outputs.len());
+    let mut stops = FitStops::default();
+    for (net_index, legs) in outputs.iter().enumerate() {
+        let (network, selection, net_stops) =
+            select_and_fit(&split, legs, options, net_index, progress);
+        networks.push(network);
+        selections.push(selection);
+        stops = stops.add(net_stops);
+    }
     // Eq. 21 (for a coupled model, the one network's Eq. 18 validation RMSE).
     let validation_rmse_mm = selections
         .iter()
@@ -254,6 +365,7 @@ pub fn train(
         selections,
         validation_rmse_mm,
         seconds: start.elapsed().as_secs_f64(),
+        stops,
     })
 }
 
@@ -274,9 +386,7 @@ impl<'a> Split<'a> {
         options: &TrainOptions,
     ) -> Self {
         let order = shuffled(inputs.len(), options.seed);
-        let validation_count = ((inputs.len() as f64 * options.validation_fraction).round()
-            as usize)
-            .clamp(1, inputs.len() - 1);
+        let validation_count = validation_count(inputs.len(), options.validation_fraction);
         Self {
             x: inputs.iter().map(|q| normalisation.apply(q)).collect(),
             targets,
@@ -308,17 +418,17 @@ impl<'a> Split<'a> {
 
 /// One network (outputs: the corrections of `legs`): sweeps the hidden sizes, chooses the
 /// smallest whose validation RMSE is within 2 % of the best, and fits it (on all samples when
-/// [`TrainOptions::refit_on_all`]).
+/// [`TrainOptions::refit_on_all`], else again on the training samples, as the sweep did).
 fn select_and_fit(
     split: &Split,
     legs: &[usize],
     options: &TrainOptions,
     net_index: usize,
-    progress: &(dyn Fn() + Sync),
-) -> (Network, Selection) {
+    progress: &(dyn Fn(u64) + Sync),
+) -> (Network, Selection, FitStops) {
     let train_data = split.data(split.training(), legs);
     let validation_data = split.data(split.validation(), legs);
-    let sweep = sweep(
+    let (sweep, sweep_stops) = sweep(
         &train_data,
         &validation_data,
         options,
@@ -339,13 +449,25 @@ fn select_and_fit(
     } else {
         train_data
     };
-    let (network, _) = fit(
+    let (network, _, final_stops) = fit(
         &final_data,
         chosen,
         options,
         seed_for(options.seed, net_index as u64, chosen),
+        progress,
     );
-    (network, Selection { sweep, chosen })
+    // The final fit was counted at the largest size: report what the chosen size did not need.
+    let largest = options.hidden_sizes.iter().copied().max().unwrap_or(chosen);
+    let samples = final_data.x.len();
+    progress(
+        fit_work(samples, legs.len(), largest, options)
+            - fit_work(samples, legs.len(), chosen, options),
+    );
+    (
+        network,
+        Selection { sweep, chosen },
+        sweep_stops.add(final_stops),
+    )
 }
 
 /// Normalised inputs and row-major targets (`outputs` per sample) of one network.
@@ -366,12 +488,12 @@ fn sweep(
     validation: &Data,
     options: &TrainOptions,
     network: u64,
-    progress: &(dyn Fn() + Sync),
-) -> Vec<SweepPoint> {
+    progress: &(dyn Fn(u64) + Sync),
+) -> (Vec<SweepPoint>, FitStops) {
     let workers = std::thread::available_parallelism()
         .map_or(1, |n| n.get())
         .min(options.hidden_sizes.len());
-    let mut points: Vec<SweepPoint> = std::thread::scope(|scope| {
+    let results: Vec<(SweepPoint, FitStops)> = std::thread::scope(|scope| {
         let handles: Vec<_> = (0..workers)
             .map(|w| {
                 scope.spawn(move || {
@@ -382,13 +504,14 @@ fn sweep(
                         .step_by(workers)
                         .map(|&hidden| {
                             let seed = seed_for(options.seed, network, hidden);
-                            let (net, training_rmse_mm) = fit(training, hidden, options, seed);
-                            progress();
-                            SweepPoint {
+                            let (net, training_rmse_mm, stops) =
+                                fit(training, hidden, options, seed, progress);
+                            let point = SweepPoint {
                                 hidden,
                                 training_rmse_mm,
                                 validation_rmse_mm: rmse(&net, validation),
-                            }
+                            };
+                            (point, stops)
                         })
                         .collect::<Vec<_>>()
                 })
@@ -399,8 +522,12 @@ fn sweep(
             .flat_map(|h| h.join().expect("sweep worker"))
             .collect()
     });
+    let stops = results
+        .iter()
+        .fold(FitStops::default(), |total, (_, s)| total.add(*s));
+    let mut points: Vec<SweepPoint> = results.into_iter().map(|(p, _)| p).collect();
     points.sort_by_key(|p| p.hidden);
-    points
+    (points, stops)
 }
 
 /// RMSE of Eq. 18: `√(1/K Σ‖y − N(x)‖²)`, mm.
@@ -421,24 +548,33 @@ fn rmse(network: &Network, data: &Data) -> f64 {
     (sum / data.x.len() as f64).sqrt()
 }
 
-/// The best of `options.restarts` LM fits of a `hidden`-node network; returns it and its
-/// training RMSE (mm).
-fn fit(data: &Data, hidden: usize, options: &TrainOptions, seed: u64) -> (Network, f64) {
+/// The best of `options.restarts` LM fits of a `hidden`-node network; returns it, its training
+/// RMSE (mm) and how the restarts ended.
+fn fit(
+    data: &Data,
+    hidden: usize,
+    options: &TrainOptions,
+    seed: u64,
+    progress: &(dyn Fn(u64) + Sync),
+) -> (Network, f64, FitStops) {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let count = Network::weight_count(hidden, data.outputs);
-    (0..options.restarts)
+    let mut stops = FitStops::default();
+    let (network, score) = (0..options.restarts)
         .map(|_| {
             let initial: Vec<f64> = (0..count)
                 .map(|_| StandardNormal.sample(&mut rng))
                 .collect();
-            let weights = levenberg_marquardt(data, hidden, initial, options);
+            let (weights, stop) = levenberg_marquardt(data, hidden, initial, options, progress);
+            stops.count(stop);
             let network = Network::from_weights(hidden, data.outputs, weights)
                 .expect("LM keeps weights finite");
             let score = rmse(&network, data);
             (network, score)
         })
         .min_by(|a, b| a.1.total_cmp(&b.1))
-        .expect("at least one restart")
+        .expect("at least one restart");
+    (network, score, stops)
 }
 
 /// Residuals `e = y − N(x)` and the Jacobian `J = ∂N/∂w` (rows: sample × output) of Eq. 16.
@@ -485,20 +621,30 @@ fn residuals_and_jacobian(
 
 /// Levenberg–Marquardt on the sum of squared residuals `K·E(w)` (Eq. 15's loss times `K`: the
 /// same minimiser): the step `Δw = (JᵀJ + μI)⁻¹Jᵀe` (Eq. 16) and the update `w ← w + Δw`
-/// (Eq. 17), kept only when it lowers the loss.
+/// (Eq. 17), kept only when it lowers the loss. Returns the weights and why it stopped;
+/// reports [`TrainOptions::max_iterations`] iterations' work to `progress` in all.
 fn levenberg_marquardt(
     data: &Data,
     hidden: usize,
     mut w: Vec<f64>,
     options: &TrainOptions,
-) -> Vec<f64> {
+    progress: &(dyn Fn(u64) + Sync),
+) -> (Vec<f64>, Stop) {
     let n = w.len();
     let rows = data.x.len() * data.outputs;
     let mut jacobian = DMatrix::zeros(rows, n);
     let mut mu = 1e-3;
     let mut e = residuals_and_jacobian(data, hidden, &w, Some(&mut jacobian));
     let mut loss = e.norm_squared();
-    for _ in 0..options.max_iterations {
+    let budget = options.max_iterations as u64;
+    let work = iteration_work(data.x.len(), data.outputs, hidden);
+    let stopped = |done: u64, stop: Stop| {
+        progress(work.saturating_mul(budget - done));
+        stop
+    };
+    for iteration in 0..budget {
+        progress(work);
+        let done = iteration + 1;
         let jt = jacobian.transpose();
         let jtj = &jt * &jacobian;
         let jte = &jt * &e;
@@ -522,7 +668,7 @@ fn levenberg_marquardt(
                 mu = (mu * 0.1).max(1e-12);
                 accepted = true;
                 if improvement < options.relative_tolerance {
-                    return w;
+                    return (w, stopped(done, Stop::Settled));
                 }
                 e = residuals_and_jacobian(data, hidden, &w, Some(&mut jacobian));
                 break;
@@ -530,10 +676,10 @@ fn levenberg_marquardt(
             mu *= 10.0;
         }
         if !accepted {
-            break;
+            return (w, stopped(done, Stop::NoDescent));
         }
     }
-    w
+    (w, Stop::IterationCap)
 }
 
 #[cfg(test)]
@@ -590,7 +736,7 @@ mod tests {
             .map(|_| StandardNormal.sample(&mut rng))
             .collect();
         let before = residuals_and_jacobian(&data, 6, &initial, None).norm_squared();
-        let fitted = levenberg_marquardt(&data, 6, initial, &options);
+        let (fitted, _) = levenberg_marquardt(&data, 6, initial, &options, &|_| {});
         let after = residuals_and_jacobian(&data, 6, &fitted, None).norm_squared();
         assert!(after <= before);
         let network = Network::from_weights(6, 2, fitted).unwrap();
@@ -615,7 +761,8 @@ mod tests {
         for w in &mut initial[w2..w2 + hidden] {
             *w *= 1e8;
         }
-        let fitted = levenberg_marquardt(&data, hidden, initial, &TrainOptions::default());
+        let (fitted, _) =
+            levenberg_marquardt(&data, hidden, initial, &TrainOptions::default(), &|_| {});
         let network = Network::from_weights(hidden, 1, fitted).unwrap();
         // Through the five points to far below a micrometre.
         assert!(rmse(&network, &data) < 1e-6, "{}", rmse(&network, &data));
@@ -635,7 +782,7 @@ mod tests {
                 relative_tolerance,
                 ..TrainOptions::default()
             };
-            levenberg_marquardt(&data, hidden, initial.clone(), &options)
+            levenberg_marquardt(&data, hidden, initial.clone(), &options, &|_| {}).0
         };
         let loss = |w: &[f64]| residuals_and_jacobian(&data, hidden, w, None).norm_squared();
         // Without a tolerance, each iteration is one accepted step: the path of the fit.
@@ -652,5 +799,114 @@ mod tests {
         // A tolerance of 1 (every gain is below 100 %) stops at the first accepted step.
         assert_eq!(run(100, 1.0), path[1]);
         assert!(loss(&path[1]) < loss(&initial));
+    }
+
+    /// Runs one fit counting the progress it reports; returns why it stopped and that count.
+    fn stop_and_progress(
+        data: &Data,
+        hidden: usize,
+        initial: Vec<f64>,
+        options: &TrainOptions,
+    ) -> (Stop, u64) {
+        let reported = std::sync::atomic::AtomicU64::new(0);
+        let (_, stop) = levenberg_marquardt(data, hidden, initial, options, &|n| {
+            reported.fetch_add(n, std::sync::atomic::Ordering::Relaxed);
+        });
+        (stop, reported.into_inner())
+    }
+
+    #[test]
+    fn each_fit_says_why_it_stopped_and_reports_the_work_of_every_iteration_it_may_take() {
+        let data = toy_data(2);
+        let hidden = 4;
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        let initial: Vec<f64> = (0..Network::weight_count(hidden, 2))
+            .map(|_| StandardNormal.sample(&mut rng))
+            .collect();
+        let options = |max_iterations, relative_tolerance| TrainOptions {
+            max_iterations,
+            relative_tolerance,
+            ..TrainOptions::default()
+        };
+        // 40 samples × 2 outputs × (4·6 + 4 + 2·4 + 2 = 38 weights)².
+        let work = 40 * 2 * 38 * 38;
+        assert_eq!(iteration_work(40, 2, hidden), work);
+        // No tolerance: every step gains something, so the cap ends it.
+        assert_eq!(
+            stop_and_progress(&data, hidden, initial.clone(), &options(7, 0.0)),
+            (Stop::IterationCap, 7 * work)
+        );
+        // Every gain is below 100 %: the first accepted step settles it, and the 99 iterations
+        // it did not need are reported at once.
+        assert_eq!(
+            stop_and_progress(&data, hidden, initial.clone(), &options(100, 1.0)),
+            (Stop::Settled, 100 * work)
+        );
+        // Data a network reproduces exactly, fitted from that network's weights: the loss is
+        // zero and no step can lower it.
+        let (exact, _) = levenberg_marquardt(&data, hidden, initial, &options(100, 0.0), &|_| {});
+        let network = Network::from_weights(hidden, 2, exact.clone()).unwrap();
+        let mut reproduced = Data {
+            x: data.x.clone(),
+            y: Vec::new(),
+            outputs: 2,
+        };
+        let mut out = [0.0; LEGS];
+        for x in &data.x {
+            network.evaluate(x, &mut out[..2]);
+            reproduced.y.extend_from_slice(&out[..2]);
+        }
+        assert_eq!(
+            stop_and_progress(&reproduced, hidden, exact, &options(100, 0.0)),
+            (Stop::NoDescent, 100 * work)
+        );
+    }
+
+    #[test]
+    fn a_training_reports_exactly_its_work_and_counts_every_fit() {
+        let rows: Vec<JointCorrection> = toy_data(LEGS)
+            .x
+            .iter()
+            .enumerate()
+            .map(|(k, x)| JointCorrection {
+                id: k.to_string(),
+                legs: x.map(|v| 400.0 + 50.0 * v),
+                corrections: x.map(|v| 0.1 * (3.0 * v).sin()),
+            })
+            .collect();
+        for architecture in [Architecture::Coupled, Architecture::Decoupled] {
+            let options = TrainOptions {
+                hidden_sizes: vec![1, 2, 3],
+                restarts: 2,
+                max_iterations: 20,
+                ..TrainOptions::default()
+            };
+            let reported = std::sync::atomic::AtomicU64::new(0);
+            let trained = train(&rows, architecture, Fingerprint(1), &options, &|n| {
+                reported.fetch_add(n, std::sync::atomic::Ordering::Relaxed);
+            })
+            .unwrap();
+            let work = training_work(rows.len(), architecture, &options);
+            assert_eq!(reported.into_inner(), work, "{architecture:?}");
+            // (3 sizes + the final fit) × 2 restarts per network.
+            let (networks, outputs) = match architecture {
+                Architecture::Coupled => (1, LEGS),
+                Architecture::Decoupled => (LEGS, 1),
+            };
+            assert_eq!(trained.stops.total(), networks * 4 * 2, "{architecture:?}");
+            // 40 rows: 13 held out, 27 to train on; the final fit on all 40 counted at 3 nodes.
+            let by_hand: usize = [(27, 1), (27, 2), (27, 3), (40, 3)]
+                .iter()
+                .map(|&(samples, hidden)| {
+                    let weights = hidden * LEGS + hidden + outputs * hidden + outputs;
+                    samples * outputs * weights * weights * 20 * 2
+                })
+                .sum();
+            assert_eq!(work, (networks * by_hand) as u64, "{architecture:?}");
+            // Sizes that training refuses still have a work (and no overflow).
+            for rows in [0, 1, 2] {
+                assert!(training_work(rows, architecture, &options) < work);
+            }
+        }
     }
 }

@@ -9,13 +9,16 @@ mod common;
 use std::process::Command;
 
 use hexacomp_core::compensator::compensate_pose;
+use hexacomp_core::kinematics::pose_from_targets;
 use hexacomp_core::model::NetworkInput;
 use hexacomp_core::records::{JointCorrection, MeasuredConfiguration};
 use hexacomp_core::sampling::{SamplerOptions, WorkspaceSampler};
 use hexacomp_core::stats::{ErrorStats, PoseErrorNorm, PoseErrorStats};
 use hexacomp_core::{Geometry, LEGS, Pose, inverse_kinematics};
 use hexacomp_trainer::corrections::{Checks, Outcome, SolverOptions, solve_all};
-use hexacomp_trainer::evaluate::{Evaluation, EvaluationOptions, Method, evaluate};
+use hexacomp_trainer::evaluate::{
+    Evaluation, EvaluationOptions, Method, Protocol, ValidationErrors, evaluate,
+};
 use hexacomp_trainer::identify::{IdentifyOptions, identify};
 use hexacomp_trainer::train::{Architecture, TrainOptions, train};
 use hexacomp_virtual::{DEFAULT_MACHINE_SEED, ErrorModel, ErrorVariant, VirtualPlatform};
@@ -40,7 +43,7 @@ fn options(sizes: Vec<usize>, error_model: ErrorModel) -> EvaluationOptions {
 /// The comparison redone from its parts.
 struct Redone {
     /// Per size: per method, the errors at the validation poses.
-    errors: Vec<Vec<(Method, Vec<PoseErrorNorm>)>>,
+    errors: Vec<Vec<(Method, ValidationErrors)>>,
     /// Robust solutions with cond(PT) above the threshold.
     above_threshold: usize,
     /// Decoupled networks at the largest size with the other input.
@@ -81,19 +84,28 @@ fn redo(g: &Geometry, o: &EvaluationOptions) -> Redone {
             input,
             ..o.train.clone()
         };
-        train(rows, architecture, g.fingerprint(), &options, &|| {})
+        train(rows, architecture, g.fingerprint(), &options, &|_| {})
             .unwrap()
             .model
     };
-    // A fresh copy of the machine, as it is after measuring the plan, for every drive.
-    let drive = |command: &dyn Fn(&Pose) -> [f64; LEGS]| -> Vec<PoseErrorNorm> {
+    // A fresh copy of the machine, as it is after measuring the plan, for every drive; the
+    // instrument measuring the validation poses is a copy with its own noise stream.
+    let instrument =
+        VirtualPlatform::new(g, &o.error_model, o.machine_seed, o.noise_seed + 1).unwrap();
+    let drive = |command: &dyn Fn(&Pose) -> [f64; LEGS]| -> ValidationErrors {
         let mut copy = platform.clone();
-        validation
-            .iter()
-            .map(|pose| {
-                PoseErrorNorm::between(pose, &copy.move_legs(&command(pose), pose).unwrap())
-            })
-            .collect()
+        let mut instrument = instrument.clone();
+        let mut errors = ValidationErrors::default();
+        for pose in &validation {
+            let reached = copy.move_legs(&command(pose), pose).unwrap();
+            let targets = instrument.measure_targets(&reached);
+            let measured = pose_from_targets(g, &targets, pose).unwrap();
+            errors.reached.push(PoseErrorNorm::between(pose, &reached));
+            errors
+                .measured
+                .push(PoseErrorNorm::between(pose, &measured));
+        }
+        errors
     };
     let input = o.train.input;
     let mut errors = Vec::new();
@@ -106,10 +118,9 @@ fn redo(g: &Geometry, o: &EvaluationOptions) -> Redone {
         let coupled = fit(&first(&robust, n), Architecture::Coupled, input);
         let decoupled = fit(&first(&robust, n), Architecture::Decoupled, input);
         errors.push(vec![
-            // Through the platform's own uncompensated drive.
             (
                 Method::Uncompensated,
-                platform.clone().uncompensated_errors(&validation).unwrap(),
+                drive(&|p| inverse_kinematics(g, p).lengths),
             ),
             (
                 Method::ModelBased,
@@ -134,9 +145,9 @@ fn redo(g: &Geometry, o: &EvaluationOptions) -> Redone {
                 Architecture::Decoupled,
                 NetworkInput::Commanded,
             );
-            other_input = Some(PoseErrorStats::of(&drive(&|p| {
-                compensate_pose(g, Some(&other), p).legs
-            })));
+            other_input = Some(PoseErrorStats::of(
+                &drive(&|p| compensate_pose(g, Some(&other), p).legs).reached,
+            ));
         }
     }
     Redone {
@@ -184,20 +195,33 @@ fn every_method_meets_the_same_machine_and_the_numbers_match_the_comparison_redo
         let methods: Vec<Method> = size.errors.iter().map(|(m, _)| *m).collect();
         assert_eq!(methods, Method::ALL);
         for ((method, got), (_, want)) in size.errors.iter().zip(expected) {
-            assert_eq!(got, want, "{method:?} at {n} configurations");
-            let stats = size.stats(*method);
-            assert_stats(
-                &stats.position_mm,
-                &want.iter().map(|e| e.position_mm).collect::<Vec<_>>(),
-            );
-            assert_stats(
-                &stats.orientation_deg,
-                &want.iter().map(|e| e.orientation_deg).collect::<Vec<_>>(),
-            );
+            for protocol in [Protocol::Reached, Protocol::Measured] {
+                let want = want.of(protocol);
+                assert_eq!(
+                    got.of(protocol),
+                    want,
+                    "{method:?} {protocol:?} at {n} configurations"
+                );
+                let stats = size.stats(*method, protocol);
+                assert_stats(
+                    &stats.position_mm,
+                    &want.iter().map(|e| e.position_mm).collect::<Vec<_>>(),
+                );
+                assert_stats(
+                    &stats.orientation_deg,
+                    &want.iter().map(|e| e.orientation_deg).collect::<Vec<_>>(),
+                );
+            }
         }
         // Sanity of the case: compensation helps at every size.
-        let before = size.stats(Method::Uncompensated).position_mm.mean;
-        let robust = size.stats(Method::RobustCoupled).position_mm.mean;
+        let before = size
+            .stats(Method::Uncompensated, Protocol::Reached)
+            .position_mm
+            .mean;
+        let robust = size
+            .stats(Method::RobustCoupled, Protocol::Reached)
+            .position_mm
+            .mean;
         assert!(before > 0.3 && robust < before / 3.0, "{before} {robust}");
     }
     // The input comparison is made at the largest size (the first given here).
@@ -207,7 +231,7 @@ fn every_method_meets_the_same_machine_and_the_numbers_match_the_comparison_redo
         evaluation.inputs[0],
         (
             NetworkInput::Equivalent,
-            largest.stats(Method::RobustDecoupled)
+            largest.stats(Method::RobustDecoupled, Protocol::Reached)
         )
     );
     assert_eq!(
@@ -253,10 +277,15 @@ fn on_a_purely_geometric_machine_the_model_based_baseline_is_exact_and_ordinary_
     let evaluation = evaluate(&g, &o, &|_| {}).unwrap();
     let size = &evaluation.sizes[0];
     // Identification recovers a purely geometric machine: its inverse kinematics is exact.
-    let model_based = size.stats(Method::ModelBased);
+    let model_based = size.stats(Method::ModelBased, Protocol::Reached);
     assert!(model_based.position_mm.max < 1e-4, "{model_based:?}");
     assert!(model_based.orientation_deg.max < 1e-5, "{model_based:?}");
-    assert!(size.stats(Method::Uncompensated).position_mm.mean > 0.3);
+    assert!(
+        size.stats(Method::Uncompensated, Protocol::Reached)
+            .position_mm
+            .mean
+            > 0.3
+    );
     // No configuration is near-singular, so λ₀ is never applied: the ordinary and the robust
     // corrections, hence their networks and errors, are the same.
     assert_eq!(evaluation.above_threshold, 0);
@@ -267,6 +296,81 @@ fn on_a_purely_geometric_machine_the_model_based_baseline_is_exact_and_ordinary_
     );
 }
 
+#[test]
+fn measured_errors_are_the_reached_ones_plus_the_instruments_noise() {
+    let g = Geometry::prototype();
+    // A noise-free instrument reports the reached pose itself.
+    let o = options(vec![10], ErrorModel::variant(ErrorVariant::NoiseFree));
+    let evaluation = evaluate(&g, &o, &|_| {}).unwrap();
+    for (method, errors) in &evaluation.sizes[0].errors {
+        for (reached, measured) in errors.reached.iter().zip(&errors.measured) {
+            assert!(
+                (reached.position_mm - measured.position_mm).abs() < 1e-9
+                    && (reached.orientation_deg - measured.orientation_deg).abs() < 1e-9,
+                "{method:?}: {reached:?} {measured:?}"
+            );
+        }
+    }
+    // A purely geometric machine without repeatability noise, driven with its identified
+    // geometry (exact: every pose reached to 1e-4 mm) and measured by the default instrument:
+    // what the measured pose is off by is the instrument's noise propagated through the
+    // least-squares pose fit. Its expected square is σ²·tr((PᵀP)⁻¹) over the translation
+    // (rotation) block, σ the noise of one averaged target coordinate.
+    let machine_model = ErrorModel::variant(ErrorVariant::GeometricOnly);
+    let mut platform = VirtualPlatform::new(&g, &machine_model, DEFAULT_MACHINE_SEED, 1).unwrap();
+    let planned = common::plan_rows(&g, 30, 1);
+    let measurements = hexacomp_trainer::acquire::measure_plan(&mut platform, &planned).unwrap();
+    let identified = identify(&g, &measurements, &IdentifyOptions::default())
+        .unwrap()
+        .geometry;
+    let model = ErrorModel::default();
+    let mut instrument = VirtualPlatform::new(&g, &model, DEFAULT_MACHINE_SEED, 2).unwrap();
+    let o = EvaluationOptions {
+        validation_count: 200,
+        ..options(vec![20], model)
+    };
+    let validation = WorkspaceSampler::new(&g, o.validation_seed, SamplerOptions::default())
+        .unwrap()
+        .samples(o.validation_count)
+        .unwrap();
+    let errors =
+        hexacomp_trainer::evaluate::drive(&mut platform, &mut instrument, &validation, |p| {
+            inverse_kinematics(&identified, p).lengths
+        })
+        .unwrap();
+    let worst = errors
+        .reached
+        .iter()
+        .map(|e| e.position_mm)
+        .fold(0.0, f64::max);
+    assert!(worst < 1e-4, "reached to {worst} mm");
+    let sigma = model.device.sigma_mm / (model.device.readings as f64).sqrt();
+    let (mut expected_position, mut expected_rotation) = (0.0, 0.0);
+    for pose in &validation {
+        let p = hexacomp_core::screw::point_matrix(&g, pose);
+        let covariance = (p.transpose() * p).try_inverse().unwrap() * sigma * sigma;
+        expected_position += (0..3).map(|k| covariance[(k, k)]).sum::<f64>();
+        expected_rotation += (3..6).map(|k| covariance[(k, k)]).sum::<f64>();
+    }
+    let n = validation.len() as f64;
+    let (expected_position, expected_rotation) = (expected_position / n, expected_rotation / n);
+    let mean_square = |pick: fn(&PoseErrorNorm) -> f64| {
+        errors.measured.iter().map(|e| pick(e).powi(2)).sum::<f64>() / n
+    };
+    let position = mean_square(|e| e.position_mm);
+    let rotation = mean_square(|e| e.orientation_deg.to_radians());
+    // 200 poses × 3 coordinates: the mean of the squares scatters by about 6 %.
+    for (what, got, want) in [
+        ("position (mm²)", position, expected_position),
+        ("rotation (rad²)", rotation, expected_rotation),
+    ] {
+        assert!(
+            (got / want - 1.0).abs() < 0.2,
+            "{what}: measured {got:e}, the instrument's noise gives {want:e}"
+        );
+    }
+}
+
 /// The words after `head` of the first line of `text` whose words start with `head`.
 fn row<'t>(text: &'t str, head: &[&str]) -> Vec<&'t str> {
     text.lines()
@@ -274,6 +378,15 @@ fn row<'t>(text: &'t str, head: &[&str]) -> Vec<&'t str> {
         .find(|words| words.starts_with(head))
         .unwrap_or_else(|| panic!("no row {head:?} in\n{text}"))[head.len()..]
         .to_vec()
+}
+
+/// The lines of `text` from the first one that starts with `heading` to the next blank line.
+fn section<'t>(text: &'t str, heading: &str) -> &'t str {
+    let start = text
+        .find(&format!("\n{heading}"))
+        .unwrap_or_else(|| panic!("no section {heading:?} in\n{text}"));
+    let rest = &text[start + 1..];
+    &rest[..rest.find("\n\n").unwrap_or(rest.len())]
 }
 
 fn four(values: &[f64]) -> Vec<String> {
@@ -329,28 +442,45 @@ fn the_evaluate_command_prints_the_tables_of_the_largest_size_and_writes_the_fig
         ),
         "{stdout}"
     );
-    let stats: Vec<PoseErrorStats> = Method::ALL.iter().map(|m| largest.stats(*m)).collect();
-    for (head, pick) in [
+    // Table 2 twice: measured (the paper's protocol) first, then reached; then the paper's own.
+    for (protocol, heading) in [
+        (Protocol::Measured, "measured, the paper's protocol"),
         (
-            ["‖δ_A‖", "(mm)", "max"],
-            (|s: &PoseErrorStats| s.position_mm.max) as fn(&PoseErrorStats) -> f64,
+            Protocol::Reached,
+            "reached: the pose the virtual machine really reached",
         ),
-        (["‖δ_A‖", "(mm)", "mean"], |s| s.position_mm.mean),
-        (["‖δ_A‖", "(mm)", "std"], |s| s.position_mm.std),
-        (["‖ε‖", "(deg)", "max"], |s| s.orientation_deg.max),
-        (["‖ε‖", "(deg)", "mean"], |s| s.orientation_deg.mean),
-        (["‖ε‖", "(deg)", "std"], |s| s.orientation_deg.std),
     ] {
-        let values: Vec<f64> = stats.iter().map(pick).collect();
-        assert_eq!(row(&stdout, &head), four(&values), "{head:?}");
+        let table = section(&stdout, heading);
+        let stats: Vec<PoseErrorStats> = Method::ALL
+            .iter()
+            .map(|m| largest.stats(*m, protocol))
+            .collect();
+        for (head, pick) in [
+            (
+                ["‖δ_A‖", "(mm)", "max"],
+                (|s: &PoseErrorStats| s.position_mm.max) as fn(&PoseErrorStats) -> f64,
+            ),
+            (["‖δ_A‖", "(mm)", "mean"], |s| s.position_mm.mean),
+            (["‖δ_A‖", "(mm)", "std"], |s| s.position_mm.std),
+            (["‖ε‖", "(deg)", "max"], |s| s.orientation_deg.max),
+            (["‖ε‖", "(deg)", "mean"], |s| s.orientation_deg.mean),
+            (["‖ε‖", "(deg)", "std"], |s| s.orientation_deg.std),
+        ] {
+            let values: Vec<f64> = stats.iter().map(pick).collect();
+            assert_eq!(row(table, &head), four(&values), "{protocol:?} {head:?}");
+        }
     }
+    assert!(
+        stdout
+            .contains("The paper's Table 2, in its protocol on its prototype: mean ‖δ_A‖ 0.642 mm")
+    );
     // Fig. 13's numbers, one row per size in the order given.
     for size in &evaluation.sizes {
         let head = size.configurations.to_string();
         let expected: Vec<String> = Method::ALL
             .iter()
             .flat_map(|m| {
-                let s = size.stats(*m);
+                let s = size.stats(*m, Protocol::Reached);
                 [
                     format!("{:.4}", s.position_mm.mean),
                     "/".to_string(),
@@ -380,7 +510,7 @@ fn the_evaluate_command_prints_the_tables_of_the_largest_size_and_writes_the_fig
     )));
     // The input comparison, labelled with the size it was made at.
     assert!(
-        stdout.contains("Network input, robust decoupled at 12 configurations:"),
+        stdout.contains("Network input, robust decoupled at 12 configurations, reached:"),
         "{stdout}"
     );
     for (input, s) in &evaluation.inputs {

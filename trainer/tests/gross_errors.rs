@@ -148,17 +148,21 @@ fn calibrate(machine: &Machine, measurements: &[MeasuredConfiguration]) -> Resul
             &machine.geometry,
             &solved.corrections,
             Architecture::Decoupled,
-            &|| {},
+            &|_| {},
         )
         .unwrap();
     let poses = WorkspaceSampler::new(&machine.geometry, 1001, SamplerOptions::default())
         .unwrap()
         .samples(100)
         .unwrap();
-    let errors = drive(&mut machine.platform.clone(), &poses, |p| {
-        compensate_pose(&machine.geometry, Some(&trained.model), p).legs
-    })
-    .unwrap();
+    let errors = drive(
+        &mut machine.platform.clone(),
+        &mut machine.platform.reseeded(2),
+        &poses,
+        |p| compensate_pose(&machine.geometry, Some(&trained.model), p).legs,
+    )
+    .unwrap()
+    .reached;
     Result::Trained {
         excluded,
         mean_mm: PoseErrorStats::of(&errors).position_mm.mean,

@@ -33,7 +33,7 @@ fn robust_networks_beat_the_papers_figures_and_the_model_based_baseline() {
             &g,
             &measurements,
             &[Architecture::Decoupled, Architecture::Coupled],
-            &|_| {},
+            &|_, _| {},
         )
         .unwrap();
     let (decoupled, coupled) = (&calibration.models[0].1, &calibration.models[1].1);
@@ -41,20 +41,42 @@ fn robust_networks_beat_the_papers_figures_and_the_model_based_baseline() {
         .unwrap()
         .samples(100)
         .unwrap();
+    // (reached, measured in the paper's protocol)
+    let instrument = platform.reseeded(2);
     let drive = |command: &dyn Fn(&Pose) -> [f64; 6]| {
-        PoseErrorStats::of(&evaluate::drive(&mut platform.clone(), &fresh, command).unwrap())
+        let errors = evaluate::drive(
+            &mut platform.clone(),
+            &mut instrument.clone(),
+            &fresh,
+            command,
+        )
+        .unwrap();
+        (
+            PoseErrorStats::of(&errors.reached),
+            PoseErrorStats::of(&errors.measured),
+        )
     };
     let identified = identify(&g, &measurements, &IdentifyOptions::default())
         .unwrap()
         .geometry;
 
-    let before = drive(&|p| inverse_kinematics(&g, p).lengths);
-    let model_based = drive(&|p| inverse_kinematics(&identified, p).lengths);
-    let d = drive(&|p| compensate_pose(&g, Some(&decoupled.model), p).legs);
-    let c = drive(&|p| compensate_pose(&g, Some(&coupled.model), p).legs);
-    eprintln!("before {before:?}\nmodel-based {model_based:?}\ncoupled {c:?}\ndecoupled {d:?}");
+    let (before, _) = drive(&|p| inverse_kinematics(&g, p).lengths);
+    let (model_based, _) = drive(&|p| inverse_kinematics(&identified, p).lengths);
+    let (d, d_measured) = drive(&|p| compensate_pose(&g, Some(&decoupled.model), p).legs);
+    let (c, c_measured) = drive(&|p| compensate_pose(&g, Some(&coupled.model), p).legs);
+    eprintln!(
+        "before {before:?}\nmodel-based {model_based:?}\ncoupled {c:?}\ndecoupled {d:?}\n\
+         measured: coupled {c_measured:?}\ndecoupled {d_measured:?}"
+    );
 
-    // The issue's targets, better than the paper's 0.052 mm / 0.112 mm / 0.018°.
+    // In the paper's protocol, better than the paper's Table 2: 0.052 mm mean, 0.112 mm max,
+    // 0.018° mean with the decoupled networks, 0.076 mm and 0.024° with the coupled one.
+    assert!(d_measured.position_mm.mean <= 0.052, "{d_measured:?}");
+    assert!(d_measured.position_mm.max <= 0.112, "{d_measured:?}");
+    assert!(d_measured.orientation_deg.mean <= 0.018, "{d_measured:?}");
+    assert!(c_measured.position_mm.mean <= 0.076, "{c_measured:?}");
+    assert!(c_measured.orientation_deg.mean <= 0.024, "{c_measured:?}");
+    // The errors reached: the issue's targets.
     assert!(d.position_mm.mean <= 0.040, "{d:?}");
     assert!(d.position_mm.max <= 0.10, "{d:?}");
     assert!(d.orientation_deg.mean <= 0.015, "{d:?}");
@@ -84,7 +106,7 @@ fn too_few_corrections_are_refused() {
             Architecture::Coupled,
             g.fingerprint(),
             &TrainOptions::default(),
-            &|| {},
+            &|_| {},
         );
         assert!(
             matches!(result, Err(Error::InsufficientData(_))),

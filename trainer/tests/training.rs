@@ -55,7 +55,7 @@ fn small(hidden_sizes: Vec<usize>, input: NetworkInput, refit_on_all: bool) -> T
 }
 
 fn fit(rows: &[JointCorrection], architecture: Architecture, options: &TrainOptions) -> Trained {
-    train(rows, architecture, Fingerprint(7), options, &|| {}).unwrap()
+    train(rows, architecture, Fingerprint(7), options, &|_| {}).unwrap()
 }
 
 /// Indices of the rows whose corrections can change without changing the trained networks.
@@ -443,7 +443,7 @@ fn six_configurations_are_enough_to_train_and_five_are_refused() {
         Architecture::Coupled,
         Fingerprint(7),
         &options,
-        &|| {},
+        &|_| {},
     );
     assert!(
         matches!(refused, Err(hexacomp_trainer::Error::InsufficientData(_))),
@@ -466,7 +466,7 @@ fn an_empty_sweep_or_no_restart_is_refused_as_an_invalid_setting() {
             Architecture::Coupled,
             Fingerprint(7),
             &options,
-            &|| {},
+            &|_| {},
         );
         assert!(
             matches!(result, Err(hexacomp_trainer::Error::InvalidSetting(_))),

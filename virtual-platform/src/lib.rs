@@ -74,6 +74,15 @@ impl VirtualPlatform {
         })
     }
 
+    /// The same machine and device with the noise stream of `noise_seed`: e.g. an instrument
+    /// whose readings draw their noise apart from the machine's moves.
+    pub fn reseeded(&self, noise_seed: u64) -> Self {
+        Self {
+            noise: ChaCha8Rng::seed_from_u64(noise_seed),
+            ..self.clone()
+        }
+    }
+
     /// The nominal geometry the controller believes in.
     pub fn nominal(&self) -> &Geometry {
         &self.nominal

@@ -175,16 +175,19 @@ pub fn run(geometry: &Geometry, args: &CalibrateArgs) -> anyhow::Result<()> {
     );
     for (architecture, t) in &trained {
         println!(
-            "  {:<9} hidden nodes {:?}, holdout validation RMSE {:.4} mm, trained in {:.2} s",
+            "  {:<9} hidden nodes {:?}, holdout validation RMSE {:.4} mm, trained in {:.2} s; {}",
             arch_name(*architecture),
             t.model.hidden_nodes(),
             t.validation_rmse_mm,
-            t.seconds
+            t.seconds,
+            t.stops
         );
     }
     if let Some(table) = check {
         println!(
-            "\nOn {} fresh poses of the virtual machine:\n{table}",
+            "\nOn {} fresh poses of the virtual machine; reached: the machine's true pose; \
+             measured: the pose fitted to the instrument's targets (Eq. 4), the paper's \
+             protocol, with the instrument's noise:\n{table}",
             args.validation.max(1)
         );
     }
@@ -286,14 +289,16 @@ fn train_both(
 }
 
 /// On fresh poses of the virtual machine: the pose errors uncompensated, with the identified
-/// geometry (the model-based baseline) and with each trained model.
+/// geometry (the model-based baseline) and with each trained model; reached (the machine's true
+/// pose) and measured (the pose fitted to the instrument's noisy targets, Eq. 4: the paper's
+/// protocol).
 fn check_on_fresh_poses(
     geometry: &Geometry,
     platform: &VirtualPlatform,
     measurements: &[MeasuredConfiguration],
     trained: &[(Architecture, Trained)],
     args: &CalibrateArgs,
-) -> anyhow::Result<Table<4>> {
+) -> anyhow::Result<Table<6>> {
     let poses = WorkspaceSampler::new(
         geometry,
         args.seed.wrapping_add(1000),
@@ -301,8 +306,22 @@ fn check_on_fresh_poses(
     )?
     .samples(args.validation.max(1))?;
     let identified = identify(geometry, measurements, &IdentifyOptions::default())?.geometry;
+    // The instrument draws its noise apart from the machine's moves; every method meets the same
+    // machine and instrument states.
+    let instrument = platform.reseeded(args.seed.wrapping_add(1));
     let stats = |command: &dyn Fn(&hexacomp_core::Pose) -> [f64; 6]| {
-        drive(&mut platform.clone(), &poses, command).map(|e| PoseErrorStats::of(&e))
+        drive(
+            &mut platform.clone(),
+            &mut instrument.clone(),
+            &poses,
+            command,
+        )
+        .map(|e| {
+            (
+                PoseErrorStats::of(&e.reached),
+                PoseErrorStats::of(&e.measured),
+            )
+        })
     };
     let mut rows = vec![
         (
@@ -322,16 +341,20 @@ fn check_on_fresh_poses(
     }
     let mut table = Table::new([
         "method",
-        "mean ‖δ_A‖ (mm)",
-        "max ‖δ_A‖ (mm)",
-        "mean ‖ε‖ (deg)",
+        "reached mean ‖δ_A‖ (mm)",
+        "reached max ‖δ_A‖ (mm)",
+        "reached mean ‖ε‖ (deg)",
+        "measured mean ‖δ_A‖ (mm)",
+        "measured mean ‖ε‖ (deg)",
     ]);
-    for (name, s) in rows {
+    for (name, (reached, measured)) in rows {
         table.row([
             name,
-            format!("{:.4}", s.position_mm.mean),
-            format!("{:.4}", s.position_mm.max),
-            format!("{:.4}", s.orientation_deg.mean),
+            format!("{:.4}", reached.position_mm.mean),
+            format!("{:.4}", reached.position_mm.max),
+            format!("{:.4}", reached.orientation_deg.mean),
+            format!("{:.4}", measured.position_mm.mean),
+            format!("{:.4}", measured.orientation_deg.mean),
         ]);
     }
     Ok(table)

@@ -5,7 +5,8 @@ use std::path::PathBuf;
 use hexacomp_core::Geometry;
 use hexacomp_core::sampling::SamplerOptions;
 use hexacomp_formats::write_poses;
-use hexacomp_trainer::plan::{PlanOptions, numbered_rows, plan};
+use hexacomp_trainer::plan::{PlanOptions, numbered_rows, plan_with_progress, plan_work};
+use indicatif::{ProgressBar, ProgressStyle};
 
 use hexacomp_formats::write_file;
 
@@ -13,7 +14,8 @@ use hexacomp_formats::write_file;
 ///
 /// Each configuration is the best of several uniform random candidates (the one farthest from
 /// those already chosen), so the plan is random but evenly spread; poses whose legs come within
-/// the stroke margin of a stroke end are never chosen. Output: a poses CSV, `id,x,y,z,a,b,c`
+/// the stroke margin of a stroke end are never chosen. The time this takes grows with the square
+/// of the count (a progress bar shows the time left); with --candidates 1 it grows linearly. Output: a poses CSV, `id,x,y,z,a,b,c`
 /// (mm, degrees), ids 1..N.
 #[derive(Debug, clap::Args)]
 pub struct PlanArgs {
@@ -55,7 +57,18 @@ pub fn run(geometry: &Geometry, args: &PlanArgs) -> anyhow::Result<()> {
             ..Default::default()
         },
     };
-    let rows = numbered_rows(&plan(geometry, &options)?);
+    let bar = ProgressBar::new(plan_work(&options));
+    bar.set_style(
+        ProgressStyle::with_template(
+            "planning {msg} configurations [{bar:30}] {percent_precise}% ({elapsed}, about {eta} left)",
+        )
+        .expect("valid template")
+        .progress_chars("=> "),
+    );
+    bar.set_message(args.count.to_string());
+    let poses = plan_with_progress(geometry, &options, &|n| bar.inc(n));
+    bar.finish_and_clear();
+    let rows = numbered_rows(&poses?);
     write_file(&args.out, |w| write_poses(w, &rows))?;
     eprintln!(
         "planned {} configurations over the workspace of {} → {}",

@@ -11,7 +11,7 @@ use hexacomp_trainer::pipeline::Pipeline;
 
 use super::solve::{ScreeningArgs, screen_corrections_file};
 use hexacomp_trainer::svg::{Chart, Series};
-use hexacomp_trainer::train::{Architecture, Selection, TrainOptions, Trained};
+use hexacomp_trainer::train::{Architecture, Selection, TrainOptions, Trained, training_work};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use hexacomp_trainer::table::Table;
@@ -136,18 +136,20 @@ pub fn run(geometry: &Geometry, args: &TrainArgs) -> anyhow::Result<()> {
     print_selection(&trained, args.arch.into());
     write_selection_plot(&trained, args.arch.into(), &plot)?;
     eprintln!(
-        "trained {} model (hidden nodes {:?}, validation RMSE {:.4} mm) in {:.2} s → {} (selection curve: {})",
+        "trained {} model (hidden nodes {:?}, validation RMSE {:.4} mm) in {:.2} s → {} (selection curve: {})\n{}",
         arch_name(args.arch.into()),
         trained.model.hidden_nodes(),
         trained.validation_rmse_mm,
         trained.seconds,
         args.out.display(),
-        plot.display()
+        plot.display(),
+        trained.stops
     );
     Ok(())
 }
 
-/// Trains with a progress bar over the sweep, recording `source` in the provenance.
+/// Trains with a progress bar (share of the iteration budget done, time left), recording
+/// `source` in the provenance.
 pub fn train_with_progress(
     rows: &[JointCorrection],
     architecture: Architecture,
@@ -155,20 +157,19 @@ pub fn train_with_progress(
     pipeline: &Pipeline,
     source: String,
 ) -> anyhow::Result<Trained> {
-    let options = &pipeline.train;
-    let networks = match architecture {
-        Architecture::Coupled => 1,
-        Architecture::Decoupled => 6,
-    };
-    let bar = ProgressBar::new((networks * options.hidden_sizes.len()) as u64);
+    // The bar counts the work of Levenberg–Marquardt iterations, so it moves within a fit on
+    // large inputs; fits that settle early skip ahead, so the real time left is often shorter.
+    let bar = ProgressBar::new(training_work(rows.len(), architecture, &pipeline.train));
     bar.set_style(
-        ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len} fits ({elapsed})")
-            .expect("valid template")
-            .progress_chars("=> "),
+        ProgressStyle::with_template(
+            "{msg} [{bar:30}] {percent_precise}% ({elapsed}, about {eta} left)",
+        )
+        .expect("valid template")
+        .progress_chars("=> "),
     );
     bar.set_message(format!("training {} networks", arch_name(architecture)));
     let mut trained = pipeline
-        .train(geometry, rows, architecture, &|| bar.inc(1))
+        .train(geometry, rows, architecture, &|n| bar.inc(n))
         .context("training")?;
     bar.finish_and_clear();
     trained.model.provenance.source = source;

@@ -1,0 +1,128 @@
+//! The pose an instrument reports from three measured targets (`pose_from_targets`): exact
+//! targets give the pose back from a distant seed; noisy targets give the least-squares rigid fit,
+//! checked against the closed-form solution of that problem (Kabsch/Horn: centroids and the SVD
+//! of the cross-covariance), which shares no code with the Gauss–Newton iteration.
+
+use glam::{DMat3, DVec3};
+use hexacomp_core::kinematics::{pose_from_targets, target_points};
+use hexacomp_core::pose::rotation_vector;
+use hexacomp_core::sampling::{SamplerOptions, WorkspaceSampler};
+use hexacomp_core::{Error, Geometry, Pose, TARGETS};
+use nalgebra::Matrix3;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, Normal};
+
+fn workspace_poses(count: usize, seed: u64) -> Vec<Pose> {
+    WorkspaceSampler::new(&Geometry::prototype(), seed, SamplerOptions::default())
+        .expect("sampler")
+        .samples(count)
+        .expect("poses")
+}
+
+/// The angle between two rotations, rad.
+fn rotation_gap(a: &DMat3, b: &DMat3) -> f64 {
+    rotation_vector(&(*a * b.transpose())).length()
+}
+
+/// The least-squares rigid transform platform → base taking the targets `platform` onto
+/// `measured`, in closed form (Kabsch).
+fn kabsch(platform: &[DVec3; TARGETS], measured: &[DVec3; TARGETS]) -> (DMat3, DVec3) {
+    let mean = |points: &[DVec3; TARGETS]| points.iter().copied().sum::<DVec3>() / TARGETS as f64;
+    let (p_mean, m_mean) = (mean(platform), mean(measured));
+    let mut h = Matrix3::zeros();
+    for (p, m) in platform.iter().zip(measured) {
+        let (p, m) = (*p - p_mean, *m - m_mean);
+        h += nalgebra::Vector3::new(p.x, p.y, p.z)
+            * nalgebra::Vector3::new(m.x, m.y, m.z).transpose();
+    }
+    let svd = h.svd(true, true);
+    let (u, v) = (svd.u.expect("U"), svd.v_t.expect("Vᵀ").transpose());
+    let d = (v * u.transpose()).determinant().signum();
+    let r = v * Matrix3::from_diagonal(&nalgebra::Vector3::new(1.0, 1.0, d)) * u.transpose();
+    let rotation = DMat3::from_cols_array(&[
+        r[(0, 0)],
+        r[(1, 0)],
+        r[(2, 0)],
+        r[(0, 1)],
+        r[(1, 1)],
+        r[(2, 1)],
+        r[(0, 2)],
+        r[(1, 2)],
+        r[(2, 2)],
+    ]);
+    (rotation, m_mean - rotation * p_mean)
+}
+
+#[test]
+fn exact_targets_give_the_pose_back_from_a_distant_seed() {
+    let g = Geometry::prototype();
+    let poses = workspace_poses(300, 7);
+    let mut worst = (0.0_f64, 0.0_f64);
+    for (k, pose) in poses.iter().enumerate() {
+        // Seeds 5 mm and 3° away: far more than any machine's error.
+        let offset = DVec3::new(5.0, -5.0, 5.0) * if k % 2 == 0 { 1.0 } else { -1.0 };
+        let seed = Pose::new(
+            pose.position + offset,
+            pose.angles + DVec3::splat(3f64.to_radians()),
+        );
+        let fitted = pose_from_targets(&g, &target_points(&g, pose), &seed).expect("fit");
+        worst.0 = worst.0.max((fitted.position - pose.position).length());
+        worst.1 = worst
+            .1
+            .max(rotation_gap(&fitted.rotation(), &pose.rotation()));
+    }
+    assert!(worst.0 < 1e-9, "position off by {:e} mm", worst.0);
+    assert!(worst.1 < 1e-12, "rotation off by {:e} rad", worst.1);
+}
+
+#[test]
+fn noisy_targets_give_the_least_squares_rigid_fit() {
+    let g = Geometry::prototype();
+    let mut rng = ChaCha8Rng::seed_from_u64(11);
+    // 0.05 mm: ten times a laser tracker's noise, so the fit's residual is far from zero.
+    let noise = Normal::new(0.0, 0.05).expect("normal");
+    let mut worst = (0.0_f64, 0.0_f64, 0.0_f64);
+    for pose in workspace_poses(300, 8) {
+        let measured = target_points(&g, &pose).map(|p| {
+            p + DVec3::new(
+                noise.sample(&mut rng),
+                noise.sample(&mut rng),
+                noise.sample(&mut rng),
+            )
+        });
+        let fitted = pose_from_targets(&g, &measured, &pose).expect("fit");
+        let (rotation, position) = kabsch(&g.targets, &measured);
+        worst.0 = worst.0.max((fitted.position - position).length());
+        worst.1 = worst.1.max(rotation_gap(&fitted.rotation(), &rotation));
+        // The noise moved the fit away from the true pose: the comparison is not trivial.
+        worst.2 = worst.2.max((fitted.position - pose.position).length());
+    }
+    assert!(
+        worst.0 < 1e-9,
+        "position off the closed form by {:e} mm",
+        worst.0
+    );
+    assert!(
+        worst.1 < 1e-12,
+        "rotation off the closed form by {:e} rad",
+        worst.1
+    );
+    assert!(
+        worst.2 > 0.02,
+        "the noise moved the fit by {:e} mm only",
+        worst.2
+    );
+}
+
+#[test]
+fn a_non_finite_target_is_refused() {
+    let g = Geometry::prototype();
+    let pose = g.home_pose();
+    let mut measured = target_points(&g, &pose);
+    measured[1].y = f64::NAN;
+    assert!(matches!(
+        pose_from_targets(&g, &measured, &pose),
+        Err(Error::NonFinite(_))
+    ));
+}
