@@ -61,8 +61,11 @@ pub fn calibrate(
         ..Default::default()
     };
     let (_, measurements) = pipeline.measure_virtual(platform)?;
+    let solved = pipeline
+        .solve(&geometry, &measurements)
+        .context("solving the virtual platform's corrections")?;
     let bar = ProgressBar::new(training_work(
-        measurements.len(),
+        solved.corrections.len(),
         Architecture::Decoupled,
         &pipeline.train,
     ));
@@ -73,16 +76,15 @@ pub fn calibrate(
         .expect("valid template")
         .progress_chars("=> "),
     );
-    let calibration = pipeline
-        .calibrate(
+    let mut trained = pipeline
+        .train(
             &geometry,
-            &measurements,
-            &[Architecture::Decoupled],
-            &|_, n| bar.inc(n),
+            &solved.corrections,
+            Architecture::Decoupled,
+            &|n| bar.inc(n),
         )
-        .context("calibrating the virtual platform")?;
+        .context("training the virtual platform's model")?;
     bar.finish_and_clear();
-    let (_, mut trained) = calibration.models.into_iter().next().expect("one model");
     trained.model.provenance.source = format!(
         "hexacomp-bench {} virtual calibration ({configurations} configurations)",
         env!("CARGO_PKG_VERSION")

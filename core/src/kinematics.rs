@@ -156,7 +156,9 @@ pub fn target_points(geometry: &Geometry, pose: &Pose) -> [DVec3; crate::geometr
 /// (Eq. 4) for the twist `ξ` about `A` in least squares, `ζ` being the measured minus the computed
 /// targets, and displaces the pose by it. The first step is the paper's linear solve; the next
 /// ones remove its second-order term (below 1e-4 mm for errors of 1 mm and 0.2°). Stops when a
-/// step moves every target by less than 1e-10 mm.
+/// step moves every target by less than 1e-10 mm (or 1e-14 of the largest coordinate, where
+/// rounding is coarser); after 20 steps the iterate is still returned if its last step was below
+/// 1e-6 mm, and is an error otherwise.
 pub fn pose_from_targets(
     geometry: &Geometry,
     measured: &[DVec3; crate::geometry::TARGETS],
@@ -164,6 +166,7 @@ pub fn pose_from_targets(
 ) -> Result<Pose> {
     const MAX_STEPS: usize = 20;
     const STEP_TOLERANCE_MM: f64 = 1e-10;
+    const GOOD_ENOUGH_MM: f64 = 1e-6;
     if !measured.iter().all(|p| p.is_finite()) {
         return Err(Error::NonFinite("measured target point"));
     }
@@ -175,6 +178,10 @@ pub fn pose_from_targets(
         .targets
         .iter()
         .fold(1.0_f64, |r, p| r.max(p.length()));
+    let scale_mm = measured
+        .iter()
+        .fold(0.0_f64, |m, p| m.max(p.abs().max_element()));
+    let tolerance_mm = STEP_TOLERANCE_MM.max(1e-14 * scale_mm);
     let mut pose = *seed;
     let mut step_mm = f64::INFINITY;
     for _ in 0..MAX_STEPS {
@@ -190,7 +197,11 @@ pub fn pose_from_targets(
         let normal = p.transpose() * p;
         let xi = normal
             .cholesky()
-            .ok_or(Error::SingularJacobian { ratio: 0.0 })?
+            .ok_or_else(|| {
+                Error::InvalidGeometry(
+                    "the targets are collinear: measured targets do not determine the pose".into(),
+                )
+            })?
             .solve(&(p.transpose() * misfit));
         let step = crate::pose::Twist {
             translation: DVec3::new(xi[0], xi[1], xi[2]),
@@ -201,9 +212,12 @@ pub fn pose_from_targets(
             return Err(Error::NonFinite("pose-fit iterate"));
         }
         step_mm = step.translation.length() + reach_mm * step.rotation.length();
-        if step_mm < STEP_TOLERANCE_MM {
+        if step_mm < tolerance_mm {
             return Ok(pose);
         }
+    }
+    if step_mm < GOOD_ENOUGH_MM {
+        return Ok(pose);
     }
     Err(Error::PoseFitNotConverged {
         iterations: MAX_STEPS,

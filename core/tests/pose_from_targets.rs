@@ -126,3 +126,38 @@ fn a_non_finite_target_is_refused() {
         Err(Error::NonFinite(_))
     ));
 }
+
+#[test]
+fn collinear_targets_are_refused_with_their_cause() {
+    let mut g = Geometry::prototype();
+    for (j, x) in [-50.0, 0.0, 50.0].into_iter().enumerate() {
+        g.targets[j] = DVec3::new(x, 0.0, 25.0);
+    }
+    let pose = g.home_pose();
+    let error = pose_from_targets(&g, &target_points(&g, &pose), &pose).unwrap_err();
+    assert!(error.to_string().contains("collinear"), "{error}");
+}
+
+#[test]
+fn a_pose_far_from_the_origin_is_fitted_where_rounding_is_coarser() {
+    // Points in a site's survey frame, 10 km from its origin: coordinates near 1e7 mm, whose
+    // rounding step (1.9e-9 mm) is above a fixed 1e-10 mm step tolerance.
+    let g = Geometry::prototype();
+    let mut rng = ChaCha8Rng::seed_from_u64(12);
+    let noise = Normal::new(0.0, 0.05).expect("normal");
+    for pose in workspace_poses(50, 9) {
+        let far = Pose::new(pose.position + DVec3::new(1e7, -1e7, 1e7), pose.angles);
+        let measured = target_points(&g, &far).map(|p| {
+            p + DVec3::new(
+                noise.sample(&mut rng),
+                noise.sample(&mut rng),
+                noise.sample(&mut rng),
+            )
+        });
+        let fitted = pose_from_targets(&g, &measured, &far).expect("fit");
+        let (rotation, position) = kabsch(&g.targets, &measured);
+        // Rounding of the coordinates themselves limits both fits to about 1e-8 mm here.
+        assert!((fitted.position - position).length() < 1e-7);
+        assert!(rotation_gap(&fitted.rotation(), &rotation) < 1e-9);
+    }
+}

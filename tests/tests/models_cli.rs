@@ -279,10 +279,38 @@ fn calibrate_runs_the_whole_pipeline_and_summarises() {
         report.contains("Calibration summary (60 configurations, virtual platform)"),
         "{report}"
     );
-    assert!(
-        report.contains("robust decoupled") && report.contains("time: "),
-        "{report}"
-    );
+    assert!(report.contains("time: "), "{report}");
+    // How every Levenberg–Marquardt run ended: (16 sizes + the final fit) × 3 restarts per network.
+    for (architecture, runs) in [("coupled", 51), ("decoupled", 6 * 51)] {
+        let line = report
+            .lines()
+            .find(|l| l.trim_start().starts_with(architecture) && l.contains("runs:"))
+            .unwrap_or_else(|| panic!("no {architecture} summary in\n{report}"));
+        let counts: Vec<usize> = line
+            .split(|c: char| !c.is_ascii_digit())
+            .filter(|w| !w.is_empty())
+            .map(|w| w.parse().unwrap())
+            .collect();
+        // … trained in X.YZ s; N runs: a settled, b at the cap, c found no lower loss
+        let [total, settled, cap, no_descent] = counts[counts.len() - 4..] else {
+            unreachable!()
+        };
+        assert_eq!(total, runs, "{line}");
+        assert_eq!(settled + cap + no_descent, total, "{line}");
+    }
+    // Both protocols on the fresh poses: reached mean, max, orientation; measured mean and
+    // orientation. The instrument's noise makes the measured mean differ from the reached one.
+    assert!(report.contains("measured mean ‖δ_A‖ (mm)"), "{report}");
+    let row: Vec<f64> = report
+        .lines()
+        .find(|l| l.starts_with("robust decoupled"))
+        .unwrap_or_else(|| panic!("no robust decoupled row in\n{report}"))
+        ["robust decoupled".len()..]
+        .split_whitespace()
+        .map(|w| w.parse().unwrap())
+        .collect();
+    assert_eq!(row.len(), 5, "{row:?}");
+    assert!(row[0] > 0.0 && row[3] > 0.0 && row[0] != row[3], "{row:?}");
     Model::load(&out_dir.join("model.hxm"), &Geometry::prototype()).unwrap();
 }
 

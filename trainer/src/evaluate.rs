@@ -77,8 +77,10 @@ pub struct EvaluationOptions {
     pub error_model: ErrorModel,
     /// Seed of the virtual machine.
     pub machine_seed: u64,
-    /// Seed of its noise.
+    /// Seed of its repeatability and measuring noise while the plan is measured.
     pub noise_seed: u64,
+    /// Seed of the instrument's noise at the validation poses (drawn apart from the machine's).
+    pub instrument_seed: u64,
     /// Network training settings (the input is set per model).
     pub train: TrainOptions,
 }
@@ -91,16 +93,6 @@ pub enum Protocol {
     /// Against the pose fitted to the instrument's measured targets (Eq. 4), as the paper
     /// evaluates: the instrument's noise is in it.
     Measured,
-}
-
-impl Protocol {
-    /// A short label for tables.
-    pub fn label(self) -> &'static str {
-        match self {
-            Protocol::Reached => "reached",
-            Protocol::Measured => "measured (paper's protocol)",
-        }
-    }
 }
 
 /// One method's pose errors at the validation poses, in both protocols (same order as the
@@ -212,7 +204,7 @@ pub fn evaluate(
     let (_, measurements) = robust_pipeline.measure_virtual(&mut platform)?;
     // The instrument that measures the validation poses draws its noise apart from the machine's
     // moves, so the reached errors do not depend on whether they are also measured.
-    let instrument = platform.reseeded(options.noise_seed.wrapping_add(1));
+    let instrument = platform.reseeded(options.instrument_seed);
     let robust = robust_pipeline.solve(geometry, &measurements)?.outcomes;
     let ordinary = ordinary_pipeline.solve(geometry, &measurements)?.outcomes;
     let above_threshold = robust

@@ -41,8 +41,8 @@ pub fn plan(geometry: &Geometry, options: &PlanOptions) -> Result<Vec<Pose>> {
     plan_with_progress(geometry, options, &|_| {})
 }
 
-/// The work of a plan, in the units [`plan_with_progress`] reports: a candidate weighed against
-/// one configuration chosen before it. Best-candidate sampling weighs every candidate against
+/// The work of a plan, in the units [`plan_with_progress`] reports: a candidate drawn, or a
+/// candidate weighed against one configuration chosen before it. Best-candidate sampling weighs every candidate against
 /// every configuration already chosen, so the work grows with the square of the count
 /// (`candidates · count · (count + 1) / 2`); plain random draws (one candidate) cost one unit per
 /// configuration. Saturates at `u64::MAX`.
@@ -222,6 +222,22 @@ mod tests {
         };
         // 10 candidates × 1e8 × (1e8 + 1) / 2: quadratic, and still counted exactly.
         assert_eq!(plan_work(&huge), 50_000_000_500_000_000);
+    }
+
+    #[test]
+    fn one_candidate_draws_exactly_the_samplers_poses() {
+        let g = Geometry::prototype();
+        let options = PlanOptions {
+            count: 50,
+            candidates: 1,
+            seed: 4,
+            ..Default::default()
+        };
+        let drawn = WorkspaceSampler::new(&g, 4, options.sampler)
+            .unwrap()
+            .samples(50)
+            .unwrap();
+        assert_eq!(plan(&g, &options).unwrap(), drawn);
     }
 
     #[test]

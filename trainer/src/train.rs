@@ -99,8 +99,8 @@ impl Selection {
     }
 }
 
-/// How the Levenberg–Marquardt fits of a training ended, counted over every restart of every
-/// fit (the sweep's and the final refits).
+/// How the Levenberg–Marquardt runs of a training ended: one run per restart of every fit (the
+/// sweep's and the final refits).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct FitStops {
     /// An accepted step lowered the loss by less than [`TrainOptions::relative_tolerance`].
@@ -137,8 +137,8 @@ impl std::fmt::Display for FitStops {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(
             f,
-            "{} fits: {} settled (loss change below the tolerance), {} at the iteration cap, \
-             {} found no lower loss",
+            "{} Levenberg–Marquardt runs: {} settled (loss change below the tolerance), {} at \
+             the iteration cap, {} found no lower loss",
             self.total(),
             self.settled,
             self.iteration_cap,
@@ -871,12 +871,15 @@ mod tests {
             .map(|(k, x)| JointCorrection {
                 id: k.to_string(),
                 legs: x.map(|v| 400.0 + 50.0 * v),
-                corrections: x.map(|v| 0.1 * (3.0 * v).sin()),
+                // One linear function of the legs for every leg: one node fits it, coupled or
+                // not, so a size below the largest is chosen.
+                corrections: [0.1 * x.iter().sum::<f64>(); LEGS],
             })
             .collect();
         for architecture in [Architecture::Coupled, Architecture::Decoupled] {
+            // 8 nodes overfit 27 training samples: a smaller size is chosen.
             let options = TrainOptions {
-                hidden_sizes: vec![1, 2, 3],
+                hidden_sizes: vec![1, 2, 8],
                 restarts: 2,
                 max_iterations: 20,
                 ..TrainOptions::default()
@@ -894,8 +897,14 @@ mod tests {
                 Architecture::Decoupled => (LEGS, 1),
             };
             assert_eq!(trained.stops.total(), networks * 4 * 2, "{architecture:?}");
-            // 40 rows: 13 held out, 27 to train on; the final fit on all 40 counted at 3 nodes.
-            let by_hand: usize = [(27, 1), (27, 2), (27, 3), (40, 3)]
+            // The final fit's surplus (counted at 8 nodes) is exercised.
+            assert!(
+                trained.selections.iter().any(|s| s.chosen < 8),
+                "{:?}",
+                trained.selections
+            );
+            // 40 rows: 13 held out, 27 to train on; the final fit on all 40 counted at 8 nodes.
+            let by_hand: usize = [(27, 1), (27, 2), (27, 8), (40, 8)]
                 .iter()
                 .map(|&(samples, hidden)| {
                     let weights = hidden * LEGS + hidden + outputs * hidden + outputs;

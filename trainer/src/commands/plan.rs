@@ -15,8 +15,8 @@ use hexacomp_formats::write_file;
 /// Each configuration is the best of several uniform random candidates (the one farthest from
 /// those already chosen), so the plan is random but evenly spread; poses whose legs come within
 /// the stroke margin of a stroke end are never chosen. The time this takes grows with the square
-/// of the count (a progress bar shows the time left); with --candidates 1 it grows linearly. Output: a poses CSV, `id,x,y,z,a,b,c`
-/// (mm, degrees), ids 1..N.
+/// of the count (a progress bar shows the time left); with --candidates 1 it grows linearly.
+/// Output: a poses CSV, `id,x,y,z,a,b,c` (mm, degrees), ids 1..N.
 #[derive(Debug, clap::Args)]
 pub struct PlanArgs {
     /// Number of configurations (the paper measured 150: 100 for training, 50 for validation).
