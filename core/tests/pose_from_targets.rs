@@ -20,6 +20,15 @@ fn workspace_poses(count: usize, seed: u64) -> Vec<Pose> {
         .expect("poses")
 }
 
+/// `points` with independent `noise` on every coordinate.
+fn with_noise(
+    points: [DVec3; TARGETS],
+    noise: &Normal<f64>,
+    rng: &mut ChaCha8Rng,
+) -> [DVec3; TARGETS] {
+    points.map(|p| p + DVec3::new(noise.sample(rng), noise.sample(rng), noise.sample(rng)))
+}
+
 /// The angle between two rotations, rad.
 fn rotation_gap(a: &DMat3, b: &DMat3) -> f64 {
     rotation_vector(&(*a * b.transpose())).length()
@@ -84,13 +93,7 @@ fn noisy_targets_give_the_least_squares_rigid_fit() {
     let noise = Normal::new(0.0, 0.05).expect("normal");
     let mut worst = (0.0_f64, 0.0_f64, 0.0_f64);
     for pose in workspace_poses(300, 8) {
-        let measured = target_points(&g, &pose).map(|p| {
-            p + DVec3::new(
-                noise.sample(&mut rng),
-                noise.sample(&mut rng),
-                noise.sample(&mut rng),
-            )
-        });
+        let measured = with_noise(target_points(&g, &pose), &noise, &mut rng);
         let fitted = pose_from_targets(&g, &measured, &pose).expect("fit");
         let (rotation, position) = kabsch(&g.targets, &measured);
         worst.0 = worst.0.max((fitted.position - position).length());
@@ -147,13 +150,7 @@ fn a_pose_far_from_the_origin_is_fitted_where_rounding_is_coarser() {
     let noise = Normal::new(0.0, 0.05).expect("normal");
     for pose in workspace_poses(50, 9) {
         let far = Pose::new(pose.position + DVec3::new(1e7, -1e7, 1e7), pose.angles);
-        let measured = target_points(&g, &far).map(|p| {
-            p + DVec3::new(
-                noise.sample(&mut rng),
-                noise.sample(&mut rng),
-                noise.sample(&mut rng),
-            )
-        });
+        let measured = with_noise(target_points(&g, &far), &noise, &mut rng);
         let fitted = pose_from_targets(&g, &measured, &far).expect("fit");
         let (rotation, position) = kabsch(&g.targets, &measured);
         // Rounding of the coordinates themselves limits both fits to about 1e-8 mm here.

@@ -686,6 +686,14 @@ fn levenberg_marquardt(
 mod tests {
     use super::*;
 
+    /// Standard-normal weights of a `hidden`-node network with `outputs` outputs, from `seed`.
+    fn random_weights(hidden: usize, outputs: usize, seed: u64) -> Vec<f64> {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        (0..Network::weight_count(hidden, outputs))
+            .map(|_| StandardNormal.sample(&mut rng))
+            .collect()
+    }
+
     fn toy_data(outputs: usize) -> Data {
         let mut rng = ChaCha8Rng::seed_from_u64(3);
         let x: Vec<[f64; LEGS]> = (0..40)
@@ -772,10 +780,7 @@ mod tests {
     fn the_fit_stops_at_the_first_accepted_step_that_gains_less_than_the_relative_tolerance() {
         let data = toy_data(2);
         let hidden = 4;
-        let mut rng = ChaCha8Rng::seed_from_u64(5);
-        let initial: Vec<f64> = (0..Network::weight_count(hidden, 2))
-            .map(|_| StandardNormal.sample(&mut rng))
-            .collect();
+        let initial = random_weights(hidden, 2, 5);
         let run = |max_iterations, relative_tolerance| {
             let options = TrainOptions {
                 max_iterations,
@@ -819,10 +824,7 @@ mod tests {
     fn each_fit_says_why_it_stopped_and_reports_the_work_of_every_iteration_it_may_take() {
         let data = toy_data(2);
         let hidden = 4;
-        let mut rng = ChaCha8Rng::seed_from_u64(5);
-        let initial: Vec<f64> = (0..Network::weight_count(hidden, 2))
-            .map(|_| StandardNormal.sample(&mut rng))
-            .collect();
+        let initial = random_weights(hidden, 2, 5);
         let options = |max_iterations, relative_tolerance| TrainOptions {
             max_iterations,
             relative_tolerance,
