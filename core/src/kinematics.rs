@@ -148,6 +148,17 @@ pub fn target_points(geometry: &Geometry, pose: &Pose) -> [DVec3; crate::geometr
     geometry.targets.map(|p| pose.position + rotation * p)
 }
 
+/// `ζ = r_Pm − r_Pc` (Eq. 4): the `measured` target points minus those of `geometry` at `pose`
+/// (base frame, mm), stacked target by target as `(x₁, y₁, z₁, x₂, …)`.
+pub fn target_misfit(
+    geometry: &Geometry,
+    pose: &Pose,
+    measured: &[DVec3; crate::geometry::TARGETS],
+) -> nalgebra::SVector<f64, 9> {
+    let computed = target_points(geometry, pose);
+    nalgebra::SVector::<f64, 9>::from_fn(|k, _| measured[k / 3][k % 3] - computed[k / 3][k % 3])
+}
+
 /// The pose whose target points best fit measured ones (base frame, mm), in the least-squares
 /// sense: the pose an instrument that measures the three targets reports. This is how the paper
 /// obtains `δ_A` and `ε` from measured points (Eq. 4, Sec. 4.2).
@@ -185,14 +196,7 @@ pub fn pose_from_targets(
     let mut pose = *seed;
     let mut step_mm = f64::INFINITY;
     for _ in 0..MAX_STEPS {
-        let computed = target_points(geometry, &pose);
-        let mut misfit = nalgebra::SVector::<f64, 9>::zeros();
-        for (j, (m, c)) in measured.iter().zip(&computed).enumerate() {
-            let d = *m - *c;
-            misfit
-                .fixed_rows_mut::<3>(3 * j)
-                .copy_from_slice(&d.to_array());
-        }
+        let misfit = target_misfit(geometry, &pose, measured);
         let p = point_matrix(geometry, &pose);
         let normal = p.transpose() * p;
         let xi = normal
@@ -203,10 +207,7 @@ pub fn pose_from_targets(
                 )
             })?
             .solve(&(p.transpose() * misfit));
-        let step = crate::pose::Twist {
-            translation: DVec3::new(xi[0], xi[1], xi[2]),
-            rotation: DVec3::new(xi[3], xi[4], xi[5]),
-        };
+        let step = crate::pose::Twist::from_array([xi[0], xi[1], xi[2], xi[3], xi[4], xi[5]]);
         pose = pose.displaced(&step);
         if !pose.is_finite() {
             return Err(Error::NonFinite("pose-fit iterate"));

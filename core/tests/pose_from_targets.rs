@@ -4,7 +4,7 @@
 //! of the cross-covariance), which shares no code with the Gauss–Newton iteration.
 
 use glam::{DMat3, DVec3};
-use hexacomp_core::kinematics::{pose_from_targets, target_points};
+use hexacomp_core::kinematics::{pose_from_targets, target_misfit, target_points};
 use hexacomp_core::pose::rotation_vector;
 use hexacomp_core::sampling::{SamplerOptions, WorkspaceSampler};
 use hexacomp_core::{Error, Geometry, Pose, TARGETS};
@@ -156,5 +156,27 @@ fn a_pose_far_from_the_origin_is_fitted_where_rounding_is_coarser() {
         // Rounding of the coordinates themselves limits both fits to about 1e-8 mm here.
         assert!((fitted.position - position).length() < 1e-7);
         assert!(rotation_gap(&fitted.rotation(), &rotation) < 1e-9);
+    }
+}
+
+#[test]
+fn the_misfit_is_the_measured_minus_the_computed_targets_in_order() {
+    let g = Geometry::prototype();
+    let pose = workspace_poses(1, 10)[0];
+    let offsets = [
+        DVec3::new(0.1, -0.2, 0.3),
+        DVec3::new(-0.4, 0.5, -0.6),
+        DVec3::new(0.7, -0.8, 0.9),
+    ];
+    let computed = target_points(&g, &pose);
+    let measured: [DVec3; TARGETS] = std::array::from_fn(|j| computed[j] + offsets[j]);
+    let misfit = target_misfit(&g, &pose, &measured);
+    let expected = [0.1, -0.2, 0.3, -0.4, 0.5, -0.6, 0.7, -0.8, 0.9];
+    for (k, want) in expected.iter().enumerate() {
+        assert!(
+            (misfit[k] - want).abs() < 1e-12,
+            "{k}: {} vs {want}",
+            misfit[k]
+        );
     }
 }

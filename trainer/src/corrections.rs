@@ -16,7 +16,7 @@
 //! same iteration with `λ = 0` always.
 
 use glam::DVec3;
-use hexacomp_core::kinematics::target_points;
+use hexacomp_core::kinematics::target_misfit;
 use hexacomp_core::records::{JointCorrection, MeasuredConfiguration};
 use hexacomp_core::screw::{ActuationScrews, condition_number, point_matrix};
 use hexacomp_core::{
@@ -122,7 +122,7 @@ pub fn solve(
     let mut iterations = 0;
     let mut converged = false;
     while iterations < options.max_iterations {
-        let zeta = misfit(geometry, &pose, measured);
+        let zeta = target_misfit(geometry, &pose, measured);
         let screws = ActuationScrews::at(geometry, &pose);
         let t = screws
             .motion_jacobian()
@@ -156,14 +156,8 @@ pub fn solve(
         converged,
         max_cond_pt,
         regularised,
-        residual_mm: misfit(geometry, &pose, measured).norm(),
+        residual_mm: target_misfit(geometry, &pose, measured).norm(),
     })
-}
-
-/// `ζ = r_Pm − r_Pc` (Eq. 4) at `pose`, mm.
-fn misfit(geometry: &Geometry, pose: &Pose, measured: &[DVec3; TARGETS]) -> SVector<f64, 9> {
-    let computed = target_points(geometry, pose);
-    SVector::<f64, 9>::from_fn(|k, _| measured[k / 3][k % 3] - computed[k / 3][k % 3])
 }
 
 /// `ρ = (AᵀA + λI)⁻¹Aᵀζ` (Eq. 7) with `Aᵀ` and `AᵀA` given (`A = PT`): the minimiser of

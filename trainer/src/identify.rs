@@ -13,11 +13,10 @@
 //! a fraction of the largest: parameter combinations the measurements cannot see stay at their
 //! nominal values. Compensation is then the identified geometry's inverse kinematics.
 
-use glam::DVec3;
-use hexacomp_core::kinematics::target_points;
+use hexacomp_core::kinematics::target_misfit;
 use hexacomp_core::records::MeasuredConfiguration;
 use hexacomp_core::screw::{ActuationScrews, point_matrix};
-use hexacomp_core::{ForwardOptions, Geometry, LEGS, Pose, TARGETS, forward_kinematics};
+use hexacomp_core::{ForwardOptions, Geometry, LEGS, Pose, forward_kinematics};
 use nalgebra::{DMatrix, DVector, SMatrix};
 
 use crate::error::{Error, Result};
@@ -124,17 +123,7 @@ pub fn identify(
 pub fn target_distance(geometry: &Geometry, row: &MeasuredConfiguration) -> Option<f64> {
     let pose =
         forward_kinematics(geometry, &row.legs, &row.pose(), &ForwardOptions::default()).ok()?;
-    let squared: f64 = misfits(geometry, row, &pose)
-        .iter()
-        .map(|d| d.length_squared())
-        .sum();
-    Some(squared.sqrt())
-}
-
-/// The measured minus the computed target points of `row` at `pose` (base frame, mm).
-fn misfits(geometry: &Geometry, row: &MeasuredConfiguration, pose: &Pose) -> [DVec3; TARGETS] {
-    let computed = target_points(geometry, pose);
-    std::array::from_fn(|j| row.targets[j] - computed[j])
+    Some(target_misfit(geometry, &pose, &row.targets).norm())
 }
 
 /// `error` of an iterate, with the likely cause when the last step's data determined fewer
@@ -187,11 +176,9 @@ fn linearise(
         jacobian
             .view_mut((9 * k, 0), (9, PARAMETERS))
             .copy_from(&block);
-        for (j, misfit) in misfits(geometry, row, pose).iter().enumerate() {
-            for axis in 0..3 {
-                residual[9 * k + 3 * j + axis] = misfit[axis];
-            }
-        }
+        residual
+            .rows_mut(9 * k, 9)
+            .copy_from(&target_misfit(geometry, pose, &row.targets));
     }
     Ok((jacobian, residual))
 }

@@ -42,10 +42,10 @@ pub fn plan(geometry: &Geometry, options: &PlanOptions) -> Result<Vec<Pose>> {
 }
 
 /// The work of a plan, in the units [`plan_with_progress`] reports: a candidate drawn, or a
-/// candidate weighed against one configuration chosen before it. Best-candidate sampling weighs every candidate against
-/// every configuration already chosen, so the work grows with the square of the count
-/// (`candidates · count · (count + 1) / 2`); plain random draws (one candidate) cost one unit per
-/// configuration. Saturates at `u64::MAX`.
+/// candidate weighed against one configuration chosen before it. Best-candidate sampling weighs
+/// every candidate against every configuration already chosen, so the work grows with the square
+/// of the count (`candidates · count · (count + 1) / 2`); plain random draws (one candidate) cost
+/// one unit per configuration. Saturates at `u64::MAX`.
 pub fn plan_work(options: &PlanOptions) -> u64 {
     let count = options.count as u128;
     let work = if options.candidates <= 1 {
