@@ -101,6 +101,10 @@ pub enum Error {
         problem: ModelFileProblem,
     },
 
+    /// A rigid transform cannot be fitted to the points given (too few, collinear, bad weights).
+    #[error("rigid fit: {0}")]
+    RigidFit(String),
+
     /// An error-model or sampler setting is out of its valid range.
     #[error("invalid setting: {0}")]
     InvalidSetting(String),

@@ -13,6 +13,8 @@
 //! - [`records`]: planned poses, measured configurations and joint corrections with their ids,
 //!   independent of any file format;
 //! - [`compensator`]: run-time compensation with a status per point (Eq. 19, Eq. 20);
+//! - [`rigid_fit`]: the least-squares rigid transform between corresponding points (locating an
+//!   instrument from fiducials), with weights and locked parameters;
 //! - [`stats`]: max/mean/std summaries of pose errors (the paper's Table 2 layout);
 //! - [`durable`]: files replaced whole or not at all, durable across a power loss.
 //!
@@ -30,6 +32,7 @@ pub mod model;
 pub mod network;
 pub mod pose;
 pub mod records;
+pub mod rigid_fit;
 pub mod sampling;
 pub mod screw;
 pub mod stats;

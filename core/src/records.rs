@@ -77,3 +77,15 @@ pub struct NamedCompensation {
     /// The compensated point: legs to command, corrections (mm) and status.
     pub point: Compensated,
 }
+
+/// A named point: a fiducial on the machine base, in the base frame (nominal) or as an
+/// instrument measured it (in the instrument's frame).
+#[derive(Debug, Clone, PartialEq)]
+pub struct NamedPoint {
+    /// The point's name, unique in its set.
+    pub name: String,
+    /// Its coordinates, mm, in the frame of its file.
+    pub position: DVec3,
+    /// Its weight in a registration (≥ 0; 1 when the file gives none; 0: reported, not used).
+    pub weight: f64,
+}

@@ -15,8 +15,10 @@
 #![warn(missing_docs)]
 
 mod error;
+mod fiducials;
 mod lines;
 mod points_file;
+mod registration;
 
 use std::collections::HashMap;
 use std::io::{BufRead, Write};
@@ -30,8 +32,13 @@ use hexacomp_core::records::{
 };
 
 pub use error::{Error, Result};
+pub use fiducials::{FIDUCIAL_COLUMNS, read_fiducials, write_fiducials};
 pub use lines::MAX_LINE_BYTES;
 pub use points_file::{FileSummary, PointsFile, bytes_progress, compensate_file};
+pub use registration::{
+    REGISTRATION_FIRST_LINE, REGISTRATION_FORMAT, RegisteredFiducial, RegistrationFile,
+    read_registration,
+};
 
 use lines::DataLines;
 
@@ -76,6 +83,12 @@ impl<T> std::ops::Deref for Records<T> {
 
     fn deref(&self) -> &[T] {
         &self.items
+    }
+}
+
+impl<T> std::ops::DerefMut for Records<T> {
+    fn deref_mut(&mut self) -> &mut [T] {
+        &mut self.items
     }
 }
 
@@ -169,6 +182,8 @@ impl Header {
 pub struct Rows<T> {
     lines: DataLines<std::io::BufReader<std::fs::File>>,
     header: Header,
+    /// The name of the key column (`id`, or `name` for fiducials) and its index.
+    key: &'static str,
     id: usize,
     /// A 64-bit hash of every id seen (its [`id_key`]) and the line it was on.
     seen: HashMap<u64, u64>,
@@ -214,10 +229,31 @@ impl Row<'_> {
     }
 }
 
+impl Row<'_> {
+    /// The finite number of column `name`, or `None` when the file has no such column.
+    fn optional_number(&self, name: &str) -> Result<Option<f64>> {
+        if !self.header.columns.contains_key(name) {
+            return Ok(None);
+        }
+        let name: [&str; 1] = [name];
+        Ok(Some(self.numbers(name)?[0]))
+    }
+}
+
 impl<T> Rows<T> {
     /// Opens `path`, reads its header and checks that it has `id` and every column of
     /// `required`; `make` turns each row into a record.
     fn open(path: &Path, required: &[&[&str]], make: fn(&Row) -> Result<T>) -> Result<Self> {
+        Self::open_keyed(path, "id", required, make)
+    }
+
+    /// As [`Rows::open`], with the key column named `key` instead of `id`.
+    fn open_keyed(
+        path: &Path,
+        key: &'static str,
+        required: &[&[&str]],
+        make: fn(&Row) -> Result<T>,
+    ) -> Result<Self> {
         let file = path.display().to_string();
         let reader = std::fs::File::open(path).map_err(|e| Error::Format {
             file: file.clone(),
@@ -227,7 +263,7 @@ impl<T> Rows<T> {
         })?;
         let mut lines = DataLines::new(file, std::io::BufReader::new(reader));
         let header = Header::read(&mut lines)?;
-        for name in std::iter::once("id").chain(required.iter().flat_map(|c| c.iter().copied())) {
+        for name in std::iter::once(key).chain(required.iter().flat_map(|c| c.iter().copied())) {
             if !header.columns.contains_key(name) {
                 return Err(Error::Format {
                     file: lines.file().to_string(),
@@ -238,7 +274,8 @@ impl<T> Rows<T> {
             }
         }
         Ok(Self {
-            id: header.columns["id"],
+            key,
+            id: header.columns[key],
             lines,
             header,
             seen: HashMap::new(),
@@ -281,7 +318,7 @@ impl<T> Rows<T> {
             record: &record,
         };
         if row.id.is_empty() {
-            return Err(row.error(Some("id"), "empty id".into()));
+            return Err(row.error(Some(self.key), format!("empty {}", self.key)));
         }
         let key = {
             use std::hash::{Hash, Hasher};
@@ -296,9 +333,10 @@ impl<T> Rows<T> {
                 ""
             };
             return Err(row.error(
-                Some("id"),
+                Some(self.key),
                 format!(
-                    "duplicate id {} (first on line {first}{numeric})",
+                    "duplicate {} {} (first on line {first}{numeric})",
+                    self.key,
                     quote(row.id)
                 ),
             ));
@@ -427,7 +465,7 @@ fn write_compensated_row<W: Write>(
 }
 
 /// Writes a CSV file: a header and rows of already formatted cells.
-fn write_rows<W: Write>(
+pub(crate) fn write_rows<W: Write>(
     writer: W,
     header: &[&str],
     rows: impl IntoIterator<Item = Vec<String>>,

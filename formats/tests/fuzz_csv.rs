@@ -9,7 +9,9 @@ mod edits;
 use std::path::Path;
 
 use edits::{apply, edit};
-use hexacomp_formats::{read_corrections, read_joints, read_measurements, read_poses};
+use hexacomp_formats::{
+    read_corrections, read_fiducials, read_joints, read_measurements, read_poses, read_registration,
+};
 use proptest::prelude::*;
 
 const POSES: &str = "id,x,y,z,a,b,c\np1,1.5,-2,280,0.5,-1,3\np2,0,0,300,0,0,0\n";
@@ -18,6 +20,13 @@ const CORRECTIONS: &str =
     "id,q1,q2,q3,q4,q5,q6,dq1,dq2,dq3,dq4,dq5,dq6\nc1,350,351,352,353,354,355,0.1,0,0,0,0,-0.2\n";
 const MEASUREMENTS: &str = "id,x,y,z,a,b,c,q1,q2,q3,q4,q5,q6,p1x,p1y,p1z,p2x,p2y,p2z,p3x,p3y,p3z\n\
 m1,0,0,280,0,0,0,350,351,352,353,354,355,1,2,3,4,5,6,7,8,9\n";
+const FIDUCIALS: &str = "name,x,y,z,weight\nF1,450,0,0,1\nF2,0,450,0,0.5\nF3,-450,0,20,1\n";
+const REGISTRATION: &str = "format = 1\ncreated = \"2026-11-24T00:14:14Z\"\nnominal = \"n.csv\"\n\
+measured = \"m.csv\"\ninstrument_pose = [1.0, 2.0, 3.0, 0.1, 0.2, 0.3]\nlocked = []\n\
+tolerance_mm = 0.05\nrms_mm = 0.01\nmax_mm = 0.02\n\
+[[fiducials]]\nname = \"F1\"\nnominal = [1.0, 0.0, 0.0]\nmeasured = [1.0, 0.0, 0.0]\nweight = 1.0\nresidual = [0.0, 0.0, 0.0]\n\
+[[fiducials]]\nname = \"F2\"\nnominal = [0.0, 1.0, 0.0]\nmeasured = [0.0, 1.0, 0.0]\nweight = 1.0\nresidual = [0.0, 0.0, 0.0]\n\
+[[fiducials]]\nname = \"F3\"\nnominal = [0.0, 0.0, 1.0]\nmeasured = [0.0, 0.0, 1.0]\nweight = 1.0\nresidual = [0.0, 0.0, 0.0]\n";
 
 fn assert_refusal_has_a_message<T>(result: Result<T, hexacomp_formats::Error>) {
     if let Err(e) = result {
@@ -36,6 +45,8 @@ fn read_as_every_csv(dir: &Path, bytes: &[u8]) {
     assert_refusal_has_a_message(read_joints(&path));
     assert_refusal_has_a_message(read_corrections(&path));
     assert_refusal_has_a_message(read_measurements(&path));
+    assert_refusal_has_a_message(read_fiducials(&path));
+    assert_refusal_has_a_message(read_registration(&path));
 }
 
 proptest! {
@@ -47,11 +58,23 @@ proptest! {
 
     #[test]
     fn csv_readers_take_any_edit_of_a_valid_file(
-        which in 0..4usize,
+        which in 0..6usize,
         edits in prop::collection::vec(edit(), 1..6),
     ) {
         let dir = tempfile::tempdir().unwrap();
-        let valid = [POSES, JOINTS, CORRECTIONS, MEASUREMENTS][which];
+        let valid = [POSES, JOINTS, CORRECTIONS, MEASUREMENTS, FIDUCIALS, REGISTRATION][which];
         read_as_every_csv(dir.path(), &apply(valid.as_bytes(), &edits));
     }
+}
+
+#[test]
+fn the_valid_fiducials_and_registration_read() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("input");
+    std::fs::write(&path, FIDUCIALS).unwrap();
+    let fiducials = read_fiducials(&path).unwrap();
+    assert_eq!(fiducials.len(), 3);
+    assert_eq!(fiducials[1].weight, 0.5);
+    std::fs::write(&path, REGISTRATION).unwrap();
+    assert_eq!(read_registration(&path).unwrap().fiducials.len(), 3);
 }

@@ -292,3 +292,156 @@ fn gross_errors_are_excluded_by_line_and_a_file_of_them_is_refused() {
     }
     assert_eq!(std::fs::read(d.join("c.csv")).unwrap(), before);
 }
+
+/// Nominal fiducials on the prototype's base (base frame, mm).
+const NOMINAL_FIDUCIALS: &str = "name,x,y,z\nF1,450,0,0\nF2,225,389.7,0\nF3,-225,389.7,20\n\
+F4,-450,0,0\nF5,-225,-389.7,40\nF6,225,-389.7,0\n";
+
+#[test]
+fn a_tracker_campaign_is_registered_and_solved_in_the_base_frame() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("nominal.csv"), NOMINAL_FIDUCIALS).unwrap();
+    trainer_ok(d, &["plan", "--count", "30", "--out", "plan.csv"]);
+    trainer_ok(d, &["simulate", "--plan", "plan.csv", "--out", "base.csv"]);
+    trainer_ok(
+        d,
+        &[
+            "simulate",
+            "--plan",
+            "plan.csv",
+            "--out",
+            "tracker.csv",
+            "--instrument-pose",
+            "2500,-1500,-800,0.3,-0.2,135",
+            "--fiducials",
+            "nominal.csv",
+            "--fiducials-out",
+            "measured.csv",
+        ],
+    );
+    let output = trainer(
+        d,
+        &[
+            "register",
+            "--nominal",
+            "nominal.csv",
+            "--measured",
+            "measured.csv",
+            "--out",
+            "registration.toml",
+        ],
+    );
+    assert!(output.status.success(), "{}", text(&output.stderr));
+    let printed = text(&output.stdout);
+    assert!(
+        printed.contains("position   x 2500.0") && printed.contains("c 135.0"),
+        "{printed}"
+    );
+    let inspected = trainer_ok_stdout(d, &["inspect", "registration.toml"]);
+    assert!(inspected.contains("6 fiducials used: RMS"), "{inspected}");
+
+    // Solved through the registration, the corrections are those of the base-frame campaign
+    // up to the registration's error (the same noise draws: only the frame differs).
+    trainer_ok(
+        d,
+        &[
+            "solve",
+            "--measurements",
+            "base.csv",
+            "--out",
+            "base-dq.csv",
+        ],
+    );
+    let said = trainer_ok(
+        d,
+        &[
+            "solve",
+            "--measurements",
+            "tracker.csv",
+            "--registration",
+            "registration.toml",
+            "--out",
+            "tracker-dq.csv",
+        ],
+    );
+    assert!(said.contains("brought into the base frame"), "{said}");
+    let base = read_corrections(&d.join("base-dq.csv")).unwrap();
+    let tracker = read_corrections(&d.join("tracker-dq.csv")).unwrap();
+    assert_eq!(base.len(), 30);
+    let largest = base
+        .iter()
+        .zip(tracker.iter())
+        .flat_map(|(b, t)| (0..6).map(move |i| (b.corrections[i] - t.corrections[i]).abs()))
+        .fold(0.0, f64::max);
+    assert!(largest < 0.03, "corrections differ by {largest} mm");
+    assert!(largest > 0.0, "the registration changed nothing");
+
+    // Without the registration the same file is refused as a whole.
+    let output = trainer(
+        d,
+        &["solve", "--measurements", "tracker.csv", "--out", "x.csv"],
+    );
+    assert!(!output.status.success());
+    assert!(
+        text(&output.stderr).contains("give --registration"),
+        "{}",
+        text(&output.stderr)
+    );
+}
+
+/// [`trainer`], asserting success; returns stdout.
+fn trainer_ok_stdout(dir: &std::path::Path, args: &[&str]) -> String {
+    let output = trainer(dir, args);
+    assert!(
+        output.status.success(),
+        "{args:?}: {}",
+        text(&output.stderr)
+    );
+    text(&output.stdout)
+}
+
+#[test]
+fn a_refused_registration_writes_nothing_and_leaves_the_old_one() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("nominal.csv"), NOMINAL_FIDUCIALS).unwrap();
+    // F2 and F5 swapped by the operator.
+    std::fs::write(
+        d.join("measured.csv"),
+        NOMINAL_FIDUCIALS
+            .replace("F2,", "X,")
+            .replace("F5,", "F2,")
+            .replace("X,", "F5,"),
+    )
+    .unwrap();
+    std::fs::write(d.join("registration.toml"), "the previous registration").unwrap();
+    let output = trainer(
+        d,
+        &[
+            "register",
+            "--nominal",
+            "nominal.csv",
+            "--measured",
+            "measured.csv",
+            "--out",
+            "registration.toml",
+        ],
+    );
+    assert!(!output.status.success());
+    let message = text(&output.stderr);
+    assert!(
+        message.contains("The names F2 and F5 look swapped")
+            && message.contains("no registration written"),
+        "{message}"
+    );
+    assert_eq!(
+        std::fs::read_to_string(d.join("registration.toml")).unwrap(),
+        "the previous registration"
+    );
+    let names: Vec<_> = std::fs::read_dir(d)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().into_string().unwrap())
+        .collect();
+    assert_eq!(names.len(), 3, "{names:?}");
+}

@@ -51,6 +51,11 @@ pub enum Error {
         screening: Box<crate::screening::Screening>,
     },
 
+    /// A registration was refused: the fiducials do not locate the instrument (the message names
+    /// the cause and, where the data shows it, the likely mistake).
+    #[error("registration refused: {0}")]
+    RegistrationRefused(String),
+
     /// The data cannot support the requested computation (too few configurations, none usable).
     #[error("insufficient data: {0}")]
     InsufficientData(String),

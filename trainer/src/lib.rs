@@ -14,6 +14,8 @@
 //! - [`svg`], [`table`]: plots and terminal tables for reports;
 //! - [`identify`]: the model-based baseline — identification of the geometric parameters by
 //!   iterative least squares, compensation by the identified inverse kinematics;
+//! - [`registration`]: locating the instrument in the base frame from fiducials, and bringing
+//!   measurements from its frame into the base frame;
 //! - [`linuxcnc`]: the geometry of a LinuxCNC hexapod configuration (genhexkins).
 //!
 //! Units: mm and radians in memory, mm and degrees in files.
@@ -28,6 +30,7 @@ pub mod identify;
 pub mod linuxcnc;
 pub mod pipeline;
 pub mod plan;
+pub mod registration;
 pub mod screening;
 pub mod svg;
 pub mod table;

@@ -305,7 +305,8 @@ fn decide(screening: Screening, options: &ScreeningOptions) -> Result<Screening>
     let reason = format!(
         "{excluded} of {total} configurations would be excluded as gross errors (more than {:.0} \
          %; {}): the data as a whole must be wrong — a swapped or misnamed column, another \
-         machine's geometry file, inches instead of mm",
+         machine's geometry file, inches instead of mm, targets measured in an instrument's own \
+         frame (register it and give --registration)",
         100.0 * options.max_excluded_share,
         counts.join(", ")
     );

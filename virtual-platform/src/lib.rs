@@ -6,15 +6,20 @@
 //! measures the three target points in the base frame with a set uncertainty. Both are seeded:
 //! the machine by `machine_seed`, the noise stream by `noise_seed`.
 //!
-//! Units: mm and radians; points in the base frame. Errors are `hexacomp-core`'s
+//! The instrument may stand anywhere: [`seen_from`] and [`measure_fiducials`] give what it
+//! reports in its own frame, for registration ([`measure_fiducials`]'s fiducials).
+//!
+//! Units: mm and radians; points in the base frame unless said otherwise. Errors are `hexacomp-core`'s
 //! [`hexacomp_core::Error`]: settings out of range, and the kinematics of the simulated machine.
 
 #![warn(missing_docs)]
 
 mod error_model;
+mod instrument;
 mod machine;
 
 pub use error_model::{Compliance, ErrorModel, ErrorVariant, MeasuringDevice, PitchErrors};
+pub use instrument::{measure_fiducials, seen_from};
 pub use machine::{LeadScrew, TrueMachine};
 
 use glam::DVec3;

@@ -9,7 +9,9 @@ use hexacomp_core::records::MeasuredConfiguration;
 use hexacomp_core::sampling::{SamplerOptions, WorkspaceSampler};
 use hexacomp_core::stats::PoseErrorStats;
 use hexacomp_core::{Geometry, inverse_kinematics};
-use hexacomp_formats::{Records, read_measurements, write_measurements, write_poses};
+use hexacomp_formats::{
+    Records, read_measurements, read_registration, write_measurements, write_poses,
+};
 use hexacomp_trainer::evaluate::drive;
 use hexacomp_trainer::identify::{IdentifyOptions, identify};
 use hexacomp_trainer::pipeline::{Pipeline, Solved};
@@ -23,6 +25,7 @@ use super::train::{
 };
 use hexacomp_formats::write_file;
 
+use super::register::RegistrationArg;
 use super::{ResultsFolder, write_bytes};
 use hexacomp_trainer::table::Table;
 
@@ -63,6 +66,8 @@ pub struct CalibrateArgs {
     #[arg(long, value_name = "DIR", default_value = "calibration")]
     out_dir: PathBuf,
     #[command(flatten)]
+    registration: RegistrationArg,
+    #[command(flatten)]
     screening: MeasuredScreeningArgs,
 }
 
@@ -70,7 +75,12 @@ impl CalibrateArgs {
     /// The files this command reads and writes.
     pub fn files(&self) -> super::Files<'_> {
         super::Files {
-            inputs: self.measurements.iter().map(PathBuf::as_path).collect(),
+            inputs: self
+                .measurements
+                .iter()
+                .map(PathBuf::as_path)
+                .chain(self.registration.path())
+                .collect(),
             outputs: vec![],
         }
     }
@@ -87,9 +97,10 @@ impl Stages {
 }
 
 /// Every file `calibrate` writes into its folder.
-const CALIBRATION_FILES: [&str; 8] = [
+const CALIBRATION_FILES: [&str; 9] = [
     "poses.csv",
     "measurements.csv",
+    "registration.toml",
     "corrections.csv",
     "model-coupled.hxm",
     "model-coupled.selection.svg",
@@ -210,7 +221,8 @@ pub fn run(geometry: &Geometry, args: &CalibrateArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The measurements: read from --measurements (and copied byte for byte into `dir`), or the plan
+/// The measurements: read from --measurements (and copied byte for byte into `dir`, as is the
+/// --registration they are brought into the base frame with), or the plan
 /// measured on the virtual platform (both written to `dir`, and the measurements read back from
 /// it, so that what is solved is what the folder holds).
 fn acquire(
@@ -232,6 +244,19 @@ fn acquire(
             Err(e) => return Err(read_measurements(path).err().unwrap_or(e).into()),
         };
         records.file = path.display().to_string();
+        let registration = match args.registration.path() {
+            Some(given) => {
+                let bytes =
+                    std::fs::read(given).with_context(|| format!("reading {}", given.display()))?;
+                write_bytes(&dir.join("registration.toml"), &bytes)?;
+                Some(
+                    read_registration(&dir.join("registration.toml"))
+                        .map_err(|e| read_registration(given).err().unwrap_or(e))?,
+                )
+            }
+            None => None,
+        };
+        args.registration.apply(registration.as_ref(), &mut records);
         return Ok(records);
     }
     let (poses, measured) = pipeline.measure_virtual(platform)?;

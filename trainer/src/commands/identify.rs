@@ -4,10 +4,10 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use hexacomp_core::{Geometry, LEGS};
-use hexacomp_formats::read_measurements;
 use hexacomp_trainer::identify::{IdentifyOptions, PARAMETERS, identify};
 use hexacomp_trainer::pipeline::Pipeline;
 
+use super::register::RegistrationArg;
 use super::solve::{MeasuredScreeningArgs, solve_screened};
 
 /// Identify the platform's geometric parameters from point measurements (the paper's model-based
@@ -32,6 +32,8 @@ pub struct IdentifyArgs {
     #[arg(long, default_value_t = IdentifyOptions::default().max_iterations)]
     max_iterations: usize,
     #[command(flatten)]
+    registration: RegistrationArg,
+    #[command(flatten)]
     screening: MeasuredScreeningArgs,
 }
 
@@ -39,14 +41,16 @@ impl IdentifyArgs {
     /// The files this command reads and writes.
     pub fn files(&self) -> super::Files<'_> {
         super::Files {
-            inputs: vec![&self.measurements],
+            inputs: std::iter::once(self.measurements.as_path())
+                .chain(self.registration.path())
+                .collect(),
             outputs: vec![&self.out],
         }
     }
 }
 
 pub fn run(geometry: &Geometry, args: &IdentifyArgs) -> anyhow::Result<()> {
-    let file = read_measurements(&args.measurements)?;
+    let file = args.registration.read_measurements(&args.measurements)?;
     // The configurations the joint-correction solve screens out as gross errors are left out
     // of the identification too: one wrong coordinate would move the identified joints.
     let pipeline = Pipeline {

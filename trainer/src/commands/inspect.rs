@@ -9,12 +9,13 @@ use hexacomp_core::error::Error;
 use hexacomp_core::model::{FORMAT_VERSION, Model, Networks};
 
 /// Print a model file: architecture, hidden nodes, input, the geometry it is bound to, training
-/// joint ranges, correction bounds and provenance. Refuses truncated, corrupted or foreign files
-/// with the reason.
+/// joint ranges, correction bounds and provenance; or a registration file (`register`): the
+/// instrument's pose, every fiducial's residual, the inputs and the time. Refuses truncated,
+/// corrupted or foreign files with the reason.
 #[derive(Debug, clap::Args)]
 pub struct InspectArgs {
-    /// The model file.
-    #[arg(value_name = "MODEL")]
+    /// The model file (`.hxm`) or registration file (`.toml`).
+    #[arg(value_name = "FILE")]
     model: PathBuf,
 }
 
@@ -28,9 +29,25 @@ impl InspectArgs {
     }
 }
 
+/// True for a registration file: named `.toml`, or starting with a registration's first line.
+fn is_registration(path: &std::path::Path, bytes: &[u8]) -> bool {
+    path.extension().is_some_and(|e| e == "toml")
+        || bytes.starts_with(hexacomp_formats::REGISTRATION_FIRST_LINE.as_bytes())
+}
+
 pub fn run(geometry: &Geometry, args: &InspectArgs) -> anyhow::Result<()> {
     let bytes =
         std::fs::read(&args.model).with_context(|| format!("reading {}", args.model.display()))?;
+    if is_registration(&args.model, &bytes) {
+        let registration = hexacomp_formats::read_registration(&args.model)?;
+        println!(
+            "registration file {} (format version {})",
+            args.model.display(),
+            registration.format
+        );
+        super::register::print_registration(&registration);
+        return Ok(());
+    }
     let model = Model::from_bytes(&bytes).map_err(|problem| Error::ModelFile {
         path: args.model.display().to_string(),
         problem,

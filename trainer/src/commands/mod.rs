@@ -8,6 +8,7 @@ pub mod identify;
 pub mod inspect;
 pub mod plan;
 pub mod predict;
+pub mod register;
 pub mod simulate;
 pub mod solve;
 pub mod survey;

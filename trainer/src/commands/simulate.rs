@@ -4,10 +4,12 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use hexacomp_core::error::compact;
-use hexacomp_core::{Geometry, inverse_kinematics};
-use hexacomp_formats::{read_poses, write_measurements};
+use hexacomp_core::{Geometry, Pose, inverse_kinematics};
+use hexacomp_formats::{read_fiducials, read_poses, write_fiducials, write_measurements};
 use hexacomp_trainer::acquire::measure_plan;
-use hexacomp_virtual::{DEFAULT_MACHINE_SEED, ErrorModel, ErrorVariant, VirtualPlatform};
+use hexacomp_virtual::{
+    DEFAULT_MACHINE_SEED, ErrorModel, ErrorVariant, VirtualPlatform, measure_fiducials, seen_from,
+};
 
 use hexacomp_formats::write_file;
 
@@ -19,6 +21,10 @@ use hexacomp_formats::write_file;
 /// with 0.020 mm uncertainty (three readings averaged). Every pose is commanded with the nominal
 /// inverse kinematics (uncompensated). Output: a measurements CSV,
 /// `id,x,y,z,a,b,c,q1..q6,p1x,p1y,p1z,p2x,..,p3z` (mm, degrees; targets in the base frame).
+///
+/// With --instrument-pose the targets are written as a tracker standing there reports them, in
+/// its own frame; --fiducials and --fiducials-out then write the fiducials on the base as that
+/// tracker measures them, for `register`.
 #[derive(Debug, clap::Args)]
 pub struct SimulateArgs {
     /// Poses CSV to measure (`hexacomp-trainer plan`).
@@ -36,20 +42,67 @@ pub struct SimulateArgs {
     /// Output measurements CSV.
     #[arg(long, value_name = "FILE")]
     out: PathBuf,
+    /// Where the instrument stands: its pose in the base frame `x,y,z,a,b,c` (mm, degrees;
+    /// R = Rz(c)·Ry(b)·Rx(a)). The targets are then written in the instrument's frame.
+    #[arg(
+        long,
+        value_name = "X,Y,Z,A,B,C",
+        value_delimiter = ',',
+        allow_negative_numbers = true
+    )]
+    instrument_pose: Option<Vec<f64>>,
+    /// Nominal fiducials on the machine base: CSV `name,x,y,z`, base frame, mm.
+    #[arg(long, value_name = "FILE", requires = "fiducials_out")]
+    fiducials: Option<PathBuf>,
+    /// Output: the --fiducials as the instrument measures them (`name,x,y,z`, its frame, mm).
+    #[arg(long, value_name = "FILE", requires = "fiducials")]
+    fiducials_out: Option<PathBuf>,
+    /// Noise of each fiducial coordinate the instrument measures, mm (1 σ).
+    #[arg(long, default_value_t = 0.010, value_name = "MM")]
+    fiducial_noise: f64,
 }
 
 impl SimulateArgs {
     /// The files this command reads and writes.
     pub fn files(&self) -> super::Files<'_> {
         super::Files {
-            inputs: vec![&self.plan],
-            outputs: vec![&self.out],
+            inputs: std::iter::once(self.plan.as_path())
+                .chain(self.fiducials.as_deref())
+                .collect(),
+            outputs: std::iter::once(self.out.as_path())
+                .chain(self.fiducials_out.as_deref())
+                .collect(),
         }
     }
 }
 
+/// The seed of the fiducial readings, apart from the machine's moves and the target readings.
+fn fiducial_seed(seed: u64) -> u64 {
+    seed ^ 0x6669_6475_6369_616c
+}
+
+impl SimulateArgs {
+    /// The instrument's pose in the base frame (the identity without --instrument-pose).
+    fn instrument(&self) -> anyhow::Result<Pose> {
+        let Some(values) = &self.instrument_pose else {
+            return Ok(Pose::default());
+        };
+        let values: [f64; 6] = values
+            .as_slice()
+            .try_into()
+            .map_err(|_| anyhow::anyhow!("--instrument-pose needs six numbers x,y,z,a,b,c"))?;
+        anyhow::ensure!(
+            values.iter().all(|v| v.is_finite()),
+            "--instrument-pose {values:?}: every number must be finite"
+        );
+        Ok(Pose::from_mm_deg(values))
+    }
+}
+
 pub fn run(geometry: &Geometry, args: &SimulateArgs) -> anyhow::Result<()> {
+    let instrument = args.instrument()?;
     let plan = read_poses(&args.plan)?;
+    let fiducials = args.fiducials.as_deref().map(read_fiducials).transpose()?;
     let model = ErrorModel::variant(args.error_variant);
     let mut platform = VirtualPlatform::new(geometry, &model, args.machine_seed, args.seed)?;
     let mut rows = Vec::with_capacity(plan.len());
@@ -75,6 +128,27 @@ pub fn run(geometry: &Geometry, args: &SimulateArgs) -> anyhow::Result<()> {
         let measured = measure_plan(&mut platform, std::slice::from_ref(row))
             .with_context(|| format!("{}: cannot be measured on the virtual machine", at()))?;
         rows.extend(measured);
+    }
+    for row in &mut rows {
+        for target in &mut row.targets {
+            *target = seen_from(&instrument, *target);
+        }
+    }
+    if let (Some(nominal), Some(out)) = (&fiducials, &args.fiducials_out) {
+        let measured = measure_fiducials(
+            nominal,
+            &instrument,
+            args.fiducial_noise,
+            fiducial_seed(args.seed),
+        )?;
+        write_file(out, |w| write_fiducials(w, &measured))?;
+        eprintln!(
+            "measured {} fiducials of {} from the instrument ({} mm noise) → {}",
+            measured.len(),
+            nominal.file,
+            args.fiducial_noise,
+            out.display()
+        );
     }
     write_file(&args.out, |w| write_measurements(w, &rows))?;
     eprintln!(

@@ -7,12 +7,14 @@ use std::time::Instant;
 use hexacomp_core::Geometry;
 use hexacomp_core::records::JointCorrection;
 use hexacomp_core::records::MeasuredConfiguration;
-use hexacomp_formats::{Records, read_measurements, write_corrections};
+use hexacomp_formats::{Records, write_corrections};
 use hexacomp_trainer::corrections::{Checks, Outcome, Solution, SolverOptions};
 use hexacomp_trainer::pipeline::{Pipeline, Solved};
 use hexacomp_trainer::screening::{Screening, ScreeningOptions, screen_corrections};
 
 use hexacomp_formats::write_file;
+
+use super::register::RegistrationArg;
 
 /// Solve the joint corrections Δq of every measured configuration (paper Fig. 2: Eq. 5, Eq. 6,
 /// Eq. 7, Eq. 8, Eq. 9).
@@ -55,6 +57,8 @@ pub struct SolveArgs {
     #[arg(long)]
     ordinary: bool,
     #[command(flatten)]
+    registration: RegistrationArg,
+    #[command(flatten)]
     screening: MeasuredScreeningArgs,
 }
 
@@ -62,14 +66,16 @@ impl SolveArgs {
     /// The files this command reads and writes.
     pub fn files(&self) -> super::Files<'_> {
         super::Files {
-            inputs: vec![&self.measurements],
+            inputs: std::iter::once(self.measurements.as_path())
+                .chain(self.registration.path())
+                .collect(),
             outputs: vec![&self.out],
         }
     }
 }
 
 pub fn run(geometry: &Geometry, args: &SolveArgs) -> anyhow::Result<()> {
-    let rows = read_measurements(&args.measurements)?;
+    let rows = args.registration.read_measurements(&args.measurements)?;
     anyhow::ensure!(
         !rows.is_empty(),
         "{}: no configurations",

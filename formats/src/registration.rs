@@ -1,0 +1,152 @@
+//! The registration file (TOML): where an instrument stood in the machine's base frame, as
+//! `hexacomp-trainer register` located it from fiducials, with the inputs, residuals and time
+//! that prove it.
+
+use std::path::Path;
+
+use glam::DVec3;
+use hexacomp_core::Pose;
+use hexacomp_core::rigid_fit::{Locked, PARAMETER_NAMES};
+use serde::{Deserialize, Serialize};
+
+use crate::{Error, Result};
+
+/// The format version this build writes and reads.
+pub const REGISTRATION_FORMAT: u32 = 1;
+
+/// The first line of every registration file.
+pub const REGISTRATION_FIRST_LINE: &str =
+    "# hexacomp registration: the instrument's frame located in the machine's base frame";
+
+/// A registration: the instrument's pose in the base frame and the fit that found it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RegistrationFile {
+    /// The format version ([`REGISTRATION_FORMAT`]).
+    pub format: u32,
+    /// When the registration was made, RFC 3339 UTC.
+    pub created: String,
+    /// The nominal fiducials file (base frame), as given.
+    pub nominal: String,
+    /// The measured fiducials file (instrument frame), as given.
+    pub measured: String,
+    /// The instrument's pose in the base frame `[x, y, z, a, b, c]`, mm and degrees, in the
+    /// convention of every pose (`R = Rz(c)·Ry(b)·Rx(a)`): a point the instrument reports at
+    /// `p` is at `t + R·p` in the base frame.
+    pub instrument_pose: [f64; 6],
+    /// The parameters held at zero in the fit (names of `instrument_pose`'s components).
+    pub locked: Vec<String>,
+    /// The largest residual the registration accepted, mm.
+    pub tolerance_mm: f64,
+    /// Root mean square of the residuals of the fiducials of positive weight, mm.
+    pub rms_mm: f64,
+    /// Largest residual of a fiducial of positive weight, mm.
+    pub max_mm: f64,
+    /// Every fiducial matched by name, in the nominal file's order.
+    pub fiducials: Vec<RegisteredFiducial>,
+}
+
+/// One fiducial of a registration.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RegisteredFiducial {
+    /// Its name in both files.
+    pub name: String,
+    /// Nominal position, base frame, mm.
+    pub nominal: [f64; 3],
+    /// Measured position, instrument frame, mm.
+    pub measured: [f64; 3],
+    /// Its weight in the fit (0: reported, not used).
+    pub weight: f64,
+    /// The measured position brought into the base frame minus the nominal one, mm.
+    pub residual: [f64; 3],
+}
+
+impl RegisteredFiducial {
+    /// The length of the residual, mm.
+    pub fn residual_mm(&self) -> f64 {
+        DVec3::from_array(self.residual).length()
+    }
+}
+
+impl RegistrationFile {
+    /// The instrument's pose in the base frame (mm, rad).
+    pub fn instrument_pose(&self) -> Pose {
+        Pose::from_mm_deg(self.instrument_pose)
+    }
+
+    /// The locked parameters.
+    pub fn locked(&self) -> Locked {
+        Locked::from_names(self.locked.iter().map(String::as_str)).unwrap_or_default()
+    }
+
+    /// The file's text: a first comment line, then the TOML.
+    pub fn to_toml_string(&self) -> String {
+        let body = toml::to_string(self).expect("a registration always serialises to TOML");
+        format!("{REGISTRATION_FIRST_LINE}\n{body}")
+    }
+
+    /// Checks what a file may hold: this format version, finite numbers, known locked names, at
+    /// least three fiducials.
+    fn validate(&self) -> std::result::Result<(), String> {
+        if self.format != REGISTRATION_FORMAT {
+            return Err(format!(
+                "format version {}, this build reads version {REGISTRATION_FORMAT}",
+                self.format
+            ));
+        }
+        if !self.instrument_pose.iter().all(|v| v.is_finite()) {
+            return Err("instrument_pose has a number that is not finite".into());
+        }
+        if let Some(name) = self
+            .locked
+            .iter()
+            .find(|name| !PARAMETER_NAMES.contains(&name.as_str()))
+        {
+            return Err(format!(
+                "locked names {name:?}, not one of {}",
+                PARAMETER_NAMES.join(", ")
+            ));
+        }
+        if self.fiducials.len() < 3 {
+            return Err(format!(
+                "{} fiducials: a registration has at least three",
+                self.fiducials.len()
+            ));
+        }
+        let numbers = [self.tolerance_mm, self.rms_mm, self.max_mm]
+            .into_iter()
+            .chain(self.fiducials.iter().flat_map(|f| {
+                f.nominal
+                    .into_iter()
+                    .chain(f.measured)
+                    .chain(f.residual)
+                    .chain([f.weight])
+            }));
+        if numbers.into_iter().any(|v| !v.is_finite()) {
+            return Err("a number that is not finite".into());
+        }
+        Ok(())
+    }
+}
+
+/// Reads and checks a registration file; errors name the file (and, for TOML syntax, the line
+/// and column).
+pub fn read_registration(path: &Path) -> Result<RegistrationFile> {
+    let fail = |message: String| Error::Format {
+        file: path.display().to_string(),
+        line: 0,
+        column: None,
+        message,
+    };
+    let text = std::fs::read_to_string(path).map_err(|e| fail(e.to_string()))?;
+    let file: RegistrationFile = toml::from_str(&text).map_err(|e| {
+        fail(format!(
+            "not a registration file: {}",
+            e.to_string().trim_end()
+        ))
+    })?;
+    file.validate()
+        .map_err(|problem| fail(format!("invalid registration: {problem}")))?;
+    Ok(file)
+}

@@ -1,0 +1,335 @@
+//! Locating the instrument in the machine's base frame from fiducials measured in both frames
+//! (`hexacomp-trainer register`), and bringing measurements made in the instrument's frame into
+//! the base frame.
+//!
+//! The fiducials are matched by name; the least-squares rigid transform instrument → base
+//! ([`fit_rigid_transform`]) is accepted only when every fiducial of positive weight lies within
+//! the tolerance of its nominal position. A refusal names its cause and, where the data shows
+//! it, the likely mistake: two names swapped, inches for millimetres, one fiducial knocked.
+
+use glam::DVec3;
+use hexacomp_core::Pose;
+use hexacomp_core::records::{MeasuredConfiguration, NamedPoint};
+use hexacomp_core::rigid_fit::{Locked, fit_rigid_transform};
+use hexacomp_formats::{RegisteredFiducial, RegistrationFile};
+
+use crate::error::{Error, Result};
+
+/// How a registration is made and accepted.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RegistrationOptions {
+    /// The largest residual accepted on a fiducial of positive weight, mm.
+    pub tolerance_mm: f64,
+    /// Parameters of the instrument's pose held at zero.
+    pub locked: Locked,
+}
+
+impl Default for RegistrationOptions {
+    fn default() -> Self {
+        Self {
+            tolerance_mm: 0.05,
+            locked: Locked::default(),
+        }
+    }
+}
+
+/// An accepted registration: the instrument's pose in the base frame and every fiducial's
+/// residual.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Registration {
+    /// The instrument's pose in the base frame (mm, rad), exactly as written to the file (its
+    /// angles have been through degrees).
+    pub instrument: Pose,
+    /// The fiducials in the nominal file's order, with their residuals (base frame, mm).
+    pub fiducials: Vec<RegisteredFiducial>,
+    /// RMS of the residuals of the fiducials of positive weight, mm.
+    pub rms_mm: f64,
+    /// Largest residual of a fiducial of positive weight, mm.
+    pub max_mm: f64,
+}
+
+impl Registration {
+    /// The registration file of this registration, made at `created` (RFC 3339) from the files
+    /// named `nominal` and `measured`.
+    pub fn to_file(
+        &self,
+        options: &RegistrationOptions,
+        nominal: &str,
+        measured: &str,
+        created: String,
+    ) -> RegistrationFile {
+        RegistrationFile {
+            format: hexacomp_formats::REGISTRATION_FORMAT,
+            created,
+            nominal: nominal.to_string(),
+            measured: measured.to_string(),
+            instrument_pose: self.instrument.to_mm_deg(),
+            locked: options
+                .locked
+                .names()
+                .into_iter()
+                .map(str::to_string)
+                .collect(),
+            tolerance_mm: options.tolerance_mm,
+            rms_mm: self.rms_mm,
+            max_mm: self.max_mm,
+            fiducials: self.fiducials.clone(),
+        }
+    }
+}
+
+/// The fiducials of both files paired by name, in the nominal file's order; refuses names on
+/// one side only (listing them) and fewer than three common names.
+fn pair_by_name<'a>(
+    nominal: &'a [NamedPoint],
+    measured: &'a [NamedPoint],
+) -> Result<Vec<(&'a NamedPoint, &'a NamedPoint)>> {
+    let pairs: Vec<_> = nominal
+        .iter()
+        .filter_map(|n| named(measured, &n.name).map(|m| (n, m)))
+        .collect();
+    let only = |set: &[NamedPoint], other: &[NamedPoint]| -> Vec<String> {
+        set.iter()
+            .filter(|p| named(other, &p.name).is_none())
+            .map(|p| p.name.clone())
+            .collect()
+    };
+    let (nominal_only, measured_only) = (only(nominal, measured), only(measured, nominal));
+    let mut problems = Vec::new();
+    if pairs.len() < 3 {
+        problems.push(format!(
+            "{} fiducial names are common to both files: at least three are needed",
+            pairs.len()
+        ));
+    }
+    if !nominal_only.is_empty() {
+        problems.push(format!(
+            "names only in the nominal file: {}",
+            nominal_only.join(", ")
+        ));
+    }
+    if !measured_only.is_empty() {
+        problems.push(format!(
+            "names only in the measured file: {}",
+            measured_only.join(", ")
+        ));
+    }
+    if problems.is_empty() {
+        Ok(pairs)
+    } else {
+        Err(Error::RegistrationRefused(format!(
+            "{} (every fiducial must be named the same in both files)",
+            problems.join("; ")
+        )))
+    }
+}
+
+/// The point of `set` named `name`.
+fn named<'a>(set: &'a [NamedPoint], name: &str) -> Option<&'a NamedPoint> {
+    set.iter().find(|p| p.name == name)
+}
+
+/// The fit of `measured` onto `nominal` and the residuals, the pose's angles rounded through
+/// degrees as the file keeps them.
+fn fit(
+    nominal: &[DVec3],
+    measured: &[DVec3],
+    weights: &[f64],
+    locked: Locked,
+) -> Result<(Pose, Vec<DVec3>)> {
+    let pose = fit_rigid_transform(measured, nominal, weights, locked)?;
+    let pose = Pose::from_mm_deg(pose.to_mm_deg());
+    let residuals = measured
+        .iter()
+        .zip(nominal)
+        .map(|(m, n)| pose.transform_point(*m) - *n)
+        .collect();
+    Ok((pose, residuals))
+}
+
+/// The largest residual among the fiducials of positive weight, and its index.
+fn worst(residuals: &[DVec3], weights: &[f64]) -> (usize, f64) {
+    residuals
+        .iter()
+        .zip(weights)
+        .enumerate()
+        .filter(|(_, (_, w))| **w > 0.0)
+        .map(|(k, (r, _))| (k, r.length()))
+        .fold(
+            (0, -1.0),
+            |best, next| if next.1 > best.1 { next } else { best },
+        )
+}
+
+/// Locates the instrument from `nominal` fiducials (base frame, mm) and the same fiducials
+/// `measured` in its frame (mm, weights from the measured file), matched by name.
+///
+/// Refused ([`Error::RegistrationRefused`]), with the cause: names on one side only, fewer than
+/// three common names or of positive weight, nearly collinear fiducials, a residual above the
+/// tolerance (naming the worst fiducial and, where the data shows it, two swapped names, inches,
+/// or the one fiducial whose removal makes the rest fit).
+pub fn register(
+    nominal: &[NamedPoint],
+    measured: &[NamedPoint],
+    options: &RegistrationOptions,
+) -> Result<Registration> {
+    if !(options.tolerance_mm.is_finite() && options.tolerance_mm > 0.0) {
+        return Err(Error::InvalidSetting(format!(
+            "registration tolerance {} mm: a positive number is needed",
+            options.tolerance_mm
+        )));
+    }
+    let pairs = pair_by_name(nominal, measured)?;
+    let names: Vec<&str> = pairs.iter().map(|(n, _)| n.name.as_str()).collect();
+    let nominal_points: Vec<DVec3> = pairs.iter().map(|(n, _)| n.position).collect();
+    let measured_points: Vec<DVec3> = pairs.iter().map(|(_, m)| m.position).collect();
+    let weights: Vec<f64> = pairs.iter().map(|(_, m)| m.weight).collect();
+    let (instrument, residuals) = fit(&nominal_points, &measured_points, &weights, options.locked)
+        .map_err(|e| match e {
+            Error::Core(core) => Error::RegistrationRefused(format!("the fiducials: {core}")),
+            other => other,
+        })?;
+    let (worst_index, max_mm) = worst(&residuals, &weights);
+    if max_mm > options.tolerance_mm {
+        let diagnosis = diagnose(&names, &nominal_points, &measured_points, &weights, options);
+        return Err(Error::RegistrationRefused(format!(
+            "fiducial {} is {max_mm:.4} mm from its nominal position after the best fit, more \
+             than the tolerance of {} mm. {diagnosis}",
+            names[worst_index], options.tolerance_mm
+        )));
+    }
+    let used: Vec<f64> = residuals
+        .iter()
+        .zip(&weights)
+        .filter(|(_, w)| **w > 0.0)
+        .map(|(r, _)| r.length_squared())
+        .collect();
+    let rms_mm = (used.iter().sum::<f64>() / used.len() as f64).sqrt();
+    let fiducials = pairs
+        .iter()
+        .zip(&residuals)
+        .map(|((n, m), r)| RegisteredFiducial {
+            name: n.name.clone(),
+            nominal: n.position.to_array(),
+            measured: m.position.to_array(),
+            weight: m.weight,
+            residual: r.to_array(),
+        })
+        .collect();
+    Ok(Registration {
+        instrument,
+        fiducials,
+        rms_mm,
+        max_mm,
+    })
+}
+
+/// What the data says about a registration that does not fit: inches, two swapped names, one
+/// fiducial off; otherwise the typical causes.
+fn diagnose(
+    names: &[&str],
+    nominal: &[DVec3],
+    measured: &[DVec3],
+    weights: &[f64],
+    options: &RegistrationOptions,
+) -> String {
+    const TYPICAL: &str = "Typical causes: two fiducial names swapped, inches instead of \
+                           millimetres, a fiducial knocked or its nest moved, a reflector not \
+                           seated.";
+    let fits = |measured: &[DVec3], weights: &[f64]| {
+        let nominal: Vec<DVec3> = nominal.to_vec();
+        fit(&nominal, measured, weights, options.locked)
+            .ok()
+            .map(|(_, residuals)| worst(&residuals, weights).1)
+            .filter(|max| *max <= options.tolerance_mm)
+    };
+    if options.locked != Locked::default()
+        && let Ok((_, residuals)) = fit(nominal, measured, weights, Locked::default())
+        && worst(&residuals, weights).1 <= options.tolerance_mm
+    {
+        return format!(
+            "With nothing locked every fiducial fits within {:.4} mm: the instrument does not \
+             meet the locked parameters ({}); level it again, or register without locking them.",
+            worst(&residuals, weights).1,
+            options.locked.names().join(", ")
+        );
+    }
+    let ratio = spread(nominal, weights) / spread(measured, weights);
+    for (factor, what) in [
+        (25.4, "the measured coordinates look like inches"),
+        (1.0 / 25.4, "the nominal coordinates look like inches"),
+    ] {
+        if (ratio / factor - 1.0).abs() < 0.02 {
+            return format!(
+                "{what}: the nominal fiducials are spread {ratio:.3} times as wide as the \
+                 measured ones (25.4 mm to the inch); give both files in millimetres."
+            );
+        }
+    }
+    const MAX_PAIRS_TRIED: usize = 64;
+    if names.len() <= MAX_PAIRS_TRIED {
+        for i in 0..names.len() {
+            for j in i + 1..names.len() {
+                let mut swapped = measured.to_vec();
+                swapped.swap(i, j);
+                let mut swapped_weights = weights.to_vec();
+                swapped_weights.swap(i, j);
+                if let Some(max) = fits(&swapped, &swapped_weights) {
+                    return format!(
+                        "The names {} and {} look swapped in the measured file: exchanged, \
+                         every fiducial fits within {max:.4} mm.",
+                        names[i], names[j]
+                    );
+                }
+            }
+        }
+    }
+    if weights.iter().filter(|w| **w > 0.0).count() > 3 {
+        for k in (0..names.len()).filter(|&k| weights[k] > 0.0) {
+            let mut without = weights.to_vec();
+            without[k] = 0.0;
+            if let Some(max) = fits(measured, &without) {
+                return format!(
+                    "Without {} the others fit within {max:.4} mm: it was probably knocked, \
+                     mis-measured or its nominal position is wrong (measure it again, or give it \
+                     weight 0 in the measured file to register without it).",
+                    names[k]
+                );
+            }
+        }
+    }
+    if (ratio - 1.0).abs() > 0.001 {
+        return format!(
+            "The nominal fiducials are spread {ratio:.4} times as wide as the measured ones: a \
+             scale or unit error? {TYPICAL}"
+        );
+    }
+    TYPICAL.to_string()
+}
+
+/// The weighted RMS distance of `points` from their weighted centroid, mm.
+fn spread(points: &[DVec3], weights: &[f64]) -> f64 {
+    let total: f64 = weights.iter().sum();
+    let centre = points
+        .iter()
+        .zip(weights)
+        .fold(DVec3::ZERO, |s, (p, w)| s + *p * *w)
+        / total;
+    (points
+        .iter()
+        .zip(weights)
+        .map(|(p, w)| w * (*p - centre).length_squared())
+        .sum::<f64>()
+        / total)
+        .sqrt()
+}
+
+/// `rows` with their measured targets brought from the instrument's frame into the base frame
+/// through the `instrument`'s pose in the base frame (`t + R·p`).
+pub fn into_base_frame(rows: &mut [MeasuredConfiguration], instrument: &Pose) {
+    for row in rows {
+        for target in &mut row.targets {
+            *target = instrument.transform_point(*target);
+        }
+    }
+}
