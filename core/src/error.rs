@@ -54,18 +54,6 @@ pub enum Error {
         residual_mm: f64,
     },
 
-    /// The pose fitted to measured target points did not settle within its iteration limit.
-    #[error(
-        "the pose fitted to the measured targets did not settle in {iterations} steps \
-         (last step moved a target by {step_mm:.3e} mm)"
-    )]
-    PoseFitNotConverged {
-        /// Steps performed.
-        iterations: usize,
-        /// How far the last step moved a target at most, mm (an upper bound).
-        step_mm: f64,
-    },
-
     /// The kinematic Jacobian is (numerically) singular at the current iterate.
     #[error("singular Jacobian (ratio of smallest to largest singular value {ratio:.3e})")]
     SingularJacobian {

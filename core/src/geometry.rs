@@ -17,8 +17,9 @@ use crate::screw::ActuationScrews;
 
 /// Number of legs (actuated prismatic joints) of a Stewart platform.
 pub const LEGS: usize = 6;
-/// Number of measured target points on the platform (the paper's `P_1..P_3`).
-pub const TARGETS: usize = 3;
+/// The fewest measured target points a geometry names (the paper's `P_1..P_3`); it may name
+/// more.
+pub const MIN_TARGETS: usize = 3;
 
 /// The task workspace: a vertical cylinder for the position of `A`, a tilt cone and a yaw range.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -54,8 +55,9 @@ pub struct Geometry {
     pub leg_offsets: [f64; LEGS],
     /// Home pose `[x, y, z, a, b, c]`, mm and degrees.
     pub home: [f64; 6],
-    /// Measured target points `P_j` in `K_A`, mm.
-    pub targets: [DVec3; TARGETS],
+    /// Measured target points `P_1..P_N` in `K_A`, mm; at least [`MIN_TARGETS`], not all on one
+    /// line.
+    pub targets: Vec<DVec3>,
     /// The task workspace.
     pub workspace: Workspace,
 }
@@ -153,7 +155,7 @@ impl Geometry {
             leg_range: [280.0, 430.0],
             leg_offsets: [0.0; LEGS],
             home: [0.0, 0.0, home_z, 0.0, 0.0, 0.0],
-            targets: [target(90.0), target(210.0), target(330.0)],
+            targets: vec![target(90.0), target(210.0), target(330.0)],
             workspace: Workspace {
                 radius: 75.0,
                 z_range: [home_z - 50.0, home_z + 50.0],
@@ -174,7 +176,7 @@ impl Geometry {
             leg_range: file.leg_range,
             leg_offsets: file.leg_offsets,
             home: file.home,
-            targets: rows("targets", &file.targets)?,
+            targets: target_rows(&file.targets)?,
             workspace: file.workspace,
         };
         geometry.validate()?;
@@ -338,6 +340,17 @@ fn rows<const N: usize>(field: &str, v: &[[f64; 3]]) -> Result<[DVec3; N]> {
     Ok(std::array::from_fn(|i| DVec3::from_array(v[i])))
 }
 
+/// The `targets` rows: at least [`MIN_TARGETS`].
+fn target_rows(v: &[[f64; 3]]) -> Result<Vec<DVec3>> {
+    if v.len() < MIN_TARGETS {
+        return Err(Error::InvalidGeometry(format!(
+            "targets has {} rows, at least {MIN_TARGETS} are needed",
+            v.len()
+        )));
+    }
+    Ok(v.iter().copied().map(DVec3::from_array).collect())
+}
+
 fn check_finite(field: &str, v: &[f64]) -> Result<()> {
     match v.iter().position(|x| !x.is_finite()) {
         Some(i) if v.len() > 1 => Err(Error::InvalidGeometry(format!(
@@ -374,16 +387,21 @@ fn check_legs_distinct(base: &[DVec3; LEGS], platform: &[DVec3; LEGS]) -> Result
     Ok(())
 }
 
-/// Rejects targets whose triangle is degenerate: the sine of the angle at target 0 must exceed
-/// 1e-3 (collinear points leave the orientation error unobservable, Eq. 4).
-fn check_targets_not_collinear(t: &[DVec3; TARGETS]) -> Result<()> {
-    let (u, v) = (t[1] - t[0], t[2] - t[0]);
-    let scale = u.length() * v.length();
-    let sine = if scale > 0.0 {
-        u.cross(v).length() / scale
-    } else {
-        0.0
-    };
+/// Rejects targets that lie on one line: for some pair of targets `j, k`, the sine of the angle
+/// at target 0 between `P_j − P_0` and `P_k − P_0` must exceed 1e-3 (collinear points leave the
+/// orientation error unobservable, Eq. 4). With three targets this is the angle of their
+/// triangle at target 0.
+pub(crate) fn check_targets_not_collinear(t: &[DVec3]) -> Result<()> {
+    let mut sine: f64 = 0.0;
+    for j in 1..t.len() {
+        for k in j + 1..t.len() {
+            let (u, v) = (t[j] - t[0], t[k] - t[0]);
+            let scale = u.length() * v.length();
+            if scale > 0.0 {
+                sine = sine.max(u.cross(v).length() / scale);
+            }
+        }
+    }
     if sine < 1e-3 {
         return Err(Error::InvalidGeometry(format!(
             "targets are collinear or coincide (sine of the angle at target 0 is {sine:.2e}); \

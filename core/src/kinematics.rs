@@ -10,7 +10,8 @@ use glam::DVec3;
 use crate::error::{Error, Result};
 use crate::geometry::{Geometry, LEGS};
 use crate::pose::Pose;
-use crate::screw::{ActuationScrews, point_matrix};
+use crate::rigid_fit::{Locked, fit_rigid_transform};
+use crate::screw::ActuationScrews;
 
 /// Where a leg length lies relative to the actuator stroke.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -142,86 +143,46 @@ pub fn forward_kinematics(
     })
 }
 
-/// The base-frame positions (mm) of the geometry's target points `P_j` at a pose.
-pub fn target_points(geometry: &Geometry, pose: &Pose) -> [DVec3; crate::geometry::TARGETS] {
+/// The base-frame positions (mm) of the geometry's target points `P_1..P_N` at a pose.
+pub fn target_points(geometry: &Geometry, pose: &Pose) -> Vec<DVec3> {
     let rotation = pose.rotation();
-    geometry.targets.map(|p| pose.position + rotation * p)
-}
-
-/// `ζ = r_Pm − r_Pc` (Eq. 4): the `measured` target points minus those of `geometry` at `pose`
-/// (base frame, mm), stacked target by target as `(x₁, y₁, z₁, x₂, …)`.
-pub fn target_misfit(
-    geometry: &Geometry,
-    pose: &Pose,
-    measured: &[DVec3; crate::geometry::TARGETS],
-) -> nalgebra::SVector<f64, 9> {
-    let computed = target_points(geometry, pose);
-    nalgebra::SVector::<f64, 9>::from_fn(|k, _| measured[k / 3][k % 3] - computed[k / 3][k % 3])
-}
-
-/// The pose whose target points best fit measured ones (base frame, mm), in the least-squares
-/// sense: the pose an instrument that measures the three targets reports. This is how the paper
-/// obtains `δ_A` and `ε` from measured points (Eq. 4, Sec. 4.2).
-///
-/// Gauss–Newton from `seed` (a nearby pose, e.g. the commanded one): each step solves `ζ = P·ξ`
-/// (Eq. 4) for the twist `ξ` about `A` in least squares, `ζ` being the measured minus the computed
-/// targets, and displaces the pose by it. The first step is the paper's linear solve; the next
-/// ones remove its second-order term (below 1e-4 mm for errors of 1 mm and 0.2°). Stops when a
-/// step moves every target by less than 1e-10 mm (or 1e-14 of the largest coordinate, where
-/// rounding is coarser); after 20 steps the iterate is still returned if its last step was below
-/// 1e-6 mm, and is an error otherwise.
-pub fn pose_from_targets(
-    geometry: &Geometry,
-    measured: &[DVec3; crate::geometry::TARGETS],
-    seed: &Pose,
-) -> Result<Pose> {
-    const MAX_STEPS: usize = 20;
-    const STEP_TOLERANCE_MM: f64 = 1e-10;
-    const GOOD_ENOUGH_MM: f64 = 1e-6;
-    if !measured.iter().all(|p| p.is_finite()) {
-        return Err(Error::NonFinite("measured target point"));
-    }
-    if !seed.is_finite() {
-        return Err(Error::NonFinite("pose-fit seed pose"));
-    }
-    // The largest lever arm of a target about `A` turns a rotation step into a point motion.
-    let reach_mm = geometry
+    geometry
         .targets
         .iter()
-        .fold(1.0_f64, |r, p| r.max(p.length()));
-    let scale_mm = measured
+        .map(|p| pose.position + rotation * *p)
+        .collect()
+}
+
+/// The pose whose target points best fit measured ones (base frame, mm; `None` for a target not
+/// seen), in the least-squares sense: the pose an instrument that measures the targets reports.
+/// This is how the paper obtains `δ_A` and `ε` from measured points (Eq. 4, Sec. 4.2), solved in
+/// closed form ([`fit_rigid_transform`]: the geometry's targets in `K_A` onto the measured ones).
+///
+/// Errors: a count of targets other than the geometry's, a measured point that is not finite,
+/// fewer than three targets seen or seen targets (nearly) on one line.
+pub fn pose_from_targets(geometry: &Geometry, measured: &[Option<DVec3>]) -> Result<Pose> {
+    if measured.len() != geometry.targets.len() {
+        return Err(Error::RigidFit(format!(
+            "{} measured targets, the geometry has {}",
+            measured.len(),
+            geometry.targets.len()
+        )));
+    }
+    let (platform, base): (Vec<DVec3>, Vec<DVec3>) = geometry
+        .targets
         .iter()
-        .fold(0.0_f64, |m, p| m.max(p.abs().max_element()));
-    let tolerance_mm = STEP_TOLERANCE_MM.max(1e-14 * scale_mm);
-    let mut pose = *seed;
-    let mut step_mm = f64::INFINITY;
-    for _ in 0..MAX_STEPS {
-        let misfit = target_misfit(geometry, &pose, measured);
-        let p = point_matrix(geometry, &pose);
-        let normal = p.transpose() * p;
-        let xi = normal
-            .cholesky()
-            .ok_or_else(|| {
-                Error::InvalidGeometry(
-                    "the targets are collinear: measured targets do not determine the pose".into(),
-                )
-            })?
-            .solve(&(p.transpose() * misfit));
-        let step = crate::pose::Twist::from_array([xi[0], xi[1], xi[2], xi[3], xi[4], xi[5]]);
-        pose = pose.displaced(&step);
-        if !pose.is_finite() {
-            return Err(Error::NonFinite("pose-fit iterate"));
-        }
-        step_mm = step.translation.length() + reach_mm * step.rotation.length();
-        if step_mm < tolerance_mm {
-            return Ok(pose);
-        }
+        .zip(measured)
+        .filter_map(|(p, m)| m.map(|m| (*p, m)))
+        .unzip();
+    if base.len() < 3 {
+        return Err(Error::RigidFit(format!(
+            "{} of {} targets seen: three not on one line are needed to fit a pose",
+            base.len(),
+            measured.len()
+        )));
     }
-    if step_mm < GOOD_ENOUGH_MM {
-        return Ok(pose);
+    if !base.iter().all(|p| p.is_finite()) {
+        return Err(Error::NonFinite("measured target point"));
     }
-    Err(Error::PoseFitNotConverged {
-        iterations: MAX_STEPS,
-        step_mm,
-    })
+    fit_rigid_transform(&platform, &base, &vec![1.0; base.len()], Locked::default())
 }

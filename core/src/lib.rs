@@ -10,6 +10,8 @@
 //! - [`screw`]: the paper's matrices `W`, `T = W⁻ᵀ` (Eq. 3), `P` (Eq. 4) and `cond(PT)`;
 //! - [`sampling`]: seeded uniform poses over the task workspace;
 //! - [`network`], [`model`]: the trained networks, their normalisation and the model file;
+//! - [`observation`]: what an instrument measured of a configuration (targets, some perhaps not
+//!   seen, or a 6-DoF pose) and its linearisation (Eq. 4);
 //! - [`records`]: planned poses, measured configurations and joint corrections with their ids,
 //!   independent of any file format;
 //! - [`compensator`]: run-time compensation with a status per point (Eq. 19, Eq. 20);
@@ -30,6 +32,7 @@ pub mod geometry;
 pub mod kinematics;
 pub mod model;
 pub mod network;
+pub mod observation;
 pub mod pose;
 pub mod records;
 pub mod rigid_fit;
@@ -38,7 +41,7 @@ pub mod screw;
 pub mod stats;
 
 pub use error::{Error, Result};
-pub use geometry::{Fingerprint, Geometry, LEGS, TARGETS, Workspace};
+pub use geometry::{Fingerprint, Geometry, LEGS, MIN_TARGETS, Workspace};
 pub use kinematics::{
     ForwardOptions, LegLengths, LegStatus, forward_kinematics, inverse_kinematics,
 };

@@ -105,6 +105,13 @@ impl Pose {
         self.position + self.rotation() * platform_point
     }
 
+    /// The inverse transform: the pose of the base frame in this pose's frame, so that
+    /// `inverse().transform_point(transform_point(p)) = p`.
+    pub fn inverse(&self) -> Self {
+        let rotation = self.rotation().transpose();
+        Self::from_rotation(-(rotation * self.position), &rotation)
+    }
+
     /// This pose displaced by a small twist: `t + δ_A`, `exp([ε×])·R` (rotation about `A` in
     /// base-frame axes).
     pub fn displaced(&self, twist: &Twist) -> Self {
@@ -151,6 +158,105 @@ pub fn rotation_vector(r: &DMat3) -> DVec3 {
         return s;
     }
     s * (angle / sin_angle)
+}
+
+/// How a file's three angles compose a rotation: the convention of the controller that wrote
+/// it. Positions (mm) are the same in every convention; angles are degrees in files.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum PoseConvention {
+    /// LinuxCNC's hexapod kinematics (genhexkins), hexacomp's own: `R = Rz(c)·Ry(b)·Rx(a)`, roll
+    /// about x, pitch about y, yaw about z, each about the fixed base axes.
+    #[default]
+    Linuxcnc,
+    /// Physik Instrumente's hexapod controllers: `U` about x, then `V` about the moved y, then `W`
+    /// about the moved z, `R = Rx(U)·Ry(V)·Rz(W)`.
+    PiUvw,
+}
+
+impl PoseConvention {
+    /// Every convention, in the order `--help` lists them.
+    pub const ALL: [PoseConvention; 2] = [PoseConvention::Linuxcnc, PoseConvention::PiUvw];
+
+    /// The name on the command line and in messages.
+    pub fn name(self) -> &'static str {
+        match self {
+            PoseConvention::Linuxcnc => "linuxcnc",
+            PoseConvention::PiUvw => "pi-uvw",
+        }
+    }
+
+    /// The rotation of the angles `[α, β, γ]` (rad) in this convention.
+    fn rotation(self, angles: DVec3) -> DMat3 {
+        match self {
+            PoseConvention::Linuxcnc => Pose::new(DVec3::ZERO, angles).rotation(),
+            PoseConvention::PiUvw => {
+                DMat3::from_rotation_x(angles.x)
+                    * DMat3::from_rotation_y(angles.y)
+                    * DMat3::from_rotation_z(angles.z)
+            }
+        }
+    }
+
+    /// The angles (rad) of `rotation` in this convention, the middle one in [-90°, 90°].
+    fn angles(self, rotation: &DMat3) -> DVec3 {
+        match self {
+            PoseConvention::Linuxcnc => Pose::from_rotation(DVec3::ZERO, rotation).angles,
+            PoseConvention::PiUvw => {
+                // Element (row r, column k) of a column-major glam matrix is `col(k)[r]`.
+                let (r00, r01, r02) = (rotation.x_axis.x, rotation.y_axis.x, rotation.z_axis.x);
+                let (r12, r22) = (rotation.z_axis.y, rotation.z_axis.z);
+                DVec3::new(
+                    (-r12).atan2(r22),
+                    r02.atan2((r00 * r00 + r01 * r01).sqrt()),
+                    (-r01).atan2(r00),
+                )
+            }
+        }
+    }
+
+    /// A pose `[x, y, z, α, β, γ]` (mm, degrees) written in this convention, in LinuxCNC's
+    /// `[x, y, z, a, b, c]`; LinuxCNC's own values are returned unchanged.
+    pub fn to_linuxcnc(self, values: [f64; 6]) -> [f64; 6] {
+        self.convert(values, PoseConvention::Linuxcnc)
+    }
+
+    /// A pose in LinuxCNC's `[x, y, z, a, b, c]` (mm, degrees) written in this convention.
+    pub fn from_linuxcnc(self, values: [f64; 6]) -> [f64; 6] {
+        PoseConvention::Linuxcnc.convert(values, self)
+    }
+
+    /// `values` in this convention, expressed in `other`.
+    fn convert(self, values: [f64; 6], other: PoseConvention) -> [f64; 6] {
+        if self == other {
+            return values;
+        }
+        let angles = DVec3::from_array([values[3], values[4], values[5]].map(f64::to_radians));
+        let [a, b, c] = other
+            .angles(&self.rotation(angles))
+            .to_array()
+            .map(f64::to_degrees);
+        [values[0], values[1], values[2], a, b, c]
+    }
+}
+
+impl std::fmt::Display for PoseConvention {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for PoseConvention {
+    type Err = String;
+
+    fn from_str(text: &str) -> Result<Self, String> {
+        Self::ALL
+            .into_iter()
+            .find(|c| c.name() == text)
+            .ok_or_else(|| {
+                let names: Vec<_> = Self::ALL.iter().map(|c| c.name()).collect();
+                format!("{text:?} is not a pose convention ({})", names.join(", "))
+            })
+    }
 }
 
 #[cfg(test)]

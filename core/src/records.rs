@@ -4,12 +4,13 @@
 //!
 //! Units: mm and degrees for the poses as planned or commanded (kept exactly as given, so a
 //! record written and read back is bit-identical); the `pose()` methods convert to [`Pose`]
-//! (mm, radians). Points are in the base frame.
+//! (mm, radians). Points are in the base frame unless a record says otherwise.
 
 use glam::DVec3;
 
 use crate::compensator::Compensated;
-use crate::geometry::{LEGS, TARGETS};
+use crate::geometry::LEGS;
+use crate::observation::Observation;
 use crate::pose::Pose;
 
 /// A pose with an id: one planned configuration, or one point to compensate.
@@ -28,8 +29,8 @@ impl NamedPose {
     }
 }
 
-/// One measured configuration: the commanded pose, the nominal legs commanded for it, and the
-/// three measured target points in the base frame.
+/// One measured configuration: the commanded pose, the nominal legs commanded for it, and what
+/// the instrument measured (target points or the platform's pose) in the base frame.
 #[derive(Debug, Clone, PartialEq)]
 pub struct MeasuredConfiguration {
     /// The configuration's id, unique in its set.
@@ -38,8 +39,8 @@ pub struct MeasuredConfiguration {
     pub pose_mm_deg: [f64; 6],
     /// The nominal leg lengths that were commanded, mm.
     pub legs: [f64; LEGS],
-    /// The measured target points `P_1..P_3` in the base frame, mm.
-    pub targets: [DVec3; TARGETS],
+    /// What was measured: the target points `P_1..P_N` (some perhaps not seen) or the pose.
+    pub observed: Observation,
 }
 
 impl MeasuredConfiguration {

@@ -7,13 +7,10 @@
 //! and `a_i = R·A_i` the vector from `A` to `A_i`.
 
 use glam::DVec3;
-use nalgebra::{Matrix6, SMatrix, Vector6};
+use nalgebra::{DMatrix, Matrix6, Vector6};
 
-use crate::geometry::{Geometry, LEGS, TARGETS};
+use crate::geometry::{Geometry, LEGS};
 use crate::pose::{Pose, Twist};
-
-/// The 9 × 6 point matrix `P` of Eq. 4.
-pub type PointMatrix = SMatrix<f64, 9, 6>;
 
 /// The actuation screws of all six legs at one pose.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -92,15 +89,19 @@ impl ActuationScrews {
     }
 }
 
-/// The point matrix `P` of Eq. 4 at `pose`: `ζ = P·ξ_t` maps a pose-error twist about `A` to the
-/// position errors of the three targets (mm). Block `j` is `[I₃ [p_j×]]` with `p_j = A − P_j`
-/// (the vector from target `P_j` to `A`, base-frame axes).
-pub fn point_matrix(geometry: &Geometry, pose: &Pose) -> PointMatrix {
+/// The point matrix `P` of Eq. 4 at `pose` for the geometry's targets `which` (indices into
+/// `geometry.targets`, in that order): `ζ = P·ξ_t` maps a pose-error twist about `A` to the
+/// position errors of those targets (mm), so `P` is `3·which.len()` × 6. Block `j` is
+/// `[I₃ [p_j×]]` with `p_j = A − P_j` (the vector from target `P_j` to `A`, base-frame axes).
+///
+/// # Panics
+/// If an index of `which` is not below `geometry.targets.len()`.
+pub fn point_matrix(geometry: &Geometry, pose: &Pose, which: &[usize]) -> DMatrix<f64> {
     let rotation = pose.rotation();
-    let mut p = PointMatrix::zeros();
-    for j in 0..TARGETS {
+    let mut p = DMatrix::zeros(3 * which.len(), 6);
+    for (row, &j) in which.iter().enumerate() {
         let v = -(rotation * geometry.targets[j]);
-        let block = 3 * j;
+        let block = 3 * row;
         for k in 0..3 {
             p[(block + k, k)] = 1.0;
         }
@@ -115,10 +116,14 @@ pub fn point_matrix(geometry: &Geometry, pose: &Pose) -> PointMatrix {
     p
 }
 
-/// The condition number σ_max/σ_min of a 9 × 6 matrix such as `PT` from its singular values (∞
-/// when rank-deficient or when an entry is not finite). The paper applies it to the
-/// dimensionless `PT` (Sec. 3.1) to decide on regularisation.
-pub fn condition_number(m: &PointMatrix) -> f64 {
+/// The condition number σ_max/σ_min of a matrix with six columns such as `PT` from its singular
+/// values (∞ when rank-deficient, when it has fewer than six rows, or when an entry is not
+/// finite). The paper applies it to the dimensionless `PT` (Sec. 3.1) to decide on
+/// regularisation.
+pub fn condition_number(m: &DMatrix<f64>) -> f64 {
+    if m.nrows() < m.ncols() {
+        return f64::INFINITY;
+    }
     // nalgebra's SVD never returns for a matrix with a NaN or infinite entry.
     if !m.iter().all(|v| v.is_finite()) {
         return f64::INFINITY;

@@ -219,3 +219,31 @@ fn leg_offsets_are_optional_round_trip_and_enter_the_fingerprint() {
         assert!((nominal[i] - shifted[i] - identified.leg_offsets[i]).abs() < 1e-12);
     }
 }
+
+#[test]
+fn any_number_of_targets_from_three_is_read_and_written_back() {
+    let text = with_line(
+        "targets",
+        "targets = [[0.0, 180.0, 25.0], [-155.9, -90.0, 25.0], [155.9, -90.0, 25.0], [0.0, 0.0, 60.0], [10.0, 20.0, 30.0]]",
+    );
+    let geometry = Geometry::from_toml_str(&text).expect("five targets");
+    assert_eq!(geometry.targets.len(), 5);
+    assert_eq!(
+        Geometry::from_toml_str(&geometry.to_toml_string()).unwrap(),
+        geometry
+    );
+    let text = with_line(
+        "targets",
+        "targets = [[0.0, 180.0, 25.0], [-155.9, -90.0, 25.0]]",
+    );
+    assert_eq!(
+        invalid_message(&text),
+        "targets has 2 rows, at least 3 are needed"
+    );
+    // Four targets on one line are as collinear as three.
+    let text = with_line(
+        "targets",
+        "targets = [[0.0, 0.0, 25.0], [100.0, 0.0, 25.0], [200.0, 0.0, 25.0], [-50.0, 0.0, 25.0]]",
+    );
+    assert!(invalid_message(&text).starts_with("targets are collinear"));
+}

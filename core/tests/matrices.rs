@@ -12,11 +12,11 @@
 
 use hexacomp_core::kinematics::target_points;
 use hexacomp_core::sampling::{SamplerOptions, WorkspaceSampler};
-use hexacomp_core::screw::{ActuationScrews, PointMatrix, condition_number, point_matrix};
+use hexacomp_core::screw::{ActuationScrews, condition_number, point_matrix};
 use hexacomp_core::{
     ForwardOptions, Geometry, Pose, Twist, forward_kinematics, inverse_kinematics,
 };
-use nalgebra::{Matrix6, SMatrix};
+use nalgebra::{DMatrix, Matrix6};
 
 fn poses(count: usize) -> (Geometry, Vec<Pose>) {
     let g = Geometry::prototype();
@@ -25,6 +25,18 @@ fn poses(count: usize) -> (Geometry, Vec<Pose>) {
         .samples(count)
         .unwrap();
     (g, poses)
+}
+
+/// `P` over every target of the geometry.
+fn full_point_matrix(g: &Geometry, pose: &Pose) -> DMatrix<f64> {
+    let all: Vec<usize> = (0..g.targets.len()).collect();
+    point_matrix(g, pose, &all)
+}
+
+/// `P·T` at `pose`.
+fn pt(g: &Geometry, pose: &Pose) -> DMatrix<f64> {
+    let t = ActuationScrews::at(g, pose).motion_jacobian().unwrap();
+    full_point_matrix(g, pose) * DMatrix::from_column_slice(6, 6, t.as_slice())
 }
 
 fn unit_twist(k: usize, h: f64) -> Twist {
@@ -108,7 +120,7 @@ fn motion_jacobian_inverts_the_force_jacobian_transpose() {
 fn point_matrix_maps_twists_to_target_displacements() {
     let (g, poses) = poses(200);
     for pose in poses {
-        let p = point_matrix(&g, &pose);
+        let p = full_point_matrix(&g, &pose);
         for k in 0..6 {
             let h = step(k);
             let plus = target_points(&g, &pose.displaced(&unit_twist(k, h)));
@@ -153,16 +165,13 @@ fn condition_of_pt_stays_in_single_digits_inside_the_workspace() {
     let (g, poses) = poses(500);
     let worst = poses
         .iter()
-        .map(|pose| {
-            let t = ActuationScrews::at(&g, pose).motion_jacobian().unwrap();
-            condition_number(&(point_matrix(&g, pose) * t))
-        })
+        .map(|pose| condition_number(&pt(&g, pose)))
         .fold(0.0, f64::max);
     assert!((1.0..10.0).contains(&worst), "worst cond(PT) = {worst}");
 }
 
 /// σ_max/σ_min of `m` from the eigenvalues of `mᵀm` (not from an SVD).
-fn condition_by_eigenvalues<const R: usize>(m: &SMatrix<f64, R, 6>) -> f64 {
+fn condition_by_eigenvalues(m: &DMatrix<f64>) -> f64 {
     let eigenvalues = (m.transpose() * m).symmetric_eigen().eigenvalues;
     (eigenvalues.max() / eigenvalues.min()).sqrt()
 }
@@ -172,7 +181,7 @@ fn condition_number_is_the_ratio_of_extreme_singular_values() {
     // Orthogonal columns of norms 1, 2, 3, 4, 5, 10 (each column spread over two rows):
     // the singular values are the norms, so cond = 10.
     let norms = [1.0, 2.0, 3.0, 4.0, 5.0, 10.0];
-    let mut m = PointMatrix::zeros();
+    let mut m = DMatrix::<f64>::zeros(9, 6);
     let h = std::f64::consts::FRAC_1_SQRT_2;
     for k in 0..3 {
         // Column k is n_k (e_k + e_{k+6})/√2, column k + 3 is n_{k+3} (e_k − e_{k+6})/√2.
@@ -181,7 +190,7 @@ fn condition_number_is_the_ratio_of_extreme_singular_values() {
         m[(k, k + 3)] = norms[k + 3] * h;
         m[(k + 6, k + 3)] = -norms[k + 3] * h;
     }
-    let gram = m.transpose() * m;
+    let gram = m.transpose() * &m;
     for i in 0..6 {
         for j in 0..6 {
             let expected = if i == j { norms[i] * norms[i] } else { 0.0 };
@@ -196,15 +205,17 @@ fn condition_number_is_the_ratio_of_extreme_singular_values() {
     // Scaling one column to zero makes the matrix rank-deficient: a condition number beyond
     // any meaningful one (the SVD leaves σ_min at rounding level), and infinite for the zero
     // matrix, whose σ_min is exactly 0.
-    let mut deficient = m;
+    let mut deficient = m.clone();
     deficient.column_mut(4).fill(0.0);
     assert!(condition_number(&deficient) > 1e12);
-    assert_eq!(condition_number(&PointMatrix::zeros()), f64::INFINITY);
+    assert_eq!(condition_number(&DMatrix::zeros(9, 6)), f64::INFINITY);
+    // Fewer rows than columns (two targets: six equations, but one rotation unobserved)
+    // counts as singular too.
+    assert_eq!(condition_number(&DMatrix::identity(5, 6)), f64::INFINITY);
     // And PT at workspace poses: the same number as from the eigenvalues of (PT)ᵀ(PT).
     let (g, poses) = poses(50);
     for pose in poses {
-        let t = ActuationScrews::at(&g, &pose).motion_jacobian().unwrap();
-        let pt = point_matrix(&g, &pose) * t;
+        let pt = pt(&g, &pose);
         let expected = condition_by_eigenvalues(&pt);
         assert!(
             (condition_number(&pt) - expected).abs() < 1e-9 * expected,
@@ -219,7 +230,12 @@ fn singular_value_ratio_is_sigma_min_over_sigma_max_of_w() {
     let (g, poses) = poses(50);
     for pose in poses {
         let screws = ActuationScrews::at(&g, &pose);
-        let expected = 1.0 / condition_by_eigenvalues(&screws.force_jacobian());
+        let expected = 1.0
+            / condition_by_eigenvalues(&DMatrix::from_column_slice(
+                6,
+                6,
+                screws.force_jacobian().as_slice(),
+            ));
         let ratio = screws.singular_value_ratio();
         assert!(
             (ratio - expected).abs() < 1e-9 * expected,
@@ -240,7 +256,12 @@ fn solve_twist_solves_wt_xi_equals_rho_and_refuses_below_its_threshold() {
     for (n, pose) in poses.into_iter().enumerate() {
         let screws = ActuationScrews::at(&g, &pose);
         let rho: [f64; 6] = std::array::from_fn(|i| ((n * 6 + i) as f64 * 0.7).sin());
-        let ratio = 1.0 / condition_by_eigenvalues(&screws.force_jacobian());
+        let ratio = 1.0
+            / condition_by_eigenvalues(&DMatrix::from_column_slice(
+                6,
+                6,
+                screws.force_jacobian().as_slice(),
+            ));
         // Below the pose's σ_min/σ_max the threshold lets the solve through…
         let xi = screws.solve_twist(&rho, ratio * (1.0 - 1e-6)).unwrap();
         let back = screws.force_jacobian().transpose() * nalgebra::Vector6::from(xi.to_array());
@@ -272,7 +293,7 @@ fn non_finite_or_zero_matrices_count_as_singular() {
         screws.directions[2].x = bad;
         assert_eq!(screws.singular_value_ratio(), 0.0);
         assert_eq!(screws.solve_twist(&[0.1; 6], 1e-10), Err(0.0));
-        let mut m = point_matrix(&g, &g.home_pose());
+        let mut m = full_point_matrix(&g, &g.home_pose());
         m[(4, 2)] = bad;
         assert_eq!(condition_number(&m), f64::INFINITY);
     }

@@ -17,6 +17,7 @@
 mod error;
 mod fiducials;
 mod lines;
+mod measurements;
 mod points_file;
 mod registration;
 
@@ -24,16 +25,17 @@ use std::collections::HashMap;
 use std::io::{BufRead, Write};
 use std::path::Path;
 
-use glam::DVec3;
 use hexacomp_core::durable::NewFile;
-use hexacomp_core::geometry::{LEGS, TARGETS};
-use hexacomp_core::records::{
-    JointCorrection, MeasuredConfiguration, NamedCompensation, NamedLegs, NamedPose,
-};
+use hexacomp_core::geometry::LEGS;
+use hexacomp_core::records::{JointCorrection, NamedCompensation, NamedLegs, NamedPose};
 
 pub use error::{Error, Result};
 pub use fiducials::{FIDUCIAL_COLUMNS, read_fiducials, write_fiducials};
 pub use lines::MAX_LINE_BYTES;
+pub use measurements::{
+    MEASURED_POSE_COLUMNS, read_measurements, read_measurements_in, target_columns,
+    write_measurements, write_measurements_in,
+};
 pub use points_file::{FileSummary, PointsFile, bytes_progress, compensate_file};
 pub use registration::{
     REGISTRATION_FIRST_LINE, REGISTRATION_FORMAT, RegisteredFiducial, RegistrationFile,
@@ -48,11 +50,6 @@ pub const POSE_COLUMNS: [&str; 6] = ["x", "y", "z", "a", "b", "c"];
 pub const LEG_COLUMNS: [&str; LEGS] = ["q1", "q2", "q3", "q4", "q5", "q6"];
 /// Joint correction columns, mm.
 pub const CORRECTION_COLUMNS: [&str; LEGS] = ["dq1", "dq2", "dq3", "dq4", "dq5", "dq6"];
-/// Measured target point columns (base frame), mm.
-pub const TARGET_COLUMNS: [&str; 3 * TARGETS] = [
-    "p1x", "p1y", "p1z", "p2x", "p2y", "p2z", "p3x", "p3y", "p3z",
-];
-
 /// The records of one file, in file order, with the line each came from (for messages).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Records<T> {
@@ -115,7 +112,7 @@ const QUOTE_LIMIT: usize = 40;
 
 /// `text` quoted for a message, cut after [`QUOTE_LIMIT`] characters (a 200 MB field is not
 /// echoed whole).
-fn quote(text: &str) -> String {
+pub(crate) fn quote(text: &str) -> String {
     match text.char_indices().nth(QUOTE_LIMIT) {
         None => format!("{text:?}"),
         Some((cut, _)) => format!("{:?}… ({} bytes)", &text[..cut], text.len()),
@@ -393,24 +390,6 @@ pub fn stream_poses(path: &Path) -> Result<Rows<NamedPose>> {
     Rows::open(path, &[&POSE_COLUMNS], pose_row)
 }
 
-/// Reads a measurements file (`id,x,y,z,a,b,c,q1..q6,p1x..p3z`).
-pub fn read_measurements(path: &Path) -> Result<Records<MeasuredConfiguration>> {
-    Rows::open(
-        path,
-        &[&POSE_COLUMNS, &LEG_COLUMNS, &TARGET_COLUMNS],
-        |row| {
-            let p = row.numbers(TARGET_COLUMNS)?;
-            Ok(MeasuredConfiguration {
-                id: row.id.to_string(),
-                pose_mm_deg: row.numbers(POSE_COLUMNS)?,
-                legs: row.numbers(LEG_COLUMNS)?,
-                targets: std::array::from_fn(|j| DVec3::new(p[3 * j], p[3 * j + 1], p[3 * j + 2])),
-            })
-        },
-    )?
-    .collect()
-}
-
 /// Reads a corrections file (`id,q1..q6,dq1..dq6`, diagnostic columns ignored).
 pub fn read_corrections(path: &Path) -> Result<Records<JointCorrection>> {
     Rows::open(path, &[&LEG_COLUMNS, &CORRECTION_COLUMNS], |row| {
@@ -478,11 +457,11 @@ pub(crate) fn write_rows<W: Write>(
     csv.flush()
 }
 
-fn cells(values: &[f64]) -> impl Iterator<Item = String> + '_ {
+pub(crate) fn cells(values: &[f64]) -> impl Iterator<Item = String> + '_ {
     values.iter().map(|v| v.to_string())
 }
 
-fn header<'a>(parts: &[&[&'a str]]) -> Vec<&'a str> {
+pub(crate) fn header<'a>(parts: &[&[&'a str]]) -> Vec<&'a str> {
     std::iter::once("id")
         .chain(parts.iter().flat_map(|p| p.iter().copied()))
         .collect()
@@ -496,25 +475,6 @@ pub fn write_poses<W: Write>(writer: W, rows: &[NamedPose]) -> std::io::Result<(
         rows.iter().map(|r| {
             std::iter::once(r.id.clone())
                 .chain(cells(&r.pose_mm_deg))
-                .collect()
-        }),
-    )
-}
-
-/// Writes a measurements file.
-pub fn write_measurements<W: Write>(
-    writer: W,
-    rows: &[MeasuredConfiguration],
-) -> std::io::Result<()> {
-    write_rows(
-        writer,
-        &header(&[&POSE_COLUMNS, &LEG_COLUMNS, &TARGET_COLUMNS]),
-        rows.iter().map(|r| {
-            let targets: Vec<f64> = r.targets.iter().flat_map(|p| p.to_array()).collect();
-            std::iter::once(r.id.clone())
-                .chain(cells(&r.pose_mm_deg))
-                .chain(cells(&r.legs))
-                .chain(cells(&targets))
                 .collect()
         }),
     )

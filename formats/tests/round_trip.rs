@@ -1,6 +1,7 @@
 //! The CSV formats: exact round trips and strict refusal naming file, line and column.
 
 use glam::DVec3;
+use hexacomp_core::observation::Observation;
 use hexacomp_core::records::{JointCorrection, MeasuredConfiguration, NamedPose};
 use hexacomp_formats::Error;
 use hexacomp_formats::{
@@ -56,11 +57,11 @@ fn measurements_and_corrections_round_trip() {
         id: "7".into(),
         pose_mm_deg: [1.5, 2.5, 290.0, 3.0, -4.0, 5.0],
         legs: [350.1, 351.2, 352.3, 353.4, 354.5, 355.6],
-        targets: [
-            DVec3::new(1.0, 2.0, 3.0),
-            DVec3::new(4.0, 5.0, 6.0),
-            DVec3::new(7.0, 8.0, 9.0),
-        ],
+        observed: Observation::Targets(vec![
+            Some(DVec3::new(1.0, 2.0, 3.0)),
+            Some(DVec3::new(4.0, 5.0, 6.0)),
+            Some(DVec3::new(7.0, 8.0, 9.0)),
+        ]),
     }];
     let path = dir.path().join("m.csv");
     write_measurements(std::fs::File::create(&path).unwrap(), &m).unwrap();

@@ -445,3 +445,115 @@ fn a_refused_registration_writes_nothing_and_leaves_the_old_one() {
         .collect();
     assert_eq!(names.len(), 3, "{names:?}");
 }
+
+#[test]
+fn gaps_and_a_probe_in_pi_angles_are_solved_and_reported() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    trainer_ok(d, &["plan", "--count", "30", "--out", "plan.csv"]);
+    trainer_ok(d, &["simulate", "--plan", "plan.csv", "--out", "base.csv"]);
+    trainer_ok(
+        d,
+        &[
+            "simulate",
+            "--plan",
+            "plan.csv",
+            "--out",
+            "gaps.csv",
+            "--drop-rate",
+            "0.3",
+        ],
+    );
+    let gaps = std::fs::read_to_string(d.join("gaps.csv")).unwrap();
+    let gappy_rows = gaps.lines().filter(|l| l.contains(",,,")).count();
+    assert!(gappy_rows > 3, "{gaps}");
+    let said = trainer_ok(
+        d,
+        &[
+            "solve",
+            "--measurements",
+            "gaps.csv",
+            "--out",
+            "gaps-dq.csv",
+        ],
+    );
+    assert_eq!(
+        said.matches("cannot be used: 2 of 3 targets seen").count(),
+        gappy_rows,
+        "{said}"
+    );
+    assert!(
+        said.contains(&format!("{gappy_rows} with too few targets seen")),
+        "{said}"
+    );
+    assert_eq!(
+        read_corrections(&d.join("gaps-dq.csv")).unwrap().len(),
+        30 - gappy_rows
+    );
+
+    // A 6-DoF probe writing PI's U, V, W: read in that convention, the corrections are those of
+    // the targets it was fitted to (to the fit's noise); read as LinuxCNC angles, they are not.
+    trainer_ok(
+        d,
+        &[
+            "simulate",
+            "--plan",
+            "plan.csv",
+            "--out",
+            "probe.csv",
+            "--probe",
+            "--pose-convention",
+            "pi-uvw",
+        ],
+    );
+    assert!(
+        std::fs::read_to_string(d.join("probe.csv"))
+            .unwrap()
+            .contains(",mx,my,mz,ma,mb,mc\n")
+    );
+    trainer_ok(
+        d,
+        &[
+            "solve",
+            "--measurements",
+            "base.csv",
+            "--out",
+            "base-dq.csv",
+        ],
+    );
+    trainer_ok(
+        d,
+        &[
+            "solve",
+            "--measurements",
+            "probe.csv",
+            "--pose-convention",
+            "pi-uvw",
+            "--out",
+            "probe-dq.csv",
+        ],
+    );
+    let largest_difference = |other: &str| {
+        let base = read_corrections(&d.join("base-dq.csv")).unwrap();
+        let other = read_corrections(&d.join(other)).unwrap();
+        base.iter()
+            .zip(other.iter())
+            .flat_map(|(b, o)| (0..6).map(move |i| (b.corrections[i] - o.corrections[i]).abs()))
+            .fold(0.0, f64::max)
+    };
+    assert!(largest_difference("probe-dq.csv") < 1e-6);
+    let output = trainer(
+        d,
+        &[
+            "solve",
+            "--measurements",
+            "probe.csv",
+            "--out",
+            "wrong-dq.csv",
+        ],
+    );
+    assert!(
+        !output.status.success() || largest_difference("wrong-dq.csv") > 0.01,
+        "read in the wrong convention, the probe's poses gave the same corrections"
+    );
+}

@@ -1,10 +1,10 @@
 //! Joint corrections by the robust Levenberg–Marquardt iteration of the paper's Fig. 2.
 //!
 //! For one measured configuration with commanded legs `q⁽⁰⁾` and measured target points `r_Pm`
-//! (base frame), iterate from `q⁽⁰⁾`:
+//! (base frame; the targets seen, three or more), iterate from `q⁽⁰⁾`:
 //!
 //! 1. `r_Pc = f(q⁽ˡ⁾)`: the target points of the nominal forward kinematics, `ζ = r_Pm − r_Pc`
-//!    (Eq. 4);
+//!    (Eq. 4); with a 6-DoF probe, `ζ` is the pose error itself and `P` the identity;
 //! 2. `P` (Eq. 4) and `T = W⁻ᵀ` (Eq. 3) at that iterate, hence the linearised model `ζ = PTρ`
 //!    (Eq. 5); `λ = λ₀` if `cond(PT) > c`, else 0;
 //! 3. `ρ⁽ˡ⁾ = ((PT)ᵀ(PT) + λI)⁻¹(PT)ᵀζ` (Eq. 7, the minimiser of Eq. 6's
@@ -15,14 +15,11 @@
 //! cancels the error to first order. The "ordinary" compensator of the paper's comparison is the
 //! same iteration with `λ = 0` always.
 
-use glam::DVec3;
-use hexacomp_core::kinematics::target_misfit;
+use hexacomp_core::observation::Observation;
 use hexacomp_core::records::{JointCorrection, MeasuredConfiguration};
-use hexacomp_core::screw::{ActuationScrews, condition_number, point_matrix};
-use hexacomp_core::{
-    ForwardOptions, Geometry, LEGS, Pose, TARGETS, forward_kinematics, inverse_kinematics,
-};
-use nalgebra::{Matrix6, SVector, Vector6};
+use hexacomp_core::screw::{ActuationScrews, condition_number};
+use hexacomp_core::{ForwardOptions, Geometry, LEGS, Pose, forward_kinematics, inverse_kinematics};
+use nalgebra::{DMatrix, DVector, Matrix6, Vector6};
 
 use crate::error::{Error, Result};
 
@@ -91,13 +88,14 @@ pub struct Solution {
     pub max_cond_pt: f64,
     /// Whether `λ₀` was applied at any iterate.
     pub regularised: bool,
-    /// `‖ζ‖` at `q⁽ᴸ⁾`: how far the nominal model there is from the measured points, mm.
+    /// `‖ζ‖` at `q⁽ᴸ⁾`: how far the nominal model there is from the measured points, mm (for a
+    /// measured pose, from the geometry's targets placed at it).
     pub residual_mm: f64,
 }
 
-/// Runs the Fig. 2 iteration for one configuration: commanded legs `commanded` (mm), measured
-/// target points `measured` (base frame, mm), `seed` a pose near the configuration (normally the
-/// commanded pose) for forward kinematics.
+/// Runs the Fig. 2 iteration for one configuration: commanded legs `commanded` (mm), what was
+/// `measured` (target points or a pose, base frame), `seed` a pose near the configuration
+/// (normally the commanded pose) for forward kinematics.
 ///
 /// Each iterate forms `PT` of the linearised model `ζ = PTρ` (Eq. 5), takes the regularised step
 /// of Eq. 7 (`regularised_step`), and updates `q⁽ˡ⁺¹⁾ = q⁽ˡ⁾ + ρ⁽ˡ⁾` (Eq. 8); the result's
@@ -106,14 +104,20 @@ pub struct Solution {
 /// Fails when forward kinematics fails at an iterate (a leg leaves the stroke, a singular
 /// Jacobian) — the measurement cannot be explained by leg corrections inside the stroke — when
 /// `W` is singular at an iterate (`T` does not exist), or when the normal equations of a step
-/// cannot be solved ([`Error::SingularNormalEquations`]).
+/// cannot be solved ([`Error::SingularNormalEquations`]); and before iterating, when the
+/// observation does not belong to the geometry or does not determine the pose (fewer than three
+/// targets seen: [`Error::InsufficientData`]).
 pub fn solve(
     geometry: &Geometry,
     commanded: &[f64; LEGS],
-    measured: &[DVec3; TARGETS],
+    measured: &Observation,
     seed: &Pose,
     options: &SolverOptions,
 ) -> Result<Solution> {
+    measured.check(geometry)?;
+    if let Some(reason) = measured.undetermined(geometry) {
+        return Err(Error::InsufficientData(reason));
+    }
     let fk = ForwardOptions::default();
     let mut legs = *commanded;
     let mut pose = forward_kinematics(geometry, &legs, seed, &fk)?;
@@ -122,14 +126,14 @@ pub fn solve(
     let mut iterations = 0;
     let mut converged = false;
     while iterations < options.max_iterations {
-        let zeta = target_misfit(geometry, &pose, measured);
+        let (zeta, p) = measured.linearised(geometry, &pose);
         let screws = ActuationScrews::at(geometry, &pose);
         let t = screws
             .motion_jacobian()
             .ok_or_else(|| hexacomp_core::Error::SingularJacobian {
                 ratio: screws.singular_value_ratio(),
             })?;
-        let pt = point_matrix(geometry, &pose) * t;
+        let pt = p * DMatrix::from_column_slice(6, 6, t.as_slice());
         let cond = condition_number(&pt);
         max_cond_pt = max_cond_pt.max(cond);
         let lambda = if options.robust && cond > options.cond_threshold {
@@ -156,7 +160,7 @@ pub fn solve(
         converged,
         max_cond_pt,
         regularised,
-        residual_mm: target_misfit(geometry, &pose, measured).norm(),
+        residual_mm: measured.misfit(geometry, &pose).norm(),
     })
 }
 
@@ -164,14 +168,14 @@ pub fn solve(
 /// `Φ(ρ) = ‖ζ − Aρ‖² + λ‖ρ‖²` (Eq. 6). `cond_a` (`cond(A)`, as computed for the λ switch) is
 /// what a singular `AᵀA + λI` is reported with.
 fn regularised_step(
-    at: &nalgebra::SMatrix<f64, 6, 9>,
-    ata: &Matrix6<f64>,
-    zeta: &SVector<f64, 9>,
+    at: &DMatrix<f64>,
+    ata: &DMatrix<f64>,
+    zeta: &DVector<f64>,
     lambda: f64,
     cond_a: f64,
 ) -> Result<Vector6<f64>> {
-    let normal = ata + Matrix6::identity() * lambda;
-    let rhs = at * zeta;
+    let normal = Matrix6::from_column_slice(ata.as_slice()) + Matrix6::identity() * lambda;
+    let rhs = Vector6::from_column_slice((at * zeta).as_slice());
     normal
         .cholesky()
         .map(|c| c.solve(&rhs))
@@ -292,6 +296,15 @@ pub fn solve_all(
 ) -> Result<Vec<Outcome>> {
     options.validate()?;
     checks.validate()?;
+    if let Some((row, problem)) = rows
+        .iter()
+        .find_map(|row| row.observed.check(geometry).err().map(|e| (row, e)))
+    {
+        return Err(Error::GeometryMismatch(format!(
+            "configuration {}: {problem}",
+            row.id
+        )));
+    }
     Ok(rows
         .iter()
         .map(|row| solve_row(geometry, row, options, checks))
@@ -316,7 +329,7 @@ fn solve_row(
         });
     }
     let solution =
-        solve(geometry, &row.legs, &row.targets, &pose, options).map_err(|e| e.to_string());
+        solve(geometry, &row.legs, &row.observed, &pose, options).map_err(|e| e.to_string());
     if let Ok(s) = &solution {
         if !s.converged {
             flags.push(Flag::NotConverged);
@@ -340,9 +353,9 @@ mod tests {
 
     #[test]
     fn a_singular_step_reports_the_conditioning_and_lambda_it_met() {
-        let at = nalgebra::SMatrix::<f64, 6, 9>::from_fn(|i, k| (i + k) as f64);
-        let zeta = SVector::<f64, 9>::from_fn(|k, _| k as f64 - 4.0);
-        let zero = Matrix6::zeros();
+        let at = DMatrix::<f64>::from_fn(6, 9, |i, k| (i + k) as f64);
+        let zeta = DVector::<f64>::from_fn(9, |k, _| k as f64 - 4.0);
+        let zero = DMatrix::zeros(6, 6);
         assert_eq!(
             regularised_step(&at, &zero, &zeta, 0.0, f64::INFINITY),
             Err(Error::SingularNormalEquations {
@@ -352,6 +365,7 @@ mod tests {
         );
         // With λ > 0 the same step is solvable: (0 + λI)⁻¹Aᵀζ = Aᵀζ / λ.
         let rho = regularised_step(&at, &zero, &zeta, 0.5, f64::INFINITY).unwrap();
-        assert!((rho - (at * zeta) / 0.5).norm() < 1e-12 * (at * zeta).norm());
+        let expected = Vector6::from_column_slice((&at * &zeta).as_slice()) / 0.5;
+        assert!((rho - expected).norm() < 1e-12 * expected.norm());
     }
 }

@@ -56,6 +56,11 @@ pub enum Error {
     #[error("registration refused: {0}")]
     RegistrationRefused(String),
 
+    /// The measurements do not fit the geometry (another number of targets, numbers that are not
+    /// finite).
+    #[error("the measurements do not fit the geometry: {0}")]
+    GeometryMismatch(String),
+
     /// The data cannot support the requested computation (too few configurations, none usable).
     #[error("insufficient data: {0}")]
     InsufficientData(String),

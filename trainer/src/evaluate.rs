@@ -322,7 +322,8 @@ pub fn drive(
     for pose in poses {
         let reached = platform.move_legs(&command(pose), pose)?;
         let targets = instrument.measure_targets(&reached);
-        let measured = pose_from_targets(platform.nominal(), &targets, pose)?;
+        let seen: Vec<_> = targets.into_iter().map(Some).collect();
+        let measured = pose_from_targets(platform.nominal(), &seen)?;
         errors.reached.push(PoseErrorNorm::between(pose, &reached));
         errors
             .measured

@@ -13,7 +13,6 @@
 //! a fraction of the largest: parameter combinations the measurements cannot see stay at their
 //! nominal values. Compensation is then the identified geometry's inverse kinematics.
 
-use hexacomp_core::kinematics::target_misfit;
 use hexacomp_core::records::MeasuredConfiguration;
 use hexacomp_core::screw::{ActuationScrews, point_matrix};
 use hexacomp_core::{ForwardOptions, Geometry, LEGS, Pose, forward_kinematics};
@@ -116,14 +115,15 @@ pub fn identify(
     })
 }
 
-/// The norm of `row`'s nine target residuals `r_Pm − r_Pc` at `geometry`, mm: how far the
+/// The norm of `row`'s target residuals `r_Pm − r_Pc` at `geometry` (the targets seen, or the
+/// geometry's targets at a measured pose), mm: how far the
 /// targets that `geometry` (an identified one) predicts for the commanded legs are from the
 /// measured ones. `None` when `geometry` cannot reach the commanded legs (forward kinematics
 /// fails from the commanded pose).
 pub fn target_distance(geometry: &Geometry, row: &MeasuredConfiguration) -> Option<f64> {
     let pose =
         forward_kinematics(geometry, &row.legs, &row.pose(), &ForwardOptions::default()).ok()?;
-    Some(target_misfit(geometry, &pose, &row.targets).norm())
+    Some(row.observed.misfit(geometry, &pose).norm())
 }
 
 /// `error` of an iterate, with the likely cause when the last step's data determined fewer
@@ -139,18 +139,28 @@ fn ill_conditioned(error: Error, rank: usize) -> Error {
     ))
 }
 
-/// The Jacobian `∂r_Pc/∂θ` (9K × 42; per configuration `P·T·G`, Eq. 5 with `ρ = G·δθ`) and the
-/// residual `r_Pm − r_Pc` (9K; the `ζ` of Eq. 4) at the current parameters; `poses` are updated
-/// to the model's poses (and seed the next call).
+/// The Jacobian `∂r_Pc/∂θ` (3 rows per measured point × 42; per configuration `P·T·G`, Eq. 5
+/// with `ρ = G·δθ`) and the residual `r_Pm − r_Pc` (the `ζ` of Eq. 4) at the current
+/// parameters, over every configuration's [`hexacomp_core::observation::Observation::points`] (a measured pose counts as its
+/// targets placed at it); `poses` are updated to the model's poses (and seed the next call).
 fn linearise(
     geometry: &Geometry,
     rows: &[MeasuredConfiguration],
     poses: &mut [Pose],
 ) -> Result<(DMatrix<f64>, DVector<f64>)> {
-    let mut jacobian = DMatrix::zeros(9 * rows.len(), PARAMETERS);
-    let mut residual = DVector::zeros(9 * rows.len());
+    let points: Vec<Vec<usize>> = rows
+        .iter()
+        .map(|row| {
+            let points = row.observed.points(geometry);
+            points.iter().map(|(j, _)| *j).collect()
+        })
+        .collect();
+    let total = 3 * points.iter().map(Vec::len).sum::<usize>();
+    let mut jacobian = DMatrix::zeros(total, PARAMETERS);
+    let mut residual = DVector::zeros(total);
     let fk = ForwardOptions::default();
-    for (k, (row, pose)) in rows.iter().zip(poses.iter_mut()).enumerate() {
+    let mut at = 0;
+    for ((row, pose), which) in rows.iter().zip(poses.iter_mut()).zip(&points) {
         *pose = forward_kinematics(geometry, &row.legs, pose, &fk).map_err(|e| {
             Error::InsufficientData(format!(
                 "configuration {}: forward kinematics of the identified geometry: {e}",
@@ -172,13 +182,17 @@ fn linearise(
             }
             g[(i, 36 + i)] = 1.0;
         }
-        let block = point_matrix(geometry, pose) * t * g;
+        let t = DMatrix::from_column_slice(LEGS, LEGS, t.as_slice());
+        let g = DMatrix::from_column_slice(LEGS, PARAMETERS, g.as_slice());
+        let block = point_matrix(geometry, pose, which) * t * g;
+        let height = 3 * which.len();
         jacobian
-            .view_mut((9 * k, 0), (9, PARAMETERS))
+            .view_mut((at, 0), (height, PARAMETERS))
             .copy_from(&block);
         residual
-            .rows_mut(9 * k, 9)
-            .copy_from(&target_misfit(geometry, pose, &row.targets));
+            .rows_mut(at, height)
+            .copy_from(&row.observed.misfit(geometry, pose));
+        at += height;
     }
     Ok((jacobian, residual))
 }
@@ -197,6 +211,7 @@ fn apply(geometry: &mut Geometry, step: &DVector<f64>) {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use hexacomp_core::observation::Observation;
     use hexacomp_virtual::{ErrorModel, ErrorVariant, VirtualPlatform};
 
     /// `count` measurements of one and the same configuration: whatever their number, they
@@ -212,7 +227,7 @@ mod tests {
                     id: (k + 1).to_string(),
                     pose_mm_deg: pose.to_mm_deg(),
                     legs: m.commanded_legs,
-                    targets: m.targets,
+                    observed: Observation::Targets(m.targets.into_iter().map(Some).collect()),
                 }
             })
             .collect()

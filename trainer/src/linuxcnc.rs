@@ -13,7 +13,7 @@ use std::path::{Path, PathBuf};
 
 use glam::DVec3;
 use hexacomp_core::Geometry;
-use hexacomp_core::geometry::{LEGS, TARGETS, Workspace};
+use hexacomp_core::geometry::{LEGS, Workspace};
 
 use crate::error::{Error, Result};
 
@@ -176,8 +176,9 @@ impl LinuxCncHexapod {
                 leg_range[0], leg_range[1]
             )));
         }
-        let targets: [DVec3; TARGETS] =
-            std::array::from_fn(|t| (platform_joints[2 * t] + platform_joints[2 * t + 1]) / 2.0);
+        let targets: Vec<DVec3> = (0..3)
+            .map(|t| (platform_joints[2 * t] + platform_joints[2 * t + 1]) / 2.0)
+            .collect();
         let base_joints = to_mm(&self.base_joints);
         let geometry = Geometry {
             name: self.machine.clone(),

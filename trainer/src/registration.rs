@@ -324,12 +324,10 @@ fn spread(points: &[DVec3], weights: &[f64]) -> f64 {
         .sqrt()
 }
 
-/// `rows` with their measured targets brought from the instrument's frame into the base frame
-/// through the `instrument`'s pose in the base frame (`t + R·p`).
+/// `rows` with what was measured (targets or a pose) brought from the instrument's frame into
+/// the base frame through the `instrument`'s pose in the base frame (a point `p` to `t + R·p`).
 pub fn into_base_frame(rows: &mut [MeasuredConfiguration], instrument: &Pose) {
     for row in rows {
-        for target in &mut row.targets {
-            *target = instrument.transform_point(*target);
-        }
+        row.observed = row.observed.in_frame(instrument);
     }
 }

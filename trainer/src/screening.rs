@@ -104,6 +104,10 @@ impl ScreeningOptions {
 /// Why a configuration was excluded.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Reason {
+    /// What was measured does not determine the platform's pose (too few targets seen): the
+    /// configuration cannot be used, but it is no gross error and does not count towards a
+    /// refusal.
+    Unmeasured(String),
     /// The joint-correction iteration failed (the message says why).
     Unsolvable(String),
     /// A per-configuration check of the solve failed.
@@ -127,6 +131,7 @@ pub enum Reason {
 impl std::fmt::Display for Reason {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
+            Reason::Unmeasured(why) => write!(f, "cannot be used: {why}"),
             Reason::Unsolvable(why) => write!(f, "cannot be solved: {why}"),
             Reason::Flagged(flag) => write!(f, "{flag}"),
             Reason::Residual {
@@ -153,6 +158,7 @@ impl Reason {
     /// A short name of the kind of reason, for counts.
     pub fn kind(&self) -> &'static str {
         match self {
+            Reason::Unmeasured(_) => "too few targets seen",
             Reason::Unsolvable(_) => "cannot be solved",
             Reason::Flagged(Flag::NotConverged) => "did not converge",
             Reason::Flagged(Flag::LargeCorrection { .. }) => "correction above the bound",
@@ -184,6 +190,18 @@ impl Screening {
     pub fn excluded(&self) -> usize {
         self.reasons.iter().filter(|r| !r.is_empty()).count()
     }
+
+    /// The number of configurations excluded as gross errors: excluded for a reason other than
+    /// too few targets seen.
+    pub fn gross_errors(&self) -> usize {
+        self.reasons
+            .iter()
+            .filter(|r| {
+                r.iter()
+                    .any(|reason| !matches!(reason, Reason::Unmeasured(_)))
+            })
+            .count()
+    }
 }
 
 /// Screens the solved configurations of a measurements file (`outcomes[k]` solved from
@@ -199,10 +217,14 @@ pub fn screen_measured(
     options.validate()?;
     let mut reasons: Vec<Vec<Reason>> = outcomes
         .iter()
-        .map(|o| match &o.solution {
-            Err(why) => vec![Reason::Unsolvable(why.clone())],
-            Ok(_) => o.flags.iter().cloned().map(Reason::Flagged).collect(),
-        })
+        .zip(measurements)
+        .map(
+            |(o, row)| match (&o.solution, row.observed.undetermined(geometry)) {
+                (Err(_), Some(why)) => vec![Reason::Unmeasured(why)],
+                (Err(why), None) => vec![Reason::Unsolvable(why.clone())],
+                (Ok(_), _) => o.flags.iter().cloned().map(Reason::Flagged).collect(),
+            },
+        )
         .collect();
     let residuals: Vec<f64> = outcomes
         .iter()
@@ -281,8 +303,9 @@ pub const MIN_EXCLUDED_TO_REFUSE: usize = 2;
 
 /// Refuses when too much is excluded; otherwise passes the screening on.
 fn decide(screening: Screening, options: &ScreeningOptions) -> Result<Screening> {
-    let total = screening.reasons.len();
-    let excluded = screening.excluded();
+    // Configurations with too few targets seen say nothing about the data's quality.
+    let total = screening.reasons.len() - (screening.excluded() - screening.gross_errors());
+    let excluded = screening.gross_errors();
     // A share of a tiny file is not evidence: one bad row of four is a bad row.
     if total == 0
         || excluded <= MIN_EXCLUDED_TO_REFUSE
@@ -291,7 +314,12 @@ fn decide(screening: Screening, options: &ScreeningOptions) -> Result<Screening>
         return Ok(screening);
     }
     let mut kinds: Vec<(&'static str, usize)> = Vec::new();
-    for reason in screening.reasons.iter().flatten() {
+    let gross = screening
+        .reasons
+        .iter()
+        .flatten()
+        .filter(|reason| !matches!(reason, Reason::Unmeasured(_)));
+    for reason in gross {
         match kinds.iter_mut().find(|(kind, _)| *kind == reason.kind()) {
             Some((_, count)) => *count += 1,
             None => kinds.push((reason.kind(), 1)),

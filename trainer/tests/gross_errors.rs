@@ -77,20 +77,24 @@ impl GrossError {
     }
 
     fn put_into(self, rows: &mut [MeasuredConfiguration]) {
-        let next = rows[ROW + 1].targets;
+        let next = common::seen_targets(&rows[ROW + 1]);
         let row = &mut rows[ROW];
         match self {
-            GrossError::CoordinateTypo => row.targets[0].x += 30.0,
-            GrossError::TypoAlongTheNormal => row.targets[0].z += 1.0,
-            GrossError::SmallTypoAlongTheNormal => row.targets[0].z += 0.3,
-            GrossError::RowOffset => row.targets.iter_mut().for_each(|p| p.x += 1.0),
-            GrossError::SwappedTargets => row.targets.swap(0, 1),
-            GrossError::RowShifted => row.targets = next,
-            GrossError::DroppedDecimal => row.targets[1].y = (row.targets[1].y * 1e3).round(),
+            GrossError::CoordinateTypo => common::edit_targets(row, |t| t[0].x += 30.0),
+            GrossError::TypoAlongTheNormal => common::edit_targets(row, |t| t[0].z += 1.0),
+            GrossError::SmallTypoAlongTheNormal => common::edit_targets(row, |t| t[0].z += 0.3),
+            GrossError::RowOffset => {
+                common::edit_targets(row, |t| t.iter_mut().for_each(|p| p.x += 1.0))
+            }
+            GrossError::SwappedTargets => common::edit_targets(row, |t| t.swap(0, 1)),
+            GrossError::RowShifted => common::set_targets(row, next),
+            GrossError::DroppedDecimal => {
+                common::edit_targets(row, |t| t[1].y = (t[1].y * 1e3).round())
+            }
             GrossError::SwappedLegColumns => rows.iter_mut().for_each(|r| r.legs.swap(0, 1)),
             GrossError::Inches => rows
                 .iter_mut()
-                .for_each(|r| r.targets.iter_mut().for_each(|p| *p /= 25.4)),
+                .for_each(|r| common::edit_targets(r, |t| t.iter_mut().for_each(|p| *p /= 25.4))),
         }
     }
 }

@@ -16,7 +16,7 @@ use hexacomp_trainer::pipeline::Pipeline;
 use hexacomp_trainer::plan::PlanOptions;
 use hexacomp_trainer::registration::{RegistrationOptions, into_base_frame, register};
 use hexacomp_trainer::train::Architecture;
-use hexacomp_virtual::{ErrorModel, ErrorVariant, VirtualPlatform, measure_fiducials, seen_from};
+use hexacomp_virtual::{ErrorModel, ErrorVariant, VirtualPlatform, measure_fiducials};
 
 /// Six fiducials on the prototype's base plate and floor (base frame, mm).
 fn nominal_fiducials() -> Vec<NamedPoint> {
@@ -96,7 +96,7 @@ fn an_instrument_frame_campaign_calibrates_within_ten_percent_of_the_base_frame_
         // The same campaign as the tracker reports it, and its fiducials.
         let mut registered = base_frame.clone();
         for row in &mut registered {
-            row.targets = row.targets.map(|p| seen_from(&tracker, p));
+            row.observed = row.observed.in_frame(&tracker.inverse());
         }
         let nominal = nominal_fiducials();
         let measured = measure_fiducials(&nominal, &tracker, 0.010, machine_seed).unwrap();

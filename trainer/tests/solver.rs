@@ -6,13 +6,12 @@
 
 use glam::DVec3;
 use hexacomp_core::kinematics::target_points;
+use hexacomp_core::observation::Observation;
 use hexacomp_core::records::MeasuredConfiguration;
 use hexacomp_core::screw::{ActuationScrews, condition_number, point_matrix};
-use hexacomp_core::{
-    ForwardOptions, Geometry, LEGS, Pose, TARGETS, forward_kinematics, inverse_kinematics,
-};
+use hexacomp_core::{ForwardOptions, Geometry, LEGS, Pose, forward_kinematics, inverse_kinematics};
 use hexacomp_trainer::corrections::{Checks, Flag, Solution, SolverOptions, solve, solve_all};
-use nalgebra::{SVector, Vector6};
+use nalgebra::{DMatrix, DVector, Vector6};
 
 /// A pose inside the prototype's workspace, tilted and yawed so that no matrix is special.
 fn pose() -> Pose {
@@ -30,12 +29,12 @@ fn row_with_leg_offsets(g: &Geometry, pose: &Pose, offsets: [f64; LEGS]) -> Meas
         id: "1".into(),
         pose_mm_deg: pose.to_mm_deg(),
         legs,
-        targets: target_points(g, &reached),
+        observed: Observation::Targets(target_points(g, &reached).into_iter().map(Some).collect()),
     }
 }
 
 fn solve_one(g: &Geometry, row: &MeasuredConfiguration, options: &SolverOptions) -> Solution {
-    solve(g, &row.legs, &row.targets, &row.pose(), options).unwrap()
+    solve(g, &row.legs, &row.observed, &row.pose(), options).unwrap()
 }
 
 fn largest_difference(a: &[f64; LEGS], b: &[f64; LEGS]) -> f64 {
@@ -168,7 +167,9 @@ fn poorly_observed() -> Geometry {
 /// Leg errors plus a 30 µm misreading of one target (so that `ζ` is not a rigid motion).
 fn row_with_a_misread_target(g: &Geometry) -> MeasuredConfiguration {
     let mut row = row_with_leg_offsets(g, &pose(), [0.4, -0.3, 0.2, 0.5, -0.1, 0.3]);
-    row.targets[1] += DVec3::new(0.03, -0.02, 0.01);
+    if let Observation::Targets(targets) = &mut row.observed {
+        targets[1] = targets[1].map(|p| p + DVec3::new(0.03, -0.02, 0.01));
+    }
     row
 }
 
@@ -181,11 +182,15 @@ fn first_step_by_svd(
 ) -> (f64, Vector6<f64>) {
     let pose = forward_kinematics(g, &row.legs, &row.pose(), &ForwardOptions::default()).unwrap();
     let t = ActuationScrews::at(g, &pose).motion_jacobian().unwrap();
-    let pt = point_matrix(g, &pose) * t;
+    let pt = point_matrix(g, &pose, &[0, 1, 2]) * DMatrix::from_column_slice(6, 6, t.as_slice());
     let computed = target_points(g, &pose);
-    let zeta =
-        SVector::<f64, 9>::from_fn(|k, _| row.targets[k / 3][k % 3] - computed[k / 3][k % 3]);
-    let svd = pt.svd(true, true);
+    let Observation::Targets(measured) = &row.observed else {
+        panic!("targets")
+    };
+    let zeta = DVector::<f64>::from_fn(9, |k, _| {
+        measured[k / 3].unwrap()[k % 3] - computed[k / 3][k % 3]
+    });
+    let svd = pt.clone().svd(true, true);
     let (u, v_t) = (svd.u.unwrap(), svd.v_t.unwrap());
     let mut rho = Vector6::zeros();
     for k in 0..6 {
@@ -193,7 +198,6 @@ fn first_step_by_svd(
         let coefficient = sigma / (sigma * sigma + lambda) * u.column(k).dot(&zeta);
         rho += v_t.row(k).transpose() * coefficient;
     }
-    assert_eq!(TARGETS * 3, 9);
     (condition_number(&pt), rho)
 }
 

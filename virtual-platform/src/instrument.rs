@@ -1,7 +1,6 @@
 //! The simulated instrument's set-up: where it stands in the base frame, and the fiducials on the
 //! machine base as it measures them there.
 
-use glam::DVec3;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
@@ -10,12 +9,6 @@ use hexacomp_core::pose::Pose;
 use hexacomp_core::records::NamedPoint;
 
 use crate::machine::normal3;
-
-/// A base-frame point (mm) as an instrument standing at `instrument` (its pose in the base
-/// frame) reports it: `Rᵀ·(p − t)`.
-pub fn seen_from(instrument: &Pose, base_point: DVec3) -> DVec3 {
-    instrument.rotation().transpose() * (base_point - instrument.position)
-}
 
 /// The `nominal` fiducials (base frame, mm) as the instrument at `instrument` measures them: in
 /// its frame, each coordinate with independent Gaussian noise of `sigma_mm`, drawn from
@@ -35,11 +28,13 @@ pub fn measure_fiducials(
         return Err(Error::NonFinite("instrument pose"));
     }
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let into_instrument = instrument.inverse();
     Ok(nominal
         .iter()
         .map(|point| NamedPoint {
             name: point.name.clone(),
-            position: seen_from(instrument, point.position + sigma_mm * normal3(&mut rng)),
+            position: into_instrument
+                .transform_point(point.position + sigma_mm * normal3(&mut rng)),
             weight: 1.0,
         })
         .collect())

@@ -3,11 +3,11 @@
 //! The real machine ([`TrueMachine`]) differs from the nominal geometry by offsets of all 12 joint
 //! centres and of the leg zeros, nonlinear lead-screw pitch errors, gravity-induced leg compliance
 //! that depends on the configuration, and random repeatability noise on every move. The device
-//! measures the three target points in the base frame with a set uncertainty. Both are seeded:
+//! measures the target points in the base frame with a set uncertainty. Both are seeded:
 //! the machine by `machine_seed`, the noise stream by `noise_seed`.
 //!
-//! The instrument may stand anywhere: [`seen_from`] and [`measure_fiducials`] give what it
-//! reports in its own frame, for registration ([`measure_fiducials`]'s fiducials).
+//! The instrument may stand anywhere: [`measure_fiducials`] gives the fiducials on the base as it
+//! reports them in its own frame, for registration.
 //!
 //! Units: mm and radians; points in the base frame unless said otherwise. Errors are `hexacomp-core`'s
 //! [`hexacomp_core::Error`]: settings out of range, and the kinematics of the simulated machine.
@@ -19,7 +19,7 @@ mod instrument;
 mod machine;
 
 pub use error_model::{Compliance, ErrorModel, ErrorVariant, MeasuringDevice, PitchErrors};
-pub use instrument::{measure_fiducials, seen_from};
+pub use instrument::measure_fiducials;
 pub use machine::{LeadScrew, TrueMachine};
 
 use glam::DVec3;
@@ -27,7 +27,7 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
 use hexacomp_core::error::Result;
-use hexacomp_core::geometry::{Geometry, LEGS, TARGETS};
+use hexacomp_core::geometry::{Geometry, LEGS};
 use hexacomp_core::kinematics::{inverse_kinematics, target_points};
 use hexacomp_core::pose::Pose;
 use hexacomp_core::stats::PoseErrorNorm;
@@ -43,14 +43,14 @@ pub const DEFAULT_MACHINE_SEED: u64 = 18;
 pub const DEFAULT_NOISE_SEED: u64 = 1;
 
 /// What one measured configuration produces: the row of a measurements file plus the truth.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct Measurement {
     /// The commanded pose (mm, rad).
     pub commanded_pose: Pose,
     /// The nominal leg lengths commanded for it, mm.
     pub commanded_legs: [f64; LEGS],
-    /// The measured target points in the base frame, mm.
-    pub targets: [DVec3; TARGETS],
+    /// The measured target points `P_1..P_N` in the base frame, mm.
+    pub targets: Vec<DVec3>,
     /// The pose the machine really reached (known only in simulation).
     pub reached_pose: Pose,
 }
@@ -121,18 +121,21 @@ impl VirtualPlatform {
 
     /// Measures the target points (base frame, mm) with the platform at the real pose `reached`:
     /// each point is the mean of the device's readings, each reading with Gaussian noise.
-    pub fn measure_targets(&mut self, reached: &Pose) -> [DVec3; TARGETS] {
+    pub fn measure_targets(&mut self, reached: &Pose) -> Vec<DVec3> {
         let device = self.machine.model().device;
-        target_points(&self.nominal, reached).map(|point| {
-            if device.sigma_mm == 0.0 {
-                return point;
-            }
-            let mut sum = DVec3::ZERO;
-            for _ in 0..device.readings {
-                sum += point + device.sigma_mm * normal3(&mut self.noise);
-            }
-            sum / device.readings as f64
-        })
+        target_points(&self.nominal, reached)
+            .into_iter()
+            .map(|point| {
+                if device.sigma_mm == 0.0 {
+                    return point;
+                }
+                let mut sum = DVec3::ZERO;
+                for _ in 0..device.readings {
+                    sum += point + device.sigma_mm * normal3(&mut self.noise);
+                }
+                sum / device.readings as f64
+            })
+            .collect()
     }
 
     /// Moves to `pose` uncompensated and measures the targets: one row of a measurements file.

@@ -25,7 +25,7 @@ use super::train::{
 };
 use hexacomp_formats::write_file;
 
-use super::register::RegistrationArg;
+use super::measurements_input::MeasurementsInput;
 use super::{ResultsFolder, write_bytes};
 use hexacomp_trainer::table::Table;
 
@@ -66,7 +66,7 @@ pub struct CalibrateArgs {
     #[arg(long, value_name = "DIR", default_value = "calibration")]
     out_dir: PathBuf,
     #[command(flatten)]
-    registration: RegistrationArg,
+    reading: MeasurementsInput,
     #[command(flatten)]
     screening: MeasuredScreeningArgs,
 }
@@ -79,7 +79,7 @@ impl CalibrateArgs {
                 .measurements
                 .iter()
                 .map(PathBuf::as_path)
-                .chain(self.registration.path())
+                .chain(self.reading.registration_path())
                 .collect(),
             outputs: vec![],
         }
@@ -237,14 +237,14 @@ fn acquire(
         // differ between the two.
         let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
         write_bytes(&written, &bytes)?;
-        let mut records = match read_measurements(&written) {
+        let mut records = match args.reading.read_file(&written) {
             Ok(records) => records,
             // The same bytes fail the same way when read from the user's file, whose name the
             // message should carry (not the staging folder's).
-            Err(e) => return Err(read_measurements(path).err().unwrap_or(e).into()),
+            Err(e) => return Err(args.reading.read_file(path).err().unwrap_or(e)),
         };
         records.file = path.display().to_string();
-        let registration = match args.registration.path() {
+        let registration = match args.reading.registration_path() {
             Some(given) => {
                 let bytes =
                     std::fs::read(given).with_context(|| format!("reading {}", given.display()))?;
@@ -256,7 +256,7 @@ fn acquire(
             }
             None => None,
         };
-        args.registration.apply(registration.as_ref(), &mut records);
+        args.reading.apply(registration.as_ref(), &mut records);
         return Ok(records);
     }
     let (poses, measured) = pipeline.measure_virtual(platform)?;

@@ -7,7 +7,7 @@ use hexacomp_core::{Geometry, LEGS};
 use hexacomp_trainer::identify::{IdentifyOptions, PARAMETERS, identify};
 use hexacomp_trainer::pipeline::Pipeline;
 
-use super::register::RegistrationArg;
+use super::measurements_input::MeasurementsInput;
 use super::solve::{MeasuredScreeningArgs, solve_screened};
 
 /// Identify the platform's geometric parameters from point measurements (the paper's model-based
@@ -32,7 +32,7 @@ pub struct IdentifyArgs {
     #[arg(long, default_value_t = IdentifyOptions::default().max_iterations)]
     max_iterations: usize,
     #[command(flatten)]
-    registration: RegistrationArg,
+    reading: MeasurementsInput,
     #[command(flatten)]
     screening: MeasuredScreeningArgs,
 }
@@ -42,7 +42,7 @@ impl IdentifyArgs {
     pub fn files(&self) -> super::Files<'_> {
         super::Files {
             inputs: std::iter::once(self.measurements.as_path())
-                .chain(self.registration.path())
+                .chain(self.reading.registration_path())
                 .collect(),
             outputs: vec![&self.out],
         }
@@ -50,7 +50,7 @@ impl IdentifyArgs {
 }
 
 pub fn run(geometry: &Geometry, args: &IdentifyArgs) -> anyhow::Result<()> {
-    let file = args.registration.read_measurements(&args.measurements)?;
+    let file = args.reading.read(&args.measurements)?;
     // The configurations the joint-correction solve screens out as gross errors are left out
     // of the identification too: one wrong coordinate would move the identified joints.
     let pipeline = Pipeline {

@@ -6,6 +6,7 @@ pub mod evaluate;
 pub mod geometry;
 pub mod identify;
 pub mod inspect;
+pub mod measurements_input;
 pub mod plan;
 pub mod predict;
 pub mod register;

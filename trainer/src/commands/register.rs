@@ -1,14 +1,13 @@
 //! `hexacomp-trainer register`: locates the instrument in the machine's base frame from
 //! fiducials; `--registration` of `solve`, `identify` and `calibrate` uses the result.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::SystemTime;
 
 use hexacomp_core::pose::rotation_vector;
-use hexacomp_core::records::MeasuredConfiguration;
 use hexacomp_core::rigid_fit::{Locked, PARAMETER_NAMES};
-use hexacomp_formats::{Records, RegistrationFile, read_fiducials, read_registration};
-use hexacomp_trainer::registration::{RegistrationOptions, into_base_frame, register};
+use hexacomp_formats::{RegistrationFile, read_fiducials};
+use hexacomp_trainer::registration::{RegistrationOptions, register};
 use hexacomp_trainer::table::Table;
 
 use super::write_bytes;
@@ -142,55 +141,4 @@ pub fn print_registration(file: &RegistrationFile) {
         "made {} from {} (nominal) and {} (measured)",
         file.created, file.nominal, file.measured
     );
-}
-
-/// `--registration` of the commands that read measurements.
-#[derive(Debug, clap::Args)]
-pub struct RegistrationArg {
-    /// Registration TOML (`hexacomp-trainer register`): the measured target points are in that
-    /// instrument's frame and are brought into the base frame before solving. Without it they
-    /// are in the base frame.
-    #[arg(long, value_name = "FILE", requires = "measurements")]
-    registration: Option<PathBuf>,
-}
-
-impl RegistrationArg {
-    /// The registration file, when one is given.
-    pub fn path(&self) -> Option<&Path> {
-        self.registration.as_deref()
-    }
-
-    /// Reads the registration, when one is given.
-    pub fn read(&self) -> anyhow::Result<Option<RegistrationFile>> {
-        Ok(self.path().map(read_registration).transpose()?)
-    }
-
-    /// Brings `rows` into the base frame through `registration`, saying so.
-    pub fn apply(
-        &self,
-        registration: Option<&RegistrationFile>,
-        rows: &mut Records<MeasuredConfiguration>,
-    ) {
-        let (Some(path), Some(registration)) = (self.path(), registration) else {
-            return;
-        };
-        into_base_frame(rows, &registration.instrument_pose());
-        eprintln!(
-            "{}: targets measured in the instrument frame of {} (registered {}, RMS {:.4} mm) \
-             brought into the base frame",
-            rows.file,
-            path.display(),
-            registration.created,
-            registration.rms_mm
-        );
-    }
-
-    /// Reads `path`'s measurements and brings them into the base frame when a registration is
-    /// given.
-    pub fn read_measurements(&self, path: &Path) -> anyhow::Result<Records<MeasuredConfiguration>> {
-        let registration = self.read()?;
-        let mut rows = hexacomp_formats::read_measurements(path)?;
-        self.apply(registration.as_ref(), &mut rows);
-        Ok(rows)
-    }
 }

@@ -4,11 +4,12 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use hexacomp_core::error::compact;
+use hexacomp_core::pose::PoseConvention;
 use hexacomp_core::{Geometry, Pose, inverse_kinematics};
-use hexacomp_formats::{read_fiducials, read_poses, write_fiducials, write_measurements};
-use hexacomp_trainer::acquire::measure_plan;
+use hexacomp_formats::{read_fiducials, read_poses, write_fiducials, write_measurements_in};
+use hexacomp_trainer::acquire::{Reporting, as_reported, measure_plan};
 use hexacomp_virtual::{
-    DEFAULT_MACHINE_SEED, ErrorModel, ErrorVariant, VirtualPlatform, measure_fiducials, seen_from,
+    DEFAULT_MACHINE_SEED, ErrorModel, ErrorVariant, VirtualPlatform, measure_fiducials,
 };
 
 use hexacomp_formats::write_file;
@@ -17,14 +18,16 @@ use hexacomp_formats::write_file;
 /// have produced.
 ///
 /// The virtual machine differs from the geometry by joint-centre and leg-zero offsets, lead-screw
-/// pitch errors, gravity compliance and repeatability noise; its device reads the three targets
-/// with 0.020 mm uncertainty (three readings averaged). Every pose is commanded with the nominal
-/// inverse kinematics (uncompensated). Output: a measurements CSV,
-/// `id,x,y,z,a,b,c,q1..q6,p1x,p1y,p1z,p2x,..,p3z` (mm, degrees; targets in the base frame).
+/// pitch errors, gravity compliance and repeatability noise; its device reads the geometry's
+/// targets with 0.020 mm uncertainty (three readings averaged). Every pose is commanded with the
+/// nominal inverse kinematics (uncompensated). Output: a measurements CSV,
+/// `id,x,y,z,a,b,c,q1..q6,p1x,p1y,p1z,..,pNz` (mm, degrees; targets in the base frame).
 ///
 /// With --instrument-pose the targets are written as a tracker standing there reports them, in
 /// its own frame; --fiducials and --fiducials-out then write the fiducials on the base as that
-/// tracker measures them, for `register`.
+/// tracker measures them, for `register`. --drop-rate leaves one target unseen in that share of
+/// the configurations (empty cells); --probe writes the platform's pose (`mx..mc`) as a 6-DoF
+/// probe reports it instead of the targets.
 #[derive(Debug, clap::Args)]
 pub struct SimulateArgs {
     /// Poses CSV to measure (`hexacomp-trainer plan`).
@@ -57,6 +60,23 @@ pub struct SimulateArgs {
     /// Output: the --fiducials as the instrument measures them (`name,x,y,z`, its frame, mm).
     #[arg(long, value_name = "FILE", requires = "fiducials")]
     fiducials_out: Option<PathBuf>,
+    /// Share of the configurations (0–1) in which one target, drawn at random, is not seen: its
+    /// cells are left empty.
+    #[arg(
+        long,
+        default_value_t = 0.0,
+        value_name = "SHARE",
+        conflicts_with = "probe"
+    )]
+    drop_rate: f64,
+    /// Report the platform's pose as a 6-DoF probe does (columns mx..mc, fitted to the measured
+    /// targets) instead of the targets.
+    #[arg(long)]
+    probe: bool,
+    /// Rotation convention of the measured poses written with --probe (linuxcnc: R =
+    /// Rz(c)·Ry(b)·Rx(a); pi-uvw: R = Rx(U)·Ry(V)·Rz(W), rotations about the moving axes).
+    #[arg(long, default_value_t = PoseConvention::Linuxcnc, value_name = "CONVENTION", requires = "probe")]
+    pose_convention: PoseConvention,
     /// Noise of each fiducial coordinate the instrument measures, mm (1 σ).
     #[arg(long, default_value_t = 0.010, value_name = "MM")]
     fiducial_noise: f64,
@@ -129,11 +149,13 @@ pub fn run(geometry: &Geometry, args: &SimulateArgs) -> anyhow::Result<()> {
             .with_context(|| format!("{}: cannot be measured on the virtual machine", at()))?;
         rows.extend(measured);
     }
-    for row in &mut rows {
-        for target in &mut row.targets {
-            *target = seen_from(&instrument, *target);
-        }
-    }
+    let reporting = Reporting {
+        instrument,
+        missed_share: args.drop_rate,
+        probe: args.probe,
+        seed: args.seed,
+    };
+    as_reported(geometry, &mut rows, &reporting)?;
     if let (Some(nominal), Some(out)) = (&fiducials, &args.fiducials_out) {
         let measured = measure_fiducials(
             nominal,
@@ -150,7 +172,9 @@ pub fn run(geometry: &Geometry, args: &SimulateArgs) -> anyhow::Result<()> {
             out.display()
         );
     }
-    write_file(&args.out, |w| write_measurements(w, &rows))?;
+    write_file(&args.out, |w| {
+        write_measurements_in(w, &rows, args.pose_convention)
+    })?;
     eprintln!(
         "measured {} configurations on virtual machine {} ({} errors) → {}",
         rows.len(),

@@ -14,7 +14,7 @@ use hexacomp_trainer::screening::{Screening, ScreeningOptions, screen_correction
 
 use hexacomp_formats::write_file;
 
-use super::register::RegistrationArg;
+use super::measurements_input::MeasurementsInput;
 
 /// Solve the joint corrections Δq of every measured configuration (paper Fig. 2: Eq. 5, Eq. 6,
 /// Eq. 7, Eq. 8, Eq. 9).
@@ -57,7 +57,7 @@ pub struct SolveArgs {
     #[arg(long)]
     ordinary: bool,
     #[command(flatten)]
-    registration: RegistrationArg,
+    reading: MeasurementsInput,
     #[command(flatten)]
     screening: MeasuredScreeningArgs,
 }
@@ -67,7 +67,7 @@ impl SolveArgs {
     pub fn files(&self) -> super::Files<'_> {
         super::Files {
             inputs: std::iter::once(self.measurements.as_path())
-                .chain(self.registration.path())
+                .chain(self.reading.registration_path())
                 .collect(),
             outputs: vec![&self.out],
         }
@@ -75,7 +75,7 @@ impl SolveArgs {
 }
 
 pub fn run(geometry: &Geometry, args: &SolveArgs) -> anyhow::Result<()> {
-    let rows = args.registration.read_measurements(&args.measurements)?;
+    let rows = args.reading.read(&args.measurements)?;
     anyhow::ensure!(
         !rows.is_empty(),
         "{}: no configurations",
@@ -185,10 +185,16 @@ fn print_exclusions<T>(screening: &Screening, records: &Records<T>, id: impl Fn(
         eprintln!("note: {note}");
     }
     let total = screening.reasons.len();
+    let unmeasured = screening.excluded() - screening.gross_errors();
     eprintln!(
-        "{} of {total} configurations kept, {} excluded as gross errors{}",
+        "{} of {total} configurations kept, {} excluded as gross errors{}{}",
         total - screening.excluded(),
-        screening.excluded(),
+        screening.gross_errors(),
+        if unmeasured > 0 {
+            format!(", {unmeasured} with too few targets seen")
+        } else {
+            String::new()
+        },
         screening
             .residual_limit_mm
             .map(|limit| format!(" (residual limit {limit:.4} mm)"))

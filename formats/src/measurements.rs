@@ -1,0 +1,210 @@
+//! Measurements files: per configuration the commanded pose and legs, then what the instrument
+//! measured — the target points `p1x..pNz` (any number N ≥ 3; a target not seen has its three
+//! cells empty), or the platform's pose `mx,my,mz,ma,mb,mc` from a 6-DoF probe.
+
+use std::io::Write;
+use std::path::Path;
+
+use glam::DVec3;
+use hexacomp_core::MIN_TARGETS;
+use hexacomp_core::observation::Observation;
+use hexacomp_core::pose::PoseConvention;
+use hexacomp_core::records::MeasuredConfiguration;
+
+use crate::{
+    Error, LEG_COLUMNS, POSE_COLUMNS, Records, Result, Row, Rows, cells, header, write_rows,
+};
+
+/// The measured-pose columns of a 6-DoF probe: position (mm) and angles (degrees).
+pub const MEASURED_POSE_COLUMNS: [&str; 6] = ["mx", "my", "mz", "ma", "mb", "mc"];
+
+/// The three columns of target `j` (1-based): `pjx, pjy, pjz`.
+pub fn target_columns(j: usize) -> [String; 3] {
+    ["x", "y", "z"].map(|axis| format!("p{j}{axis}"))
+}
+
+/// How many targets a header names: N when `p1x..pNz` are all present and `p(N+1)x` is not.
+fn targets_named(row: &Row) -> usize {
+    (1..)
+        .take_while(|&j| row.header.columns.contains_key(&format!("p{j}x")))
+        .count()
+}
+
+/// Reads a measurements file (`id,x,y,z,a,b,c,q1..q6`, then `p1x..pNz` or `mx..mc`), its
+/// measured poses in `convention` (converted to LinuxCNC's; the commanded pose is read as
+/// written).
+///
+/// A target whose three cells are all empty was not seen; one with some cells empty is refused.
+pub fn read_measurements_in(
+    path: &Path,
+    convention: PoseConvention,
+) -> Result<Records<MeasuredConfiguration>> {
+    let rows = Rows::open(path, &[&POSE_COLUMNS, &LEG_COLUMNS], |row| {
+        Ok(MeasuredConfiguration {
+            id: row.id.to_string(),
+            pose_mm_deg: row.numbers(POSE_COLUMNS)?,
+            legs: row.numbers(LEG_COLUMNS)?,
+            observed: observation(row)?,
+        })
+    })?;
+    check_measured_columns(&rows)?;
+    let mut records = rows.collect()?;
+    if convention != PoseConvention::Linuxcnc {
+        for record in records.iter_mut() {
+            if let Observation::Pose(values) = &mut record.observed {
+                *values = convention.to_linuxcnc(*values);
+            }
+        }
+    }
+    Ok(records)
+}
+
+/// Reads a measurements file whose measured poses (if any) are in LinuxCNC's convention.
+pub fn read_measurements(path: &Path) -> Result<Records<MeasuredConfiguration>> {
+    read_measurements_in(path, PoseConvention::Linuxcnc)
+}
+
+/// Refuses a header with neither targets nor a measured pose, both, or fewer than three
+/// targets, or a target with one of its three columns missing.
+fn check_measured_columns<T>(rows: &Rows<T>) -> Result<()> {
+    let columns = &rows.header.columns;
+    let fail = |column: String, message: String| Error::Format {
+        file: rows.file().to_string(),
+        line: rows.header.line,
+        column: Some(column),
+        message,
+    };
+    let has_pose = MEASURED_POSE_COLUMNS
+        .iter()
+        .any(|c| columns.contains_key(*c));
+    let named = (1..)
+        .take_while(|&j| columns.contains_key(&format!("p{j}x")))
+        .count();
+    if has_pose {
+        if named > 0 {
+            return Err(fail(
+                "p1x".into(),
+                "a measurements file holds target points or a measured pose (mx..mc), not both"
+                    .into(),
+            ));
+        }
+        if let Some(missing) = MEASURED_POSE_COLUMNS
+            .iter()
+            .find(|c| !columns.contains_key(**c))
+        {
+            return Err(fail(
+                missing.to_string(),
+                "required column is missing from the header".into(),
+            ));
+        }
+        return Ok(());
+    }
+    for j in 1..=named.max(MIN_TARGETS) {
+        if let Some(missing) = target_columns(j)
+            .into_iter()
+            .find(|c| !columns.contains_key(c))
+        {
+            return Err(fail(
+                missing,
+                "required column is missing from the header".into(),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// The observation of one row: its targets (empty cells: not seen) or its measured pose.
+fn observation(row: &Row) -> Result<Observation> {
+    if row.header.columns.contains_key("mx") {
+        return Ok(Observation::Pose(row.numbers(MEASURED_POSE_COLUMNS)?));
+    }
+    let targets = (1..=targets_named(row))
+        .map(|j| {
+            let columns = target_columns(j);
+            let texts = columns
+                .each_ref()
+                .map(|c| row.record[row.header.columns[c.as_str()]].trim());
+            if texts.iter().all(|t| t.is_empty()) {
+                return Ok(None);
+            }
+            if let Some(k) = texts.iter().position(|t| t.is_empty()) {
+                return Err(row.error(
+                    Some(&columns[k]),
+                    format!(
+                        "empty, but target {j}'s other coordinates are given: a target is either \
+                         measured whole or left empty (not seen)"
+                    ),
+                ));
+            }
+            let [x, y, z] = row.numbers(columns.each_ref().map(String::as_str))?;
+            Ok(Some(DVec3::new(x, y, z)))
+        })
+        .collect::<Result<Vec<_>>>()?;
+    if targets.iter().all(Option::is_none) {
+        return Err(row.error(
+            None,
+            "no target measured: every target's cells are empty".into(),
+        ));
+    }
+    Ok(Observation::Targets(targets))
+}
+
+/// Writes a measurements file, its measured poses (if any) in `convention`. Every row holds the
+/// same kind of observation (targets, as many in each row, or a pose); a target not seen is
+/// written as three empty cells.
+pub fn write_measurements_in<W: Write>(
+    writer: W,
+    rows: &[MeasuredConfiguration],
+    convention: PoseConvention,
+) -> std::io::Result<()> {
+    let kind = |row: &MeasuredConfiguration| match &row.observed {
+        Observation::Targets(targets) => Some(targets.len()),
+        Observation::Pose(_) => None,
+    };
+    let first = rows.first().map(kind).unwrap_or(Some(MIN_TARGETS));
+    if let Some(row) = rows.iter().find(|r| kind(r) != first) {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::InvalidInput,
+            format!(
+                "configuration {} measured otherwise than the first (targets or a pose, as many \
+                 targets): one file holds one kind",
+                row.id
+            ),
+        ));
+    }
+    let measured: Vec<String> = match first {
+        Some(count) => (1..=count).flat_map(target_columns).collect(),
+        None => MEASURED_POSE_COLUMNS.map(str::to_string).to_vec(),
+    };
+    let mut head = header(&[&POSE_COLUMNS, &LEG_COLUMNS]);
+    head.extend(measured.iter().map(String::as_str));
+    write_rows(
+        writer,
+        &head,
+        rows.iter().map(|r| {
+            let observed: Vec<String> = match &r.observed {
+                Observation::Targets(targets) => targets
+                    .iter()
+                    .flat_map(|p| match p {
+                        Some(p) => cells(&p.to_array()).collect::<Vec<_>>(),
+                        None => vec![String::new(); 3],
+                    })
+                    .collect(),
+                Observation::Pose(values) => cells(&convention.from_linuxcnc(*values)).collect(),
+            };
+            std::iter::once(r.id.clone())
+                .chain(cells(&r.pose_mm_deg))
+                .chain(cells(&r.legs))
+                .chain(observed)
+                .collect()
+        }),
+    )
+}
+
+/// Writes a measurements file, measured poses (if any) in LinuxCNC's convention.
+pub fn write_measurements<W: Write>(
+    writer: W,
+    rows: &[MeasuredConfiguration],
+) -> std::io::Result<()> {
+    write_measurements_in(writer, rows, PoseConvention::Linuxcnc)
+}
