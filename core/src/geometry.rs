@@ -60,6 +60,27 @@ pub struct Geometry {
     pub targets: Vec<DVec3>,
     /// The task workspace.
     pub workspace: Workspace,
+    /// Named fiducials on the machine base in `K_B` (mm), to register an instrument against;
+    /// optional in the TOML, not part of the fingerprint (they do not change the kinematics).
+    pub fiducials: Vec<Fiducial>,
+}
+
+/// A named fiducial on the machine base: a nest or reference point whose base-frame position is
+/// known from the drawing or a CMM report.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Fiducial {
+    /// Its name, unique in the geometry; a measured fiducials file uses the same names.
+    pub name: String,
+    /// Its position in the base frame `K_B`, mm.
+    pub position: DVec3,
+}
+
+/// One `[[fiducials]]` table of the TOML.
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct FiducialEntry {
+    name: String,
+    position: [f64; 3],
 }
 
 /// A stable 64-bit fingerprint of a geometry's numbers (CRC-64/XZ over their IEEE-754 bits in file
@@ -86,6 +107,8 @@ struct GeometryFile {
     home: [f64; 6],
     targets: Vec<[f64; 3]>,
     workspace: Workspace,
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    fiducials: Vec<FiducialEntry>,
 }
 
 fn all_zero(v: &[f64; LEGS]) -> bool {
@@ -162,6 +185,23 @@ impl Geometry {
                 tilt_max: 15.0,
                 yaw_range: [-10.0, 10.0],
             },
+            // Six nests on a 450 mm circle around the base joints (coordinates as a drawing
+            // gives them, to the micrometre), two of them on posts.
+            fiducials: [
+                [450.0, 0.0, 0.0],
+                [225.0, 389.711, 0.0],
+                [-225.0, 389.711, 20.0],
+                [-450.0, 0.0, 0.0],
+                [-225.0, -389.711, 40.0],
+                [225.0, -389.711, 0.0],
+            ]
+            .into_iter()
+            .enumerate()
+            .map(|(k, position)| Fiducial {
+                name: format!("F{}", k + 1),
+                position: DVec3::from_array(position),
+            })
+            .collect(),
         }
     }
 
@@ -178,6 +218,14 @@ impl Geometry {
             home: file.home,
             targets: target_rows(&file.targets)?,
             workspace: file.workspace,
+            fiducials: file
+                .fiducials
+                .into_iter()
+                .map(|f| Fiducial {
+                    name: f.name,
+                    position: DVec3::from_array(f.position),
+                })
+                .collect(),
         };
         geometry.validate()?;
         Ok(geometry)
@@ -209,6 +257,14 @@ impl Geometry {
             home: self.home,
             targets: to_rows(&self.targets),
             workspace: self.workspace,
+            fiducials: self
+                .fiducials
+                .iter()
+                .map(|f| FiducialEntry {
+                    name: f.name.clone(),
+                    position: f.position.to_array(),
+                })
+                .collect(),
         };
         toml::to_string(&file).expect("a geometry always serialises to TOML")
     }
@@ -278,6 +334,7 @@ impl Geometry {
         }
         check_legs_distinct(&self.base_joints, &self.platform_joints)?;
         check_targets_not_collinear(&self.targets)?;
+        check_fiducials(&self.fiducials)?;
         if w.radius < 0.0 {
             return invalid(format!("workspace.radius {} mm is negative", w.radius));
         }
@@ -338,6 +395,28 @@ fn rows<const N: usize>(field: &str, v: &[[f64; 3]]) -> Result<[DVec3; N]> {
         )));
     }
     Ok(std::array::from_fn(|i| DVec3::from_array(v[i])))
+}
+
+/// Fiducials need a name, unique, and finite coordinates.
+fn check_fiducials(fiducials: &[Fiducial]) -> Result<()> {
+    for (k, fiducial) in fiducials.iter().enumerate() {
+        if fiducial.name.trim().is_empty() {
+            return Err(Error::InvalidGeometry(format!(
+                "fiducials[{k}] has an empty name"
+            )));
+        }
+        if fiducials[..k].iter().any(|f| f.name == fiducial.name) {
+            return Err(Error::InvalidGeometry(format!(
+                "fiducial {:?} is named twice",
+                fiducial.name
+            )));
+        }
+        check_finite(
+            &format!("fiducial {:?} position", fiducial.name),
+            &fiducial.position.to_array(),
+        )?;
+    }
+    Ok(())
 }
 
 /// The `targets` rows: at least [`MIN_TARGETS`].

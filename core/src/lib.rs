@@ -41,7 +41,7 @@ pub mod screw;
 pub mod stats;
 
 pub use error::{Error, Result};
-pub use geometry::{Fingerprint, Geometry, LEGS, MIN_TARGETS, Workspace};
+pub use geometry::{Fiducial, Fingerprint, Geometry, LEGS, MIN_TARGETS, Workspace};
 pub use kinematics::{
     ForwardOptions, LegLengths, LegStatus, forward_kinematics, inverse_kinematics,
 };

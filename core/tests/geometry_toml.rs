@@ -247,3 +247,42 @@ fn any_number_of_targets_from_three_is_read_and_written_back() {
     );
     assert!(invalid_message(&text).starts_with("targets are collinear"));
 }
+
+#[test]
+fn fiducials_are_read_checked_and_left_out_of_the_fingerprint() {
+    let prototype = Geometry::prototype();
+    assert_eq!(prototype.fiducials.len(), 6);
+    let mut bare = prototype.clone();
+    bare.fiducials.clear();
+    assert_eq!(bare.fingerprint(), prototype.fingerprint());
+    let text = bare.to_toml_string();
+    assert!(!text.contains("fiducials"), "{text}");
+    assert_eq!(Geometry::from_toml_str(&text).unwrap(), bare);
+
+    let with = |entries: &str| format!("{text}{entries}");
+    let one = "\n[[fiducials]]\nname = \"nest A\"\nposition = [450.0, 0.0, 12.5]\n";
+    let read = Geometry::from_toml_str(&with(one)).unwrap();
+    assert_eq!(read.fiducials[0].name, "nest A");
+    assert_eq!(
+        read.fiducials[0].position,
+        glam::DVec3::new(450.0, 0.0, 12.5)
+    );
+    let twice = format!("{one}{one}");
+    let message = Geometry::from_toml_str(&with(&twice))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        message.contains("fiducial \"nest A\" is named twice"),
+        "{message}"
+    );
+    let nan = one.replace("12.5", "nan");
+    let message = Geometry::from_toml_str(&with(&nan))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        message.contains("fiducial \"nest A\" position[2] is NaN"),
+        "{message}"
+    );
+    let unknown = one.replace("position", "place");
+    assert!(Geometry::from_toml_str(&with(&unknown)).is_err());
+}

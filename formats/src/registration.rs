@@ -42,6 +42,13 @@ pub struct RegistrationFile {
     pub rms_mm: f64,
     /// Largest residual of a fiducial of positive weight, mm.
     pub max_mm: f64,
+    /// The instrument's stated accuracy `[A, B]`: MPE `A µm + B µm/m`, when the user gave it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub instrument_mpe_um: Option<[f64; 2]>,
+    /// What the instrument and this registration can support at the platform: a measured target
+    /// point in the base frame to within this, mm (2σ, 3D), when the MPE was given.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub supported_mm: Option<f64>,
     /// Every fiducial matched by name, in the nominal file's order.
     pub fiducials: Vec<RegisteredFiducial>,
 }
@@ -116,6 +123,8 @@ impl RegistrationFile {
         }
         let numbers = [self.tolerance_mm, self.rms_mm, self.max_mm]
             .into_iter()
+            .chain(self.instrument_mpe_um.into_iter().flatten())
+            .chain(self.supported_mm)
             .chain(self.fiducials.iter().flat_map(|f| {
                 f.nominal
                     .into_iter()

@@ -93,6 +93,8 @@ fn registration() -> RegistrationFile {
         tolerance_mm: 0.05,
         rms_mm: 0.0134,
         max_mm: 0.0202,
+        instrument_mpe_um: Some([15.0, 6.0]),
+        supported_mm: Some(0.0345),
         fiducials: (0..3)
             .map(|k| RegisteredFiducial {
                 name: format!("F{k}"),

@@ -301,7 +301,6 @@ F4,-450,0,0\nF5,-225,-389.7,40\nF6,225,-389.7,0\n";
 fn a_tracker_campaign_is_registered_and_solved_in_the_base_frame() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    std::fs::write(d.join("nominal.csv"), NOMINAL_FIDUCIALS).unwrap();
     trainer_ok(d, &["plan", "--count", "30", "--out", "plan.csv"]);
     trainer_ok(d, &["simulate", "--plan", "plan.csv", "--out", "base.csv"]);
     trainer_ok(
@@ -314,22 +313,21 @@ fn a_tracker_campaign_is_registered_and_solved_in_the_base_frame() {
             "tracker.csv",
             "--instrument-pose",
             "2500,-1500,-800,0.3,-0.2,135",
-            "--fiducials",
-            "nominal.csv",
             "--fiducials-out",
             "measured.csv",
         ],
     );
+    // The nominal fiducials: the six of the built-in geometry.
     let output = trainer(
         d,
         &[
             "register",
-            "--nominal",
-            "nominal.csv",
             "--measured",
             "measured.csv",
             "--out",
             "registration.toml",
+            "--instrument-mpe",
+            "15+6",
         ],
     );
     assert!(output.status.success(), "{}", text(&output.stderr));
@@ -338,8 +336,17 @@ fn a_tracker_campaign_is_registered_and_solved_in_the_base_frame() {
         printed.contains("position   x 2500.0") && printed.contains("c 135.0"),
         "{printed}"
     );
+    assert!(
+        printed.contains("a measured target is known to"),
+        "{printed}"
+    );
     let inspected = trainer_ok_stdout(d, &["inspect", "registration.toml"]);
-    assert!(inspected.contains("6 fiducials used: RMS"), "{inspected}");
+    assert!(
+        inspected.contains("6 fiducials used: RMS")
+            && inspected.contains("fiducials of geometry prototype")
+            && inspected.contains("with an instrument of MPE 15 µm + 6 µm/m"),
+        "{inspected}"
+    );
 
     // Solved through the registration, the corrections are those of the base-frame campaign
     // up to the registration's error (the same noise draws: only the frame differs).

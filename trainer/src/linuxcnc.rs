@@ -191,6 +191,7 @@ impl LinuxCncHexapod {
             leg_offsets: [0.0; LEGS],
             home,
             targets,
+            fiducials: Vec::new(),
         };
         geometry.validate()?;
         Ok(geometry)

@@ -89,7 +89,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Simulate(args) => commands::simulate::run(&geometry, &args),
         Command::Solve(args) => commands::solve::run(&geometry, &args),
         Command::Identify(args) => commands::identify::run(&geometry, &args),
-        Command::Register(args) => commands::register::run(&args),
+        Command::Register(args) => commands::register::run(&geometry, &args),
         Command::Train(args) => commands::train::run(&geometry, &args),
         Command::Inspect(args) => commands::inspect::run(&geometry, &args),
         Command::Predict(args) => commands::predict::run(&geometry, &args),

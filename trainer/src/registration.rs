@@ -46,14 +46,16 @@ pub struct Registration {
     pub rms_mm: f64,
     /// Largest residual of a fiducial of positive weight, mm.
     pub max_mm: f64,
+    /// The parameters held at zero in the fit.
+    pub locked: Locked,
 }
 
 impl Registration {
-    /// The registration file of this registration, made at `created` (RFC 3339) from the files
-    /// named `nominal` and `measured`.
+    /// The registration file of this registration, accepted under `tolerance_mm`, made at
+    /// `created` (RFC 3339) from the files named `nominal` and `measured`.
     pub fn to_file(
         &self,
-        options: &RegistrationOptions,
+        tolerance_mm: f64,
         nominal: &str,
         measured: &str,
         created: String,
@@ -64,15 +66,17 @@ impl Registration {
             nominal: nominal.to_string(),
             measured: measured.to_string(),
             instrument_pose: self.instrument.to_mm_deg(),
-            locked: options
+            locked: self
                 .locked
                 .names()
                 .into_iter()
                 .map(str::to_string)
                 .collect(),
-            tolerance_mm: options.tolerance_mm,
+            tolerance_mm,
             rms_mm: self.rms_mm,
             max_mm: self.max_mm,
+            instrument_mpe_um: None,
+            supported_mm: None,
             fiducials: self.fiducials.clone(),
         }
     }
@@ -221,6 +225,7 @@ pub fn register(
         fiducials,
         rms_mm,
         max_mm,
+        locked: options.locked,
     })
 }
 
@@ -330,4 +335,151 @@ pub fn into_base_frame(rows: &mut [MeasuredConfiguration], instrument: &Pose) {
     for row in rows {
         row.observed = row.observed.in_frame(instrument);
     }
+}
+
+/// An instrument's stated accuracy: the maximum permissible error of a point, `A + B·d` (µm, d
+/// the distance from the instrument in metres), as trackers and arms are specified (e.g.
+/// 15 µm + 6 µm/m). Taken as a 2σ bound: one coordinate of a point is read with a standard
+/// deviation of half the MPE.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct InstrumentMpe {
+    /// The constant part `A`, µm.
+    pub constant_um: f64,
+    /// The part per metre of distance `B`, µm/m.
+    pub per_metre_um: f64,
+}
+
+impl InstrumentMpe {
+    /// The standard deviation of one coordinate of a point at `distance_mm` from the
+    /// instrument, mm.
+    pub fn sigma_mm(&self, distance_mm: f64) -> f64 {
+        0.5 * (self.constant_um + self.per_metre_um * distance_mm / 1000.0) / 1000.0
+    }
+}
+
+impl std::str::FromStr for InstrumentMpe {
+    type Err = String;
+
+    /// Parses `A+B` (µm and µm/m, e.g. `15+6`).
+    fn from_str(text: &str) -> std::result::Result<Self, String> {
+        let (a, b) = text
+            .split_once('+')
+            .ok_or_else(|| format!("{text:?}: give the MPE as A+B (µm + µm/m, e.g. 15+6)"))?;
+        let number = |part: &str| {
+            part.trim()
+                .parse::<f64>()
+                .ok()
+                .filter(|v| v.is_finite() && *v >= 0.0)
+                .ok_or_else(|| format!("{part:?} in {text:?} is not a number ≥ 0"))
+        };
+        Ok(Self {
+            constant_um: number(a)?,
+            per_metre_um: number(b)?,
+        })
+    }
+}
+
+/// What accuracy measurements made under a registration can support (all 3D, 1σ, mm).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SupportedAccuracy {
+    /// Distances from the instrument to the nearest and farthest fiducial used, mm.
+    pub fiducial_distance_mm: [f64; 2],
+    /// Distance from the instrument to the platform's targets at the home pose, mm.
+    pub platform_distance_mm: f64,
+    /// The RMS residual (3D) the instrument's accuracy alone explains, mm.
+    pub expected_rms_mm: f64,
+    /// A target point read at the platform, mm.
+    pub point_mm: f64,
+    /// The registration's own error at the platform (the fiducials' noise through the fit), mm.
+    pub registration_mm: f64,
+    /// A target point at the platform in the base frame: both combined, mm.
+    pub combined_mm: f64,
+}
+
+/// The accuracy `registration` and an instrument of `mpe` can support at the `platform`
+/// points (base frame, mm: the geometry's targets at its home pose): each target point's
+/// reading, and the registration's error there from the fiducials' readings propagated through
+/// the least-squares fit (its covariance `σ²(JᵀWJ)⁻¹`, `J` the fit's Jacobian in a twist about
+/// the base origin).
+pub fn supported_accuracy(
+    registration: &Registration,
+    mpe: &InstrumentMpe,
+    platform: &[DVec3],
+) -> SupportedAccuracy {
+    let at = registration.instrument.position;
+    let used: Vec<&RegisteredFiducial> = registration
+        .fiducials
+        .iter()
+        .filter(|f| f.weight > 0.0)
+        .collect();
+    let distance = |p: DVec3| (p - at).length();
+    let fiducial_distances: Vec<f64> = used
+        .iter()
+        .map(|f| distance(DVec3::from_array(f.nominal)))
+        .collect();
+    // Each fiducial's coordinates with σ from its distance; the fit weighted them by w, so its
+    // covariance is the sandwich A⁻¹·B·A⁻¹, A = Σ w·JᵀJ, B = Σ w²σ²·JᵀJ. Locked parameters do
+    // not move (their columns are left out: exact for locked translations and for a rotation
+    // about z only).
+    let free = |mut jacobian: nalgebra::SMatrix<f64, 3, 6>| {
+        for k in (0..6).filter(|&k| registration.locked.is_locked(k)) {
+            jacobian.column_mut(k).fill(0.0);
+        }
+        jacobian
+    };
+    let (mut a, mut b) = (
+        nalgebra::Matrix6::<f64>::zeros(),
+        nalgebra::Matrix6::<f64>::zeros(),
+    );
+    let mut expected_square = 0.0;
+    for (f, d) in used.iter().zip(&fiducial_distances) {
+        let sigma = mpe.sigma_mm(*d);
+        let jacobian = free(twist_jacobian(DVec3::from_array(f.nominal)));
+        let jtj = jacobian.transpose() * jacobian;
+        a += jtj * f.weight;
+        b += jtj * (f.weight * f.weight * sigma * sigma);
+        expected_square += 3.0 * sigma * sigma;
+    }
+    let free_parameters = (0..6)
+        .filter(|&k| !registration.locked.is_locked(k))
+        .count();
+    let dof = (3 * used.len()).saturating_sub(free_parameters) as f64 / (3 * used.len()) as f64;
+    let a_inverse = a
+        .pseudo_inverse(1e-12 * a.norm())
+        .unwrap_or_else(|_| nalgebra::Matrix6::from_element(f64::INFINITY));
+    let covariance = a_inverse * b * a_inverse;
+    let centre = platform.iter().copied().sum::<DVec3>() / platform.len() as f64;
+    let platform_distance_mm = distance(centre);
+    let registration_mm = platform
+        .iter()
+        .map(|p| {
+            let j = twist_jacobian(*p);
+            (j * covariance * j.transpose()).trace()
+        })
+        .fold(0.0, f64::max)
+        .sqrt();
+    let point_mm = 3f64.sqrt() * mpe.sigma_mm(platform_distance_mm);
+    SupportedAccuracy {
+        fiducial_distance_mm: [
+            fiducial_distances
+                .iter()
+                .copied()
+                .fold(f64::INFINITY, f64::min),
+            fiducial_distances.iter().copied().fold(0.0, f64::max),
+        ],
+        platform_distance_mm,
+        expected_rms_mm: (expected_square / used.len() as f64 * dof).sqrt(),
+        point_mm,
+        registration_mm,
+        combined_mm: point_mm.hypot(registration_mm),
+    }
+}
+
+/// `∂p/∂(δt, ω)` of a point `p` moved by a small twist about the base origin: `[I  −[p×]]`.
+fn twist_jacobian(p: DVec3) -> nalgebra::SMatrix<f64, 3, 6> {
+    nalgebra::SMatrix::<f64, 3, 6>::from_row_slice(&[
+        1.0, 0.0, 0.0, 0.0, p.z, -p.y, //
+        0.0, 1.0, 0.0, -p.z, 0.0, p.x, //
+        0.0, 0.0, 1.0, p.y, -p.x, 0.0,
+    ])
 }

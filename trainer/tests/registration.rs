@@ -14,9 +14,13 @@ use hexacomp_core::sampling::{SamplerOptions, WorkspaceSampler};
 use hexacomp_core::stats::PoseErrorStats;
 use hexacomp_trainer::pipeline::Pipeline;
 use hexacomp_trainer::plan::PlanOptions;
-use hexacomp_trainer::registration::{RegistrationOptions, into_base_frame, register};
+use hexacomp_trainer::registration::{
+    InstrumentMpe, RegistrationOptions, into_base_frame, register, supported_accuracy,
+};
 use hexacomp_trainer::train::Architecture;
 use hexacomp_virtual::{ErrorModel, ErrorVariant, VirtualPlatform, measure_fiducials};
+use rand::SeedableRng;
+use rand_distr::Distribution;
 
 /// Six fiducials on the prototype's base plate and floor (base frame, mm).
 fn nominal_fiducials() -> Vec<NamedPoint> {
@@ -222,4 +226,68 @@ fn a_tracker_off_level_is_refused_when_its_vertical_is_locked() {
     let registration = register(&nominal_fiducials(), &measured, &options).expect("level");
     assert_eq!(registration.instrument.angles.x, 0.0);
     assert!((registration.instrument.angles.z.to_degrees() + 60.0).abs() < 1e-3);
+}
+
+/// The registration's stated error at the platform is what repeated registrations with the
+/// instrument's noise scatter by: 400 registrations with each fiducial read with σ from its
+/// distance (MPE 15 µm + 6 µm/m taken as 2σ), their error at the platform's targets against the
+/// propagated figure, and their residuals against the expected ones.
+#[test]
+fn the_supported_accuracy_is_what_repeated_registrations_scatter_by() {
+    let g = Geometry::prototype();
+    let tracker = Pose::from_mm_deg([2500.0, -1500.0, -800.0, 0.3, -0.2, 135.0]);
+    let mpe: InstrumentMpe = "15+6".parse().unwrap();
+    let platform = hexacomp_core::kinematics::target_points(&g, &g.home_pose());
+    let nominal = nominal_fiducials();
+    let into_tracker = tracker.inverse();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+    let normal = rand_distr::Normal::new(0.0, 1.0).unwrap();
+    let (mut worst_square, mut residual_square) = (vec![0.0; platform.len()], 0.0);
+    let trials = 400;
+    let mut stated = None;
+    for _ in 0..trials {
+        let measured: Vec<NamedPoint> = nominal
+            .iter()
+            .map(|f| {
+                let sigma = mpe.sigma_mm((f.position - tracker.position).length());
+                let noise = DVec3::new(
+                    normal.sample(&mut rng),
+                    normal.sample(&mut rng),
+                    normal.sample(&mut rng),
+                ) * sigma;
+                NamedPoint {
+                    position: into_tracker.transform_point(f.position + noise),
+                    ..f.clone()
+                }
+            })
+            .collect();
+        let options = RegistrationOptions {
+            tolerance_mm: 1.0,
+            ..Default::default()
+        };
+        let registration = register(&nominal, &measured, &options).expect("registration");
+        let support = supported_accuracy(&registration, &mpe, &platform);
+        stated.get_or_insert(support);
+        for (square, p) in worst_square.iter_mut().zip(&platform) {
+            let seen = into_tracker.transform_point(*p);
+            *square += (registration.instrument.transform_point(seen) - *p).length_squared();
+        }
+        residual_square += registration.rms_mm.powi(2);
+    }
+    let stated = stated.unwrap();
+    let scattered = worst_square
+        .iter()
+        .map(|s| (s / trials as f64).sqrt())
+        .fold(0.0, f64::max);
+    let residual = (residual_square / trials as f64).sqrt();
+    eprintln!(
+        "registration error at the platform: stated {:.5} mm, scattered {scattered:.5} mm; \
+         residual RMS expected {:.5} mm, found {residual:.5} mm",
+        stated.registration_mm, stated.expected_rms_mm
+    );
+    assert!((scattered / stated.registration_mm - 1.0).abs() < 0.1);
+    assert!((residual / stated.expected_rms_mm - 1.0).abs() < 0.1);
+    // A reading at the platform: √3 × half the MPE at that distance.
+    let distance = stated.platform_distance_mm / 1000.0;
+    assert!((stated.point_mm - 3f64.sqrt() * 0.5 * (15.0 + 6.0 * distance) / 1000.0).abs() < 1e-12);
 }

@@ -4,10 +4,15 @@
 use std::path::PathBuf;
 use std::time::SystemTime;
 
+use hexacomp_core::Geometry;
+use hexacomp_core::kinematics::target_points;
 use hexacomp_core::pose::rotation_vector;
+use hexacomp_core::records::NamedPoint;
 use hexacomp_core::rigid_fit::{Locked, PARAMETER_NAMES};
 use hexacomp_formats::{RegistrationFile, read_fiducials};
-use hexacomp_trainer::registration::{RegistrationOptions, register};
+use hexacomp_trainer::registration::{
+    InstrumentMpe, RegistrationOptions, SupportedAccuracy, register, supported_accuracy,
+};
 use hexacomp_trainer::table::Table;
 
 use super::write_bytes;
@@ -31,9 +36,9 @@ use super::write_bytes;
 #[derive(Debug, clap::Args)]
 pub struct RegisterArgs {
     /// Nominal fiducials on the machine base: CSV `name,x,y,z`, base frame, mm (from the
-    /// machine's drawing or an earlier CMM report).
+    /// machine's drawing or an earlier CMM report). Default: the `fiducials` of the geometry.
     #[arg(long, value_name = "FILE")]
-    nominal: PathBuf,
+    nominal: Option<PathBuf>,
     /// The same fiducials as the instrument measured them: CSV `name,x,y,z`, instrument frame,
     /// mm, any row order; an optional `weight` column (default 1; 0 reports a fiducial without
     /// using it).
@@ -49,6 +54,15 @@ pub struct RegisterArgs {
     /// `--lock a,b` keeps a levelled tracker's vertical (only a rotation about z is fitted).
     #[arg(long, value_delimiter = ',', value_name = "PARAMETERS", value_parser = parameter_name)]
     lock: Vec<String>,
+    /// The instrument's stated accuracy, MPE = A µm + B µm/m of distance (e.g. 15+6): the
+    /// registration then states what accuracy its measurements can support at the platform,
+    /// and warns when the residuals or --tolerance disagree with it.
+    #[arg(long, value_name = "A+B")]
+    instrument_mpe: Option<InstrumentMpe>,
+    /// The position accuracy (mm, 2σ) the calibration is to be proven to: with --instrument-mpe,
+    /// a warning when the instrument set up like this cannot verify it.
+    #[arg(long, value_name = "MM", requires = "instrument_mpe")]
+    goal: Option<f64>,
 }
 
 /// One of [`PARAMETER_NAMES`].
@@ -67,14 +81,28 @@ impl RegisterArgs {
     /// The files this command reads and writes.
     pub fn files(&self) -> super::Files<'_> {
         super::Files {
-            inputs: vec![&self.nominal, &self.measured],
+            inputs: self
+                .nominal
+                .iter()
+                .map(PathBuf::as_path)
+                .chain([self.measured.as_path()])
+                .collect(),
             outputs: vec![&self.out],
         }
     }
 }
 
-pub fn run(args: &RegisterArgs) -> anyhow::Result<()> {
-    let nominal = read_fiducials(&args.nominal)?;
+pub fn run(geometry: &Geometry, args: &RegisterArgs) -> anyhow::Result<()> {
+    let (nominal, nominal_source) = match &args.nominal {
+        Some(path) => (
+            read_fiducials(path)?.into_items(),
+            path.display().to_string(),
+        ),
+        None => (
+            geometry_fiducials(geometry)?,
+            format!("the fiducials of geometry {}", geometry.name),
+        ),
+    };
     let measured = read_fiducials(&args.measured)?;
     let options = RegistrationOptions {
         tolerance_mm: args.tolerance,
@@ -83,22 +111,98 @@ pub fn run(args: &RegisterArgs) -> anyhow::Result<()> {
     };
     let registration = register(&nominal, &measured, &options).map_err(|e| {
         anyhow::anyhow!(
-            "{} onto {}: {e}\nno registration written",
+            "{} onto {nominal_source}: {e}\nno registration written",
             args.measured.display(),
-            args.nominal.display()
         )
     })?;
     let created = humantime::format_rfc3339_seconds(SystemTime::now()).to_string();
-    let file = registration.to_file(
-        &options,
-        &args.nominal.display().to_string(),
+    let mut file = registration.to_file(
+        options.tolerance_mm,
+        &nominal_source,
         &args.measured.display().to_string(),
         created,
     );
+    let support = args.instrument_mpe.map(|mpe| {
+        let platform = target_points(geometry, &geometry.home_pose());
+        let support = supported_accuracy(&registration, &mpe, &platform);
+        file.instrument_mpe_um = Some([mpe.constant_um, mpe.per_metre_um]);
+        file.supported_mm = Some(2.0 * support.combined_mm);
+        support
+    });
     print_registration(&file);
+    if let Some(support) = support {
+        report_support(&file, &support, args.goal);
+    }
     write_bytes(&args.out, file.to_toml_string().as_bytes())?;
     eprintln!("wrote {}", args.out.display());
     Ok(())
+}
+
+/// Prints what the registration's measurements can support, and warns where the residuals, the
+/// tolerance or the `goal` (mm, 2σ) ask for more than the instrument delivers.
+fn report_support(file: &RegistrationFile, support: &SupportedAccuracy, goal: Option<f64>) {
+    let [a, b] = file.instrument_mpe_um.unwrap_or_default();
+    println!(
+        "instrument MPE {a} µm + {b} µm/m: fiducials at {:.2}–{:.2} m, platform at {:.2} m",
+        support.fiducial_distance_mm[0] / 1000.0,
+        support.fiducial_distance_mm[1] / 1000.0,
+        support.platform_distance_mm / 1000.0
+    );
+    println!(
+        "  at the platform, a measured target is known to {:.4} mm (1σ, 3D): {:.4} mm from its \
+         reading, {:.4} mm from this registration; {:.4} mm at 2σ",
+        support.combined_mm,
+        support.point_mm,
+        support.registration_mm,
+        2.0 * support.combined_mm
+    );
+    if file.rms_mm > 3.0 * support.expected_rms_mm {
+        eprintln!(
+            "warning: the residuals (RMS {:.4} mm) are {:.1} times what the instrument's accuracy \
+             explains ({:.4} mm): the nominal positions or the fiducials themselves are off by \
+             more than the instrument's error",
+            file.rms_mm,
+            file.rms_mm / support.expected_rms_mm,
+            support.expected_rms_mm
+        );
+    }
+    if file.tolerance_mm < 2.0 * support.expected_rms_mm {
+        eprintln!(
+            "warning: --tolerance {} mm is tighter than the instrument holds at these distances \
+             (residuals of about {:.4} mm are its noise): registrations will be refused for noise",
+            file.tolerance_mm, support.expected_rms_mm
+        );
+    }
+    if let Some(goal) = goal
+        && 2.0 * support.combined_mm > goal
+    {
+        eprintln!(
+            "warning: the goal of {goal} mm asks for more than this set-up can verify: a target \
+             at the platform is known to {:.4} mm (2σ) only; move the instrument closer (it is \
+             {:.2} m from the platform) or use a more accurate one",
+            2.0 * support.combined_mm,
+            support.platform_distance_mm / 1000.0
+        );
+    }
+}
+
+/// The fiducials the geometry names (weight 1); an error when it names none.
+pub fn geometry_fiducials(geometry: &Geometry) -> anyhow::Result<Vec<NamedPoint>> {
+    anyhow::ensure!(
+        !geometry.fiducials.is_empty(),
+        "geometry {} names no fiducials: give their nominal positions as a file (--nominal, or \
+         --fiducials for simulate) or add [[fiducials]] to the geometry file",
+        geometry.name
+    );
+    Ok(geometry
+        .fiducials
+        .iter()
+        .map(|f| NamedPoint {
+            name: f.name.clone(),
+            position: f.position,
+            weight: 1.0,
+        })
+        .collect())
 }
 
 /// Prints a registration as a metrologist reads it: the residual of every fiducial, RMS and
@@ -136,6 +240,12 @@ pub fn print_registration(file: &RegistrationFile) {
     );
     if !file.locked.is_empty() {
         println!("  locked     {} (held at zero)", file.locked.join(", "));
+    }
+    if let (Some([a, b]), Some(supported)) = (file.instrument_mpe_um, file.supported_mm) {
+        println!(
+            "  supports   a target at the platform to {supported:.4} mm (2σ) with an instrument \
+             of MPE {a} µm + {b} µm/m"
+        );
     }
     println!(
         "made {} from {} (nominal) and {} (measured)",

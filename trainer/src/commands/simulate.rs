@@ -14,6 +14,8 @@ use hexacomp_virtual::{
 
 use hexacomp_formats::write_file;
 
+use super::register::geometry_fiducials;
+
 /// Measure a plan on the built-in virtual platform, writing exactly what a measuring arm would
 /// have produced.
 ///
@@ -54,11 +56,12 @@ pub struct SimulateArgs {
         allow_negative_numbers = true
     )]
     instrument_pose: Option<Vec<f64>>,
-    /// Nominal fiducials on the machine base: CSV `name,x,y,z`, base frame, mm.
+    /// Nominal fiducials on the machine base: CSV `name,x,y,z`, base frame, mm. Default: the
+    /// `fiducials` of the geometry.
     #[arg(long, value_name = "FILE", requires = "fiducials_out")]
     fiducials: Option<PathBuf>,
-    /// Output: the --fiducials as the instrument measures them (`name,x,y,z`, its frame, mm).
-    #[arg(long, value_name = "FILE", requires = "fiducials")]
+    /// Output: the fiducials as the instrument measures them (`name,x,y,z`, its frame, mm).
+    #[arg(long, value_name = "FILE")]
     fiducials_out: Option<PathBuf>,
     /// Share of the configurations (0–1) in which one target, drawn at random, is not seen: its
     /// cells are left empty.
@@ -122,7 +125,17 @@ impl SimulateArgs {
 pub fn run(geometry: &Geometry, args: &SimulateArgs) -> anyhow::Result<()> {
     let instrument = args.instrument()?;
     let plan = read_poses(&args.plan)?;
-    let fiducials = args.fiducials.as_deref().map(read_fiducials).transpose()?;
+    let fiducials = match (&args.fiducials, &args.fiducials_out) {
+        (Some(path), _) => Some((
+            read_fiducials(path)?.into_items(),
+            path.display().to_string(),
+        )),
+        (None, Some(_)) => Some((
+            geometry_fiducials(geometry)?,
+            format!("geometry {}", geometry.name),
+        )),
+        (None, None) => None,
+    };
     let model = ErrorModel::variant(args.error_variant);
     let mut platform = VirtualPlatform::new(geometry, &model, args.machine_seed, args.seed)?;
     let mut rows = Vec::with_capacity(plan.len());
@@ -156,7 +169,7 @@ pub fn run(geometry: &Geometry, args: &SimulateArgs) -> anyhow::Result<()> {
         seed: args.seed,
     };
     as_reported(geometry, &mut rows, &reporting)?;
-    if let (Some(nominal), Some(out)) = (&fiducials, &args.fiducials_out) {
+    if let (Some((nominal, source)), Some(out)) = (&fiducials, &args.fiducials_out) {
         let measured = measure_fiducials(
             nominal,
             &instrument,
@@ -167,7 +180,7 @@ pub fn run(geometry: &Geometry, args: &SimulateArgs) -> anyhow::Result<()> {
         eprintln!(
             "measured {} fiducials of {} from the instrument ({} mm noise) → {}",
             measured.len(),
-            nominal.file,
+            source,
             args.fiducial_noise,
             out.display()
         );
