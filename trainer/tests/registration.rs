@@ -75,6 +75,9 @@ fn blind_error(
     PoseErrorStats::of(&errors)
 }
 
+/// The noise of a fiducial reading: 10 µm RMS of the point in 3D (5.8 µm per coordinate).
+const FIDUCIAL_SIGMA_MM: f64 = 0.010 / 1.732_050_807_568_877_2;
+
 #[test]
 fn an_instrument_frame_campaign_calibrates_within_ten_percent_of_the_base_frame_one() {
     let g = Geometry::prototype();
@@ -96,33 +99,30 @@ fn an_instrument_frame_campaign_calibrates_within_ten_percent_of_the_base_frame_
         };
         let platform = VirtualPlatform::new(&g, &model, machine_seed, 1).unwrap();
         let (_, base_frame) = pipeline.measure_virtual(&mut platform.clone()).unwrap();
-
-        // The same campaign as the tracker reports it, and its fiducials.
-        let mut registered = base_frame.clone();
-        for row in &mut registered {
-            row.observed = row.observed.in_frame(&tracker.inverse());
-        }
-        let nominal = nominal_fiducials();
-        let measured = measure_fiducials(&nominal, &tracker, 0.010, machine_seed).unwrap();
-        let registration =
-            register(&nominal, &measured, &RegistrationOptions::default()).expect("registration");
-        into_base_frame(&mut registered, &registration.instrument);
-
         let base = blind_error(&g, &platform, &base_frame);
-        let via_tracker = blind_error(&g, &platform, &registered);
+        // The same campaign as the tracker reports it, registered from four draws of the
+        // fiducials' noise: the registration's error is a different systematic offset each time.
+        let mut ratios = Vec::new();
+        for draw in 1..=4 {
+            let mut registered = base_frame.clone();
+            for row in &mut registered {
+                row.observed = row.observed.in_frame(&tracker.inverse());
+            }
+            let nominal = nominal_fiducials();
+            let measured = measure_fiducials(&nominal, &tracker, FIDUCIAL_SIGMA_MM, draw).unwrap();
+            let registration = register(&nominal, &measured, &RegistrationOptions::default())
+                .expect("registration");
+            into_base_frame(&mut registered, &registration.instrument);
+            let via_tracker = blind_error(&g, &platform, &registered);
+            ratios.push(via_tracker.position_mm.mean / base.position_mm.mean);
+        }
         eprintln!(
-            "machine {machine_seed} {variant}: registration RMS {:.4} mm; mean {:.4} mm from \
-             the base frame, {:.4} mm through the registration (max {:.4}, {:.4})",
-            registration.rms_mm,
-            base.position_mm.mean,
-            via_tracker.position_mm.mean,
-            base.position_mm.max,
-            via_tracker.position_mm.max,
+            "machine {machine_seed} {variant}: mean {:.4} mm from the base frame; through four \
+             registrations × {:.3?}",
+            base.position_mm.mean, ratios
         );
-        assert!(
-            via_tracker.position_mm.mean <= 1.10 * base.position_mm.mean,
-            "machine {machine_seed}: {via_tracker:?} against {base:?}"
-        );
+        let mean_ratio = ratios.iter().sum::<f64>() / ratios.len() as f64;
+        assert!(mean_ratio <= 1.10, "machine {machine_seed}: {ratios:?}");
     }
 }
 
