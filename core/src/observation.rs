@@ -24,6 +24,8 @@ pub enum Observation {
     /// The pose of the platform frame measured directly by a 6-DoF probe: `[x, y, z, a, b, c]`,
     /// mm and degrees, base frame, the convention of the commanded pose.
     Pose([f64; 6]),
+    /// A 6-DoF probe's row without a pose (its six cells empty): nothing was measured.
+    PoseMissed,
 }
 
 impl Observation {
@@ -36,31 +38,34 @@ impl Observation {
     pub fn targets_seen(&self) -> usize {
         match self {
             Observation::Targets(targets) => targets.iter().flatten().count(),
-            Observation::Pose(_) => 0,
+            Observation::Pose(_) | Observation::PoseMissed => 0,
         }
     }
 
     /// Checks that the observation belongs to `geometry` (as many targets as it names) and that
-    /// its numbers are finite.
-    pub fn check(&self, geometry: &Geometry) -> Result<()> {
+    /// its numbers are finite; the error says what does not fit.
+    pub fn check(&self, geometry: &Geometry) -> std::result::Result<(), String> {
         match self {
             Observation::Targets(targets) => {
                 if targets.len() != geometry.targets.len() {
-                    return Err(Error::InvalidSetting(format!(
-                        "{} measured targets, but the geometry names {}",
+                    return Err(format!(
+                        "{} measured targets, but geometry {} names {} (is it the geometry the \
+                         campaign was measured with?)",
                         targets.len(),
+                        geometry.name,
                         geometry.targets.len()
-                    )));
+                    ));
                 }
                 if !targets.iter().flatten().all(|p| p.is_finite()) {
-                    return Err(Error::NonFinite("measured target point"));
+                    return Err("a measured target point is not finite".into());
                 }
             }
             Observation::Pose(values) => {
                 if !values.iter().all(|v| v.is_finite()) {
-                    return Err(Error::NonFinite("measured pose"));
+                    return Err("the measured pose is not finite".into());
                 }
             }
+            Observation::PoseMissed => {}
         }
         Ok(())
     }
@@ -69,8 +74,10 @@ impl Observation {
     /// measured pose; three or more seen targets not on one line). Two targets leave the
     /// rotation about the line through them unmeasured.
     pub fn undetermined(&self, geometry: &Geometry) -> Option<String> {
-        let Observation::Targets(targets) = self else {
-            return None;
+        let targets = match self {
+            Observation::Targets(targets) => targets,
+            Observation::Pose(_) => return None,
+            Observation::PoseMissed => return Some("the probe gave no pose".into()),
         };
         let seen: Vec<DVec3> = geometry
             .targets
@@ -117,6 +124,7 @@ impl Observation {
                 .into_iter()
                 .enumerate()
                 .collect(),
+            Observation::PoseMissed => Vec::new(),
         }
     }
 
@@ -134,27 +142,17 @@ impl Observation {
     }
 
     /// The paper's linear model of the observation at `pose`: `(ζ, P)` with `ζ ≈ P·ξ_t` for a
-    /// small pose-error twist `ξ_t` about `A` (Eq. 4). For targets, `ζ` is the misfit of the
-    /// seen targets (mm) and `P` their rows of the point matrix; for a measured pose, `ζ` is the
-    /// pose error itself, the twist from `pose` to the measured pose (`δ_A` mm, `ε` rad), and
-    /// `P` the identity.
+    /// small pose-error twist `ξ_t` about `A` (Eq. 4), over [`Observation::points`]: `ζ` is the
+    /// misfit of the seen targets (mm) and `P` their rows of the point matrix. A measured pose
+    /// enters through the targets it places: its pose error `ξ_t` moves them by `P·ξ_t`, so `ζ`
+    /// and `cond(PT)` keep the units and meaning they have with targets (`P = I` would mix mm
+    /// and rad in `ζ`, and `cond(T)` is hundreds where `cond(PT)` is single digits).
     pub fn linearised(&self, geometry: &Geometry, pose: &Pose) -> (DVector<f64>, DMatrix<f64>) {
-        match self {
-            Observation::Targets(_) => {
-                let which: Vec<usize> = self.points(geometry).iter().map(|(j, _)| *j).collect();
-                (
-                    self.misfit(geometry, pose),
-                    point_matrix(geometry, pose, &which),
-                )
-            }
-            Observation::Pose(values) => {
-                let twist = pose.twist_to(&Self::measured_pose(values));
-                (
-                    DVector::from_row_slice(&twist.to_array()),
-                    DMatrix::identity(6, 6),
-                )
-            }
-        }
+        let which: Vec<usize> = self.points(geometry).iter().map(|(j, _)| *j).collect();
+        (
+            self.misfit(geometry, pose),
+            point_matrix(geometry, pose, &which),
+        )
     }
 
     /// The pose the observation gives (mm, rad): the least-squares fit of the seen targets
@@ -163,6 +161,7 @@ impl Observation {
         match self {
             Observation::Targets(targets) => pose_from_targets(geometry, targets),
             Observation::Pose(values) => Ok(Self::measured_pose(values)),
+            Observation::PoseMissed => Err(Error::RigidFit("the probe gave no pose".into())),
         }
     }
 
@@ -183,6 +182,7 @@ impl Observation {
                 let pose = Pose::from_rotation(frame.transform_point(local.position), &rotation);
                 Observation::Pose(pose.to_mm_deg())
             }
+            Observation::PoseMissed => Observation::PoseMissed,
         }
     }
 }

@@ -20,6 +20,10 @@ pub const PARAMETER_NAMES: [&str; 6] = ["x", "y", "z", "a", "b", "c"];
 /// the rotation about that line is undetermined.
 pub const MIN_SPREAD_RATIO: f64 = 0.01;
 
+/// The largest coordinate (mm, 1000 km) and weight a fit takes: beyond them its sums of squares
+/// could overflow, and no instrument measures so far.
+pub const MAX_MAGNITUDE: f64 = 1e12;
+
 /// Parameters of the transform held at zero in the fit, indexed as [`PARAMETER_NAMES`]: e.g.
 /// `a` and `b` locked keep the instrument's vertical parallel to the base's z axis (a levelled
 /// tracker), so only a rotation about z is fitted.
@@ -59,7 +63,7 @@ impl Locked {
 /// fit with the locked parameters set to zero.
 ///
 /// Errors: different numbers of points and weights, a weight that is negative or not finite, a
-/// point that is not finite, fewer than three points of positive weight, or `to` points nearly
+/// point that is not finite, a weight or coordinate beyond [`MAX_MAGNITUDE`], fewer than three points of positive weight, or `to` points nearly
 /// collinear ([`MIN_SPREAD_RATIO`]).
 pub fn fit_rigid_transform(
     from: &[DVec3],
@@ -81,6 +85,20 @@ pub fn fit_rigid_transform(
     }
     if !from.iter().chain(to).all(|p| p.is_finite()) {
         return Err(Error::NonFinite("point of a rigid fit"));
+    }
+    if let Some(w) = weights.iter().find(|w| **w > MAX_MAGNITUDE) {
+        return bad(format!("weight {w:e} is above {MAX_MAGNITUDE:e}"));
+    }
+    if let Some(p) = from
+        .iter()
+        .chain(to)
+        .find(|p| p.abs().max_element() > MAX_MAGNITUDE)
+    {
+        return bad(format!(
+            "a point with a coordinate of {:e} mm lies beyond {MAX_MAGNITUDE:e} mm: no \
+             instrument measures so far (a wrong unit or a corrupted number?)",
+            p.abs().max_element()
+        ));
     }
     let used = weights.iter().filter(|w| **w > 0.0).count();
     if used < 3 {

@@ -69,23 +69,24 @@ fn the_linearisation_of_seen_targets_matches_finite_differences() {
 }
 
 #[test]
-fn a_measured_pose_gives_its_error_as_the_exact_twist_with_an_identity_p() {
+fn a_measured_pose_enters_through_the_targets_it_places() {
     let g = Geometry::prototype();
+    let all: Vec<usize> = (0..3).collect();
     for pose in workspace_poses(&g, 50) {
-        let measured = pose.displaced(&Twist::from_array([0.2, -0.1, 0.3, 1e-3, -2e-3, 5e-4]));
+        let error = Twist::from_array([0.02, -0.01, 0.03, 1e-4, -2e-4, 5e-5]);
+        let measured = pose.displaced(&error);
         let observation = Observation::Pose(measured.to_mm_deg());
-        let (zeta, p) = observation.linearised(&g, &pose);
-        assert_eq!(p, nalgebra::DMatrix::identity(6, 6));
-        let twist = Twist::from_array(std::array::from_fn(|k| zeta[k]));
-        let reached = pose.displaced(&twist);
-        assert!((reached.position - measured.position).length() < 1e-12);
-        let gap = rotation_vector(&(reached.rotation() * measured.rotation().transpose()));
-        assert!(gap.length() < 1e-13);
         // Its points are the geometry's targets at the measured pose.
         let points = observation.points(&g);
         for ((j, point), expected) in points.iter().zip(target_points(&g, &measured)) {
             assert!((*point - expected).length() < 1e-12, "target {j}");
         }
+        // ζ is their misfit, P the point matrix of every target, and P·ξ_t the misfit to first
+        // order in the pose error (the second order, |ε|²·r/2 with r = 180 mm, is 5e-6 mm here).
+        let (zeta, p) = observation.linearised(&g, &pose);
+        assert_eq!(p, hexacomp_core::screw::point_matrix(&g, &pose, &all));
+        let predicted = &p * nalgebra::DVector::from_row_slice(&error.to_array());
+        assert!((zeta - predicted).amax() < 1e-5);
     }
 }
 
@@ -101,8 +102,17 @@ fn an_observation_taken_into_a_frame_and_back_is_unchanged() {
         ]);
         let probe = Observation::Pose(pose.to_mm_deg());
         for observation in [targets, probe] {
+            // The points in the frame are the frame applied to the points (for a pose: the frame
+            // composed on the left), and the way back gives them back.
+            let (a, there) = (
+                observation.points(&g),
+                observation.in_frame(&frame).points(&g),
+            );
+            for ((_, p), (_, q)) in a.iter().zip(&there) {
+                assert!((frame.transform_point(*p) - *q).length() < 1e-9);
+            }
             let back = observation.in_frame(&frame).in_frame(&frame.inverse());
-            let (a, b) = (observation.points(&g), back.points(&g));
+            let b = back.points(&g);
             assert_eq!(a.len(), b.len());
             for ((j, p), (k, q)) in a.iter().zip(&b) {
                 assert_eq!(j, k);

@@ -230,6 +230,17 @@ fn degenerate_inputs_are_refused_with_their_cause() {
     .to_string();
     assert!(message.contains("weight -1"), "{message}");
 
+    let mut huge = nominal.clone();
+    huge[1].x = 1e160;
+    let message = fit_rigid_transform(&huge, &nominal, &[1.0; 6], Locked::default())
+        .expect_err("huge")
+        .to_string();
+    assert!(message.contains("lies beyond 1e12 mm"), "{message}");
+    let message = fit_rigid_transform(&nominal, &nominal, &[1e300; 6], Locked::default())
+        .expect_err("huge weights")
+        .to_string();
+    assert!(message.contains("weight 1e300 is above"), "{message}");
+
     let mut bad = nominal.clone();
     bad[2].y = f64::NAN;
     assert_eq!(

@@ -34,7 +34,9 @@ fn targets_named(row: &Row) -> usize {
 /// measured poses in `convention` (converted to LinuxCNC's; the commanded pose is read as
 /// written).
 ///
-/// A target whose three cells are all empty was not seen; one with some cells empty is refused.
+/// A target whose three cells are all empty was not seen, a measured pose whose six cells are all
+/// empty was not taken ([`Observation::PoseMissed`]); a target or pose with only some cells empty
+/// is refused.
 pub fn read_measurements_in(
     path: &Path,
     convention: PoseConvention,
@@ -116,6 +118,12 @@ fn check_measured_columns<T>(rows: &Rows<T>) -> Result<()> {
 /// The observation of one row: its targets (empty cells: not seen) or its measured pose.
 fn observation(row: &Row) -> Result<Observation> {
     if row.header.columns.contains_key("mx") {
+        let empty = MEASURED_POSE_COLUMNS
+            .iter()
+            .all(|c| row.record[row.header.columns[*c]].trim().is_empty());
+        if empty {
+            return Ok(Observation::PoseMissed);
+        }
         return Ok(Observation::Pose(row.numbers(MEASURED_POSE_COLUMNS)?));
     }
     let targets = (1..=targets_named(row))
@@ -140,12 +148,6 @@ fn observation(row: &Row) -> Result<Observation> {
             Ok(Some(DVec3::new(x, y, z)))
         })
         .collect::<Result<Vec<_>>>()?;
-    if targets.iter().all(Option::is_none) {
-        return Err(row.error(
-            None,
-            "no target measured: every target's cells are empty".into(),
-        ));
-    }
     Ok(Observation::Targets(targets))
 }
 
@@ -159,7 +161,7 @@ pub fn write_measurements_in<W: Write>(
 ) -> std::io::Result<()> {
     let kind = |row: &MeasuredConfiguration| match &row.observed {
         Observation::Targets(targets) => Some(targets.len()),
-        Observation::Pose(_) => None,
+        Observation::Pose(_) | Observation::PoseMissed => None,
     };
     let first = rows.first().map(kind).unwrap_or(Some(MIN_TARGETS));
     if let Some(row) = rows.iter().find(|r| kind(r) != first) {
@@ -191,6 +193,7 @@ pub fn write_measurements_in<W: Write>(
                     })
                     .collect(),
                 Observation::Pose(values) => cells(&convention.from_linuxcnc(*values)).collect(),
+                Observation::PoseMissed => vec![String::new(); 6],
             };
             std::iter::once(r.id.clone())
                 .chain(cells(&r.pose_mm_deg))

@@ -93,8 +93,9 @@ impl RegistrationFile {
         format!("{REGISTRATION_FIRST_LINE}\n{body}")
     }
 
-    /// Checks what a file may hold: this format version, finite numbers, known locked names, at
-    /// least three fiducials.
+    /// Checks what a file may hold: this format version, finite numbers, known locked names,
+    /// fiducials named once with weights ≥ 0, three or more of them used, and residuals that are
+    /// what `instrument_pose` gives (within 1e-6 mm): a pose edited by hand is refused.
     fn validate(&self) -> std::result::Result<(), String> {
         if self.format != REGISTRATION_FORMAT {
             return Err(format!(
@@ -134,6 +135,36 @@ impl RegistrationFile {
             }));
         if numbers.into_iter().any(|v| !v.is_finite()) {
             return Err("a number that is not finite".into());
+        }
+        for (k, f) in self.fiducials.iter().enumerate() {
+            if self.fiducials[..k].iter().any(|g| g.name == f.name) {
+                return Err(format!("fiducial {:?} appears twice", f.name));
+            }
+            if f.weight < 0.0 {
+                return Err(format!(
+                    "fiducial {:?} has the negative weight {}",
+                    f.name, f.weight
+                ));
+            }
+        }
+        let used = self.fiducials.iter().filter(|f| f.weight > 0.0).count();
+        if used < 3 {
+            return Err(format!(
+                "{used} fiducials of positive weight: a registration uses at least three"
+            ));
+        }
+        let pose = self.instrument_pose();
+        for f in &self.fiducials {
+            let residual =
+                pose.transform_point(DVec3::from_array(f.measured)) - DVec3::from_array(f.nominal);
+            let gap = (residual - DVec3::from_array(f.residual)).length();
+            if gap > 1e-6 {
+                return Err(format!(
+                    "instrument_pose does not give fiducial {:?}'s residual (off by {gap:.3e} mm): \
+                     the file was edited or damaged; register again",
+                    f.name
+                ));
+            }
         }
         Ok(())
     }

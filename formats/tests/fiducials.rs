@@ -82,8 +82,9 @@ fn written_fiducials_read_back_to_the_same_bits() {
     );
 }
 
+/// A registration whose residuals are those its pose gives.
 fn registration() -> RegistrationFile {
-    RegistrationFile {
+    let mut file = RegistrationFile {
         format: 1,
         created: "2026-11-24T00:00:00Z".into(),
         nominal: "nominal.csv".into(),
@@ -101,10 +102,17 @@ fn registration() -> RegistrationFile {
                 nominal: [k as f64, 1.0, 2.0],
                 measured: [0.1, k as f64 / 7.0, -3.0],
                 weight: 1.0,
-                residual: [1e-3 / 3.0, -2e-3, 0.0],
+                residual: [0.0; 3],
             })
             .collect(),
+    };
+    let pose = file.instrument_pose();
+    for f in &mut file.fiducials {
+        f.residual = (pose.transform_point(DVec3::from_array(f.measured))
+            - DVec3::from_array(f.nominal))
+        .to_array();
     }
+    file
 }
 
 /// Writes `text` as `r.toml` and reads it: the error text, or the registration.
@@ -156,6 +164,31 @@ fn bad_registrations_are_refused_with_their_cause() {
     let message = read_text(&two.to_toml_string()).expect_err("two fiducials");
     assert!(
         message.contains("2 fiducials: a registration has at least three"),
+        "{message}"
+    );
+    let mut unused = registration();
+    unused.fiducials[0].weight = 0.0;
+    let message = read_text(&unused.to_toml_string()).expect_err("two used");
+    assert!(
+        message.contains("2 fiducials of positive weight"),
+        "{message}"
+    );
+    let mut twice = registration();
+    twice.fiducials[1].name = "F0".into();
+    let message = read_text(&twice.to_toml_string()).expect_err("twice");
+    assert!(
+        message.contains("fiducial \"F0\" appears twice"),
+        "{message}"
+    );
+    let mut negative = registration();
+    negative.fiducials[2].weight = -1.0;
+    let message = read_text(&negative.to_toml_string()).expect_err("negative");
+    assert!(message.contains("negative weight -1"), "{message}");
+    let mut edited = registration();
+    edited.instrument_pose[0] += 0.01;
+    let message = read_text(&edited.to_toml_string()).expect_err("edited");
+    assert!(
+        message.contains("instrument_pose does not give fiducial \"F0\"'s residual"),
         "{message}"
     );
 }

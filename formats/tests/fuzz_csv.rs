@@ -22,7 +22,7 @@ const MEASUREMENTS: &str = "id,x,y,z,a,b,c,q1,q2,q3,q4,q5,q6,p1x,p1y,p1z,p2x,p2y
 m1,0,0,280,0,0,0,350,351,352,353,354,355,1,2,3,4,5,6,7,8,9\n";
 const FIDUCIALS: &str = "name,x,y,z,weight\nF1,450,0,0,1\nF2,0,450,0,0.5\nF3,-450,0,20,1\n";
 const REGISTRATION: &str = "format = 1\ncreated = \"2026-11-24T00:14:14Z\"\nnominal = \"n.csv\"\n\
-measured = \"m.csv\"\ninstrument_pose = [1.0, 2.0, 3.0, 0.1, 0.2, 0.3]\nlocked = []\n\
+measured = \"m.csv\"\ninstrument_pose = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0]\nlocked = []\n\
 tolerance_mm = 0.05\nrms_mm = 0.01\nmax_mm = 0.02\n\
 [[fiducials]]\nname = \"F1\"\nnominal = [1.0, 0.0, 0.0]\nmeasured = [1.0, 0.0, 0.0]\nweight = 1.0\nresidual = [0.0, 0.0, 0.0]\n\
 [[fiducials]]\nname = \"F2\"\nnominal = [0.0, 1.0, 0.0]\nmeasured = [0.0, 1.0, 0.0]\nweight = 1.0\nresidual = [0.0, 0.0, 0.0]\n\

@@ -98,10 +98,6 @@ fn bad_measured_columns_and_cells_are_refused_with_their_place() {
             "m.csv:2: column p2y: empty, but target 2's other coordinates are given",
         ),
         (
-            format!("{HEAD},{targets}\na,{COMMANDED},,,,,,,,,\n"),
-            "m.csv:2: no target measured",
-        ),
-        (
             format!(
                 "{HEAD},{targets},mx,my,mz,ma,mb,mc\na,{COMMANDED},1,2,3,4,5,6,7,8,9,1,2,3,4,5,6\n"
             ),
@@ -165,4 +161,20 @@ fn the_default_reader_is_the_linuxcnc_convention() {
         read_measurements(&path).unwrap()[0].observed,
         Observation::Pose([1.0, 2.0, 3.0, 4.0, 5.0, 6.0])
     );
+}
+
+#[test]
+fn a_row_with_nothing_measured_is_read_as_such_not_refused() {
+    let targets = "p1x,p1y,p1z,p2x,p2y,p2z,p3x,p3y,p3z";
+    let rows = read(
+        &format!("{HEAD},{targets}\na,{COMMANDED},,,,,,,,,\n"),
+        PoseConvention::Linuxcnc,
+    )
+    .unwrap();
+    assert_eq!(rows[0].observed, Observation::Targets(vec![None; 3]));
+    let text =
+        format!("{HEAD},mx,my,mz,ma,mb,mc\na,{COMMANDED},,,,,,\nb,{COMMANDED},1,2,3,4,5,6\n");
+    let rows = read(&text, PoseConvention::PiUvw).unwrap();
+    assert_eq!(rows[0].observed, Observation::PoseMissed);
+    assert_eq!(write_and_read(&rows, PoseConvention::Linuxcnc), rows);
 }

@@ -114,7 +114,7 @@ pub fn solve(
     seed: &Pose,
     options: &SolverOptions,
 ) -> Result<Solution> {
-    measured.check(geometry)?;
+    measured.check(geometry).map_err(Error::GeometryMismatch)?;
     if let Some(reason) = measured.undetermined(geometry) {
         return Err(Error::InsufficientData(reason));
     }
@@ -298,7 +298,7 @@ pub fn solve_all(
     checks.validate()?;
     if let Some((row, problem)) = rows
         .iter()
-        .find_map(|row| row.observed.check(geometry).err().map(|e| (row, e)))
+        .find_map(|row| row.observed.check(geometry).err().map(|why| (row, why)))
     {
         return Err(Error::GeometryMismatch(format!(
             "configuration {}: {problem}",

@@ -108,7 +108,8 @@ fn pair_by_name<'a>(
     }
     if !nominal_only.is_empty() {
         problems.push(format!(
-            "names only in the nominal file: {}",
+            "names only in the nominal file: {} (measure them too, or give --nominal with only \
+             the fiducials measured)",
             nominal_only.join(", ")
         ));
     }
@@ -290,17 +291,34 @@ fn diagnose(
         }
     }
     if weights.iter().filter(|w| **w > 0.0).count() > 3 {
-        for k in (0..names.len()).filter(|&k| weights[k] > 0.0) {
-            let mut without = weights.to_vec();
-            without[k] = 0.0;
-            if let Some(max) = fits(measured, &without) {
+        // One fiducial off: the others fit without it. When several removals fit, the layout
+        // cannot tell which one moved (with four nearly coplanar fiducials any three fit).
+        let fitting: Vec<(usize, f64)> = (0..names.len())
+            .filter(|&k| weights[k] > 0.0)
+            .filter_map(|k| {
+                let mut without = weights.to_vec();
+                without[k] = 0.0;
+                fits(measured, &without).map(|max| (k, max))
+            })
+            .collect();
+        match fitting.as_slice() {
+            [(k, max)] => {
                 return format!(
                     "Without {} the others fit within {max:.4} mm: it was probably knocked, \
                      mis-measured or its nominal position is wrong (measure it again, or give it \
                      weight 0 in the measured file to register without it).",
-                    names[k]
+                    names[*k]
                 );
             }
+            [_, _, ..] => {
+                let candidates: Vec<&str> = fitting.iter().map(|(k, _)| names[*k]).collect();
+                return format!(
+                    "Without any one of {} the others fit: these fiducials cannot tell which of \
+                     them moved; measure them again, or add fiducials.",
+                    candidates.join(", ")
+                );
+            }
+            [] => {}
         }
     }
     if (ratio - 1.0).abs() > 0.001 {
@@ -392,7 +410,11 @@ pub struct SupportedAccuracy {
     pub point_mm: f64,
     /// The registration's own error at the platform (the fiducials' noise through the fit), mm.
     pub registration_mm: f64,
-    /// A target point at the platform in the base frame: both combined, mm.
+    /// The residuals' RMS over what the instrument's accuracy explains ([`Self::expected_rms_mm`]).
+    pub residual_ratio: f64,
+    /// A target point at the platform in the base frame: its reading and the registration's
+    /// error, the latter scaled up by [`Self::residual_ratio`] when the fiducials fit worse than
+    /// the instrument explains, mm.
     pub combined_mm: f64,
 }
 
@@ -459,6 +481,7 @@ pub fn supported_accuracy(
         .fold(0.0, f64::max)
         .sqrt();
     let point_mm = 3f64.sqrt() * mpe.sigma_mm(platform_distance_mm);
+    let expected_rms_mm = (expected_square / used.len() as f64 * dof).sqrt();
     SupportedAccuracy {
         fiducial_distance_mm: [
             fiducial_distances
@@ -468,10 +491,32 @@ pub fn supported_accuracy(
             fiducial_distances.iter().copied().fold(0.0, f64::max),
         ],
         platform_distance_mm,
-        expected_rms_mm: (expected_square / used.len() as f64 * dof).sqrt(),
+        expected_rms_mm,
         point_mm,
         registration_mm,
-        combined_mm: point_mm.hypot(registration_mm),
+        residual_ratio: registration.rms_mm / expected_rms_mm,
+        combined_mm: point_mm
+            .hypot(registration_mm * (registration.rms_mm / expected_rms_mm).max(1.0)),
+    }
+}
+
+/// The instrument accuracy the residuals of `registration` show: one σ per coordinate, the
+/// same for every fiducial, from their sum of squares over the fit's degrees of freedom; for a
+/// registration made without a stated MPE.
+pub fn accuracy_from_residuals(registration: &Registration) -> InstrumentMpe {
+    let used: Vec<&RegisteredFiducial> = registration
+        .fiducials
+        .iter()
+        .filter(|f| f.weight > 0.0)
+        .collect();
+    let free = (0..6)
+        .filter(|&k| !registration.locked.is_locked(k))
+        .count();
+    let square: f64 = used.iter().map(|f| f.residual_mm().powi(2)).sum();
+    let dof = (3 * used.len()).saturating_sub(free).max(1) as f64;
+    InstrumentMpe {
+        constant_um: 2.0 * 1000.0 * (square / dof).sqrt(),
+        per_metre_um: 0.0,
     }
 }
 

@@ -158,7 +158,7 @@ impl Reason {
     /// A short name of the kind of reason, for counts.
     pub fn kind(&self) -> &'static str {
         match self {
-            Reason::Unmeasured(_) => "too few targets seen",
+            Reason::Unmeasured(_) => "targets seen do not fix the pose",
             Reason::Unsolvable(_) => "cannot be solved",
             Reason::Flagged(Flag::NotConverged) => "did not converge",
             Reason::Flagged(Flag::LargeCorrection { .. }) => "correction above the bound",

@@ -5,10 +5,15 @@
 
 use glam::DVec3;
 use hexacomp_core::Geometry;
+use hexacomp_core::compensator::compensate_pose;
 use hexacomp_core::observation::Observation;
 use hexacomp_core::records::{MeasuredConfiguration, NamedPose};
+use hexacomp_core::sampling::{SamplerOptions, WorkspaceSampler};
+use hexacomp_core::stats::{PoseErrorNorm, PoseErrorStats};
 use hexacomp_trainer::acquire::measure_plan;
+use hexacomp_trainer::pipeline::{Calibration, Pipeline};
 use hexacomp_trainer::plan::{PlanOptions, numbered_rows, plan};
+use hexacomp_trainer::train::Architecture;
 use hexacomp_virtual::{ErrorModel, VirtualPlatform};
 
 /// `count` planned poses as file rows (ids 1..).
@@ -41,7 +46,9 @@ pub fn measure(
 pub fn seen_targets(row: &MeasuredConfiguration) -> Vec<DVec3> {
     match &row.observed {
         Observation::Targets(targets) => targets.iter().map(|p| p.expect("seen")).collect(),
-        Observation::Pose(_) => panic!("configuration {} holds a pose", row.id),
+        Observation::Pose(_) | Observation::PoseMissed => {
+            panic!("configuration {} holds no targets", row.id)
+        }
     }
 }
 
@@ -55,4 +62,47 @@ pub fn edit_targets(row: &mut MeasuredConfiguration, change: impl FnOnce(&mut Ve
     let mut targets = seen_targets(row);
     change(&mut targets);
     set_targets(row, targets);
+}
+
+/// The pipeline of the paper's campaign: 150 configurations planned with seed 1.
+pub fn campaign_of_150() -> Pipeline {
+    Pipeline {
+        plan: PlanOptions {
+            count: 150,
+            seed: 1,
+            ..Default::default()
+        },
+        ..Default::default()
+    }
+}
+
+/// The decoupled model calibrated from `measurements` with the default pipeline, and the errors
+/// `platform` reaches with it (blind: 100 fresh workspace poses of seed 4242).
+pub fn blind_decoupled(
+    geometry: &Geometry,
+    platform: &VirtualPlatform,
+    measurements: &[MeasuredConfiguration],
+) -> (PoseErrorStats, Calibration) {
+    let calibration = Pipeline::default()
+        .calibrate(
+            geometry,
+            measurements,
+            &[Architecture::Decoupled],
+            &|_, _| {},
+        )
+        .expect("calibration");
+    let model = &calibration.models[0].1.model;
+    let mut machine = platform.clone();
+    let errors: Vec<PoseErrorNorm> =
+        WorkspaceSampler::new(geometry, 4242, SamplerOptions::default())
+            .unwrap()
+            .samples(100)
+            .unwrap()
+            .iter()
+            .map(|pose| {
+                let legs = compensate_pose(geometry, Some(model), pose).legs;
+                PoseErrorNorm::between(pose, &machine.move_legs(&legs, pose).unwrap())
+            })
+            .collect();
+    (PoseErrorStats::of(&errors), calibration)
 }

@@ -1,6 +1,8 @@
 //! Networks on the default virtual machine: the acceptance figures of the paper's comparison,
 //! on fresh poses that no training used.
 
+mod common;
+
 use hexacomp_core::compensator::compensate_pose;
 use hexacomp_core::records::JointCorrection;
 use hexacomp_core::sampling::{SamplerOptions, WorkspaceSampler};
@@ -9,22 +11,13 @@ use hexacomp_core::{Geometry, Pose, inverse_kinematics};
 use hexacomp_trainer::Error;
 use hexacomp_trainer::evaluate;
 use hexacomp_trainer::identify::{IdentifyOptions, identify};
-use hexacomp_trainer::pipeline::Pipeline;
-use hexacomp_trainer::plan::PlanOptions;
 use hexacomp_trainer::train::{Architecture, TrainOptions, train};
 use hexacomp_virtual::{DEFAULT_MACHINE_SEED, ErrorModel, VirtualPlatform};
 
 #[test]
 fn robust_networks_beat_the_papers_figures_and_the_model_based_baseline() {
     let g = Geometry::prototype();
-    let pipeline = Pipeline {
-        plan: PlanOptions {
-            count: 150,
-            seed: 1,
-            ..Default::default()
-        },
-        ..Default::default()
-    };
+    let pipeline = common::campaign_of_150();
     let mut platform =
         VirtualPlatform::new(&g, &ErrorModel::default(), DEFAULT_MACHINE_SEED, 1).unwrap();
     let (_, measurements) = pipeline.measure_virtual(&mut platform).unwrap();

@@ -9,47 +9,22 @@ mod common;
 
 use glam::DVec3;
 use hexacomp_core::Geometry;
-use hexacomp_core::compensator::compensate_pose;
 use hexacomp_core::records::MeasuredConfiguration;
-use hexacomp_core::sampling::{SamplerOptions, WorkspaceSampler};
-use hexacomp_core::stats::{PoseErrorNorm, PoseErrorStats};
+use hexacomp_core::stats::PoseErrorStats;
 use hexacomp_trainer::acquire::{Reporting, as_reported};
-use hexacomp_trainer::pipeline::Pipeline;
-use hexacomp_trainer::plan::PlanOptions;
 use hexacomp_trainer::screening::Reason;
-use hexacomp_trainer::train::Architecture;
 use hexacomp_virtual::{DEFAULT_MACHINE_SEED, ErrorModel, VirtualPlatform};
 
-/// The decoupled model calibrated from `measurements`: its reached errors on 100 fresh poses, and
-/// how many configurations it was trained on.
+/// The decoupled model calibrated from `measurements`: its reached errors on 100 fresh poses, how
+/// many configurations it was trained on, and the screening's reasons.
 fn blind(
     geometry: &Geometry,
     platform: &VirtualPlatform,
     measurements: &[MeasuredConfiguration],
 ) -> (PoseErrorStats, usize, Vec<Vec<Reason>>) {
-    let calibration = Pipeline::default()
-        .calibrate(
-            geometry,
-            measurements,
-            &[Architecture::Decoupled],
-            &|_, _| {},
-        )
-        .expect("calibration");
-    let model = &calibration.models[0].1.model;
-    let mut machine = platform.clone();
-    let errors: Vec<PoseErrorNorm> =
-        WorkspaceSampler::new(geometry, 4242, SamplerOptions::default())
-            .unwrap()
-            .samples(100)
-            .unwrap()
-            .iter()
-            .map(|pose| {
-                let legs = compensate_pose(geometry, Some(model), pose).legs;
-                PoseErrorNorm::between(pose, &machine.move_legs(&legs, pose).unwrap())
-            })
-            .collect();
+    let (errors, calibration) = common::blind_decoupled(geometry, platform, measurements);
     (
-        PoseErrorStats::of(&errors),
+        errors,
         calibration.solved.corrections.len(),
         calibration.solved.screening.reasons,
     )
@@ -57,17 +32,11 @@ fn blind(
 
 /// 150 configurations of `geometry` measured on the default machine, and the machine.
 fn campaign(geometry: &Geometry) -> (VirtualPlatform, Vec<MeasuredConfiguration>) {
-    let pipeline = Pipeline {
-        plan: PlanOptions {
-            count: 150,
-            seed: 1,
-            ..Default::default()
-        },
-        ..Default::default()
-    };
     let platform =
         VirtualPlatform::new(geometry, &ErrorModel::default(), DEFAULT_MACHINE_SEED, 1).unwrap();
-    let (_, measurements) = pipeline.measure_virtual(&mut platform.clone()).unwrap();
+    let (_, measurements) = common::campaign_of_150()
+        .measure_virtual(&mut platform.clone())
+        .unwrap();
     (platform, measurements)
 }
 

@@ -7,17 +7,12 @@ mod common;
 use glam::DVec3;
 use hexacomp_core::Geometry;
 use hexacomp_core::Pose;
-use hexacomp_core::compensator::compensate_pose;
-use hexacomp_core::records::{MeasuredConfiguration, NamedPoint};
+use hexacomp_core::records::NamedPoint;
 use hexacomp_core::rigid_fit::Locked;
-use hexacomp_core::sampling::{SamplerOptions, WorkspaceSampler};
-use hexacomp_core::stats::PoseErrorStats;
-use hexacomp_trainer::pipeline::Pipeline;
-use hexacomp_trainer::plan::PlanOptions;
 use hexacomp_trainer::registration::{
-    InstrumentMpe, RegistrationOptions, into_base_frame, register, supported_accuracy,
+    InstrumentMpe, RegistrationOptions, accuracy_from_residuals, into_base_frame, register,
+    supported_accuracy,
 };
-use hexacomp_trainer::train::Architecture;
 use hexacomp_virtual::{ErrorModel, ErrorVariant, VirtualPlatform, measure_fiducials};
 use rand::SeedableRng;
 use rand_distr::Distribution;
@@ -42,39 +37,6 @@ fn nominal_fiducials() -> Vec<NamedPoint> {
     .collect()
 }
 
-/// The decoupled model calibrated from `measurements`, and its mean and max position error
-/// (mm) reached on 100 fresh poses of `platform`.
-fn blind_error(
-    geometry: &Geometry,
-    platform: &VirtualPlatform,
-    measurements: &[MeasuredConfiguration],
-) -> PoseErrorStats {
-    let pipeline = Pipeline::default();
-    let calibration = pipeline
-        .calibrate(
-            geometry,
-            measurements,
-            &[Architecture::Decoupled],
-            &|_, _| {},
-        )
-        .expect("calibration");
-    let model = &calibration.models[0].1.model;
-    let fresh = WorkspaceSampler::new(geometry, 4242, SamplerOptions::default())
-        .unwrap()
-        .samples(100)
-        .unwrap();
-    let mut machine = platform.clone();
-    let errors: Vec<_> = fresh
-        .iter()
-        .map(|pose| {
-            let legs = compensate_pose(geometry, Some(model), pose).legs;
-            let reached = machine.move_legs(&legs, pose).expect("move");
-            hexacomp_core::stats::PoseErrorNorm::between(pose, &reached)
-        })
-        .collect();
-    PoseErrorStats::of(&errors)
-}
-
 /// The noise of a fiducial reading: 10 µm RMS of the point in 3D (5.8 µm per coordinate).
 const FIDUCIAL_SIGMA_MM: f64 = 0.010 / 1.732_050_807_568_877_2;
 
@@ -89,17 +51,11 @@ fn an_instrument_frame_campaign_calibrates_within_ten_percent_of_the_base_frame_
         (3, ErrorVariant::StrongPitch),
     ] {
         let model = ErrorModel::variant(variant);
-        let pipeline = Pipeline {
-            plan: PlanOptions {
-                count: 150,
-                seed: 1,
-                ..Default::default()
-            },
-            ..Default::default()
-        };
         let platform = VirtualPlatform::new(&g, &model, machine_seed, 1).unwrap();
-        let (_, base_frame) = pipeline.measure_virtual(&mut platform.clone()).unwrap();
-        let base = blind_error(&g, &platform, &base_frame);
+        let (_, base_frame) = common::campaign_of_150()
+            .measure_virtual(&mut platform.clone())
+            .unwrap();
+        let base = common::blind_decoupled(&g, &platform, &base_frame).0;
         // The same campaign as the tracker reports it, registered from four draws of the
         // fiducials' noise: the registration's error is a different systematic offset each time.
         let mut ratios = Vec::new();
@@ -113,7 +69,7 @@ fn an_instrument_frame_campaign_calibrates_within_ten_percent_of_the_base_frame_
             let registration = register(&nominal, &measured, &RegistrationOptions::default())
                 .expect("registration");
             into_base_frame(&mut registered, &registration.instrument);
-            let via_tracker = blind_error(&g, &platform, &registered);
+            let via_tracker = common::blind_decoupled(&g, &platform, &registered).0;
             ratios.push(via_tracker.position_mm.mean / base.position_mm.mean);
         }
         eprintln!(
@@ -290,4 +246,61 @@ fn the_supported_accuracy_is_what_repeated_registrations_scatter_by() {
     // A reading at the platform: √3 × half the MPE at that distance.
     let distance = stated.platform_distance_mm / 1000.0;
     assert!((stated.point_mm - 3f64.sqrt() * 0.5 * (15.0 + 6.0 * distance) / 1000.0).abs() < 1e-12);
+}
+
+#[test]
+fn a_knock_the_layout_cannot_place_lists_the_candidates() {
+    // Four fiducials on the floor, one pushed down 0.4 mm: any three of four coplanar points fit,
+    // so no single one may be blamed.
+    let nominal: Vec<NamedPoint> = [(400.0, 0.0), (0.0, 400.0), (-400.0, 0.0), (0.0, -400.0)]
+        .iter()
+        .enumerate()
+        .map(|(k, &(x, y))| NamedPoint {
+            name: format!("N{}", k + 1),
+            position: DVec3::new(x, y, 0.0),
+            weight: 1.0,
+        })
+        .collect();
+    let tracker = Pose::from_mm_deg([1500.0, 200.0, -600.0, 0.0, 0.0, 30.0]);
+    let mut measured = measure_fiducials(&nominal, &tracker, 0.0, 1).unwrap();
+    measured[1].position = tracker
+        .inverse()
+        .transform_point(nominal[1].position - DVec3::new(0.0, 0.0, 0.4));
+    let message = register(&nominal, &measured, &RegistrationOptions::default())
+        .expect_err("knocked")
+        .to_string();
+    assert!(
+        message.contains("Without any one of N1, N2, N3, N4 the others fit"),
+        "{message}"
+    );
+}
+
+#[test]
+fn a_weak_layout_shows_in_the_registrations_error_at_the_platform() {
+    // Six fiducials along a 2 m rail, 20 mm apart across it: they fit within 0.01 mm, but the
+    // rotation about the rail is poorly fixed and moves a target 1 m away.
+    let nominal: Vec<NamedPoint> = (0..6)
+        .map(|k| NamedPoint {
+            name: format!("R{k}"),
+            position: DVec3::new(
+                -1000.0 + 400.0 * k as f64,
+                10.0 * (k % 2) as f64 * 2.0 - 10.0,
+                0.0,
+            ),
+            weight: 1.0,
+        })
+        .collect();
+    let tracker = Pose::from_mm_deg([0.0, -2000.0, 500.0, 0.0, 0.0, 90.0]);
+    let measured = measure_fiducials(&nominal, &tracker, 0.005, 3).unwrap();
+    let registration =
+        register(&nominal, &measured, &RegistrationOptions::default()).expect("registration");
+    assert!(registration.max_mm < 0.02, "{}", registration.max_mm);
+    let shown = accuracy_from_residuals(&registration);
+    let platform = [DVec3::new(0.0, 1000.0, 300.0)];
+    let support = supported_accuracy(&registration, &shown, &platform);
+    eprintln!(
+        "rail: residual RMS {:.4} mm, the registration's error 1 m away {:.4} mm",
+        registration.rms_mm, support.registration_mm
+    );
+    assert!(support.registration_mm > 0.05, "{support:?}");
 }

@@ -237,11 +237,12 @@ fn acquire(
         // differ between the two.
         let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
         write_bytes(&written, &bytes)?;
-        let mut records = match args.reading.read_file(&written) {
+        let geometry = platform.nominal();
+        let mut records = match args.reading.read_file(&written, geometry) {
             Ok(records) => records,
             // The same bytes fail the same way when read from the user's file, whose name the
             // message should carry (not the staging folder's).
-            Err(e) => return Err(args.reading.read_file(path).err().unwrap_or(e)),
+            Err(e) => return Err(args.reading.read_file(path, geometry).err().unwrap_or(e)),
         };
         records.file = path.display().to_string();
         let registration = match args.reading.registration_path() {

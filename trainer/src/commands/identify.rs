@@ -50,7 +50,7 @@ impl IdentifyArgs {
 }
 
 pub fn run(geometry: &Geometry, args: &IdentifyArgs) -> anyhow::Result<()> {
-    let file = args.reading.read(&args.measurements)?;
+    let file = args.reading.read(&args.measurements, geometry)?;
     // The configurations the joint-correction solve screens out as gross errors are left out
     // of the identification too: one wrong coordinate would move the identified joints.
     let pipeline = Pipeline {

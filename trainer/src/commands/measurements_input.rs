@@ -5,6 +5,8 @@
 use std::path::Path;
 use std::path::PathBuf;
 
+use hexacomp_core::Geometry;
+use hexacomp_core::observation::Observation;
 use hexacomp_core::pose::PoseConvention;
 use hexacomp_core::records::MeasuredConfiguration;
 use hexacomp_formats::{Records, RegistrationFile, read_measurements_in, read_registration};
@@ -40,9 +42,35 @@ impl MeasurementsInput {
     }
 
     /// Reads the measurements file at `path` in the pose convention given, without bringing it
-    /// into the base frame.
-    pub fn read_file(&self, path: &Path) -> anyhow::Result<Records<MeasuredConfiguration>> {
-        Ok(read_measurements_in(path, self.pose_convention)?)
+    /// into the base frame; refuses, naming the line, a row that does not fit `geometry` (another
+    /// number of targets). Warns when --pose-convention is given for a file without poses.
+    pub fn read_file(
+        &self,
+        path: &Path,
+        geometry: &Geometry,
+    ) -> anyhow::Result<Records<MeasuredConfiguration>> {
+        let rows = read_measurements_in(path, self.pose_convention)?;
+        for (index, row) in rows.iter().enumerate() {
+            if let Err(why) = row.observed.check(geometry) {
+                anyhow::bail!(
+                    "{}:{}: configuration {}: {why}",
+                    rows.file,
+                    rows.line(index),
+                    row.id
+                );
+            }
+        }
+        let has_poses = rows
+            .iter()
+            .any(|row| matches!(row.observed, Observation::Pose(_) | Observation::PoseMissed));
+        if self.pose_convention != PoseConvention::Linuxcnc && !has_poses {
+            eprintln!(
+                "warning: --pose-convention {} has no effect: {} holds no measured poses \
+                 (mx..mc); its commanded poses are read in LinuxCNC's convention",
+                self.pose_convention, rows.file
+            );
+        }
+        Ok(rows)
     }
 
     /// Brings `rows` into the base frame through `registration`, saying so.
@@ -65,11 +93,15 @@ impl MeasurementsInput {
         );
     }
 
-    /// Reads `path`'s measurements and brings them into the base frame when a registration is
-    /// given.
-    pub fn read(&self, path: &Path) -> anyhow::Result<Records<MeasuredConfiguration>> {
+    /// Reads `path`'s measurements for `geometry` and brings them into the base frame when a
+    /// registration is given.
+    pub fn read(
+        &self,
+        path: &Path,
+        geometry: &Geometry,
+    ) -> anyhow::Result<Records<MeasuredConfiguration>> {
         let registration = self.registration()?;
-        let mut rows = self.read_file(path)?;
+        let mut rows = self.read_file(path, geometry)?;
         self.apply(registration.as_ref(), &mut rows);
         Ok(rows)
     }

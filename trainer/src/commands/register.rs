@@ -6,12 +6,12 @@ use std::time::SystemTime;
 
 use hexacomp_core::Geometry;
 use hexacomp_core::kinematics::target_points;
-use hexacomp_core::pose::rotation_vector;
 use hexacomp_core::records::NamedPoint;
 use hexacomp_core::rigid_fit::{Locked, PARAMETER_NAMES};
 use hexacomp_formats::{RegistrationFile, read_fiducials};
 use hexacomp_trainer::registration::{
-    InstrumentMpe, RegistrationOptions, SupportedAccuracy, register, supported_accuracy,
+    InstrumentMpe, RegistrationOptions, SupportedAccuracy, accuracy_from_residuals, register,
+    supported_accuracy,
 };
 use hexacomp_trainer::table::Table;
 
@@ -61,8 +61,16 @@ pub struct RegisterArgs {
     instrument_mpe: Option<InstrumentMpe>,
     /// The position accuracy (mm, 2σ) the calibration is to be proven to: with --instrument-mpe,
     /// a warning when the instrument set up like this cannot verify it.
-    #[arg(long, value_name = "MM", requires = "instrument_mpe")]
+    #[arg(long, value_name = "MM", requires = "instrument_mpe", value_parser = positive_mm)]
     goal: Option<f64>,
+}
+
+/// A finite length > 0, mm.
+fn positive_mm(text: &str) -> Result<f64, String> {
+    text.parse::<f64>()
+        .ok()
+        .filter(|v| v.is_finite() && *v > 0.0)
+        .ok_or_else(|| format!("{text:?} is not a length > 0 (mm)"))
 }
 
 /// One of [`PARAMETER_NAMES`].
@@ -122,16 +130,37 @@ pub fn run(geometry: &Geometry, args: &RegisterArgs) -> anyhow::Result<()> {
         &args.measured.display().to_string(),
         created,
     );
+    let platform = target_points(geometry, &geometry.home_pose());
     let support = args.instrument_mpe.map(|mpe| {
-        let platform = target_points(geometry, &geometry.home_pose());
         let support = supported_accuracy(&registration, &mpe, &platform);
         file.instrument_mpe_um = Some([mpe.constant_um, mpe.per_metre_um]);
         file.supported_mm = Some(2.0 * support.combined_mm);
         support
     });
     print_registration(&file);
-    if let Some(support) = support {
-        report_support(&file, &support, args.goal);
+    match support {
+        Some(support) => report_support(&file, &support, args.goal),
+        None => {
+            // Without a stated accuracy, the residuals show the fiducials' noise: how far does
+            // the registration itself move the platform's targets?
+            let shown = accuracy_from_residuals(&registration);
+            let support = supported_accuracy(&registration, &shown, &platform);
+            println!(
+                "the registration's own error at the platform, from the residuals: {:.4} mm (1σ); \
+                 give --instrument-mpe for what the measurements support",
+                support.registration_mm
+            );
+            if 2.0 * support.registration_mm > file.tolerance_mm {
+                eprintln!(
+                    "warning: the fiducials locate the instrument poorly for the platform: the \
+                     registration alone may move a target there by {:.4} mm (2σ), more than the \
+                     tolerance of {} mm; spread the fiducials wider and in height around the \
+                     platform",
+                    2.0 * support.registration_mm,
+                    file.tolerance_mm
+                );
+            }
+        }
     }
     write_bytes(&args.out, file.to_toml_string().as_bytes())?;
     eprintln!("wrote {}", args.out.display());
@@ -156,14 +185,19 @@ fn report_support(file: &RegistrationFile, support: &SupportedAccuracy, goal: Op
         support.registration_mm,
         2.0 * support.combined_mm
     );
-    if file.rms_mm > 3.0 * support.expected_rms_mm {
+    if support.residual_ratio > 1.0 {
+        println!(
+            "  the residuals (RMS {:.4} mm) are {:.1} times what the instrument explains ({:.4} \
+             mm): the registration's error is scaled up by as much",
+            file.rms_mm, support.residual_ratio, support.expected_rms_mm
+        );
+    }
+    if support.residual_ratio > 3.0 {
         eprintln!(
-            "warning: the residuals (RMS {:.4} mm) are {:.1} times what the instrument's accuracy \
-             explains ({:.4} mm): the nominal positions or the fiducials themselves are off by \
-             more than the instrument's error",
-            file.rms_mm,
-            file.rms_mm / support.expected_rms_mm,
-            support.expected_rms_mm
+            "warning: the residuals are {:.1} times what the instrument's accuracy explains: the \
+             nominal positions or the fiducials themselves are off by more than the instrument's \
+             error",
+            support.residual_ratio
         );
     }
     if file.tolerance_mm < 2.0 * support.expected_rms_mm {
@@ -230,8 +264,11 @@ pub fn print_registration(file: &RegistrationFile) {
         file.rms_mm, file.max_mm, file.tolerance_mm
     );
     let [x, y, z, a, b, c] = file.instrument_pose;
-    let angle = rotation_vector(&file.instrument_pose().rotation())
-        .length()
+    // The angle of the rotation from its trace (exact at 180° too).
+    let r = file.instrument_pose().rotation();
+    let angle = (0.5 * (r.x_axis.x + r.y_axis.y + r.z_axis.z - 1.0))
+        .clamp(-1.0, 1.0)
+        .acos()
         .to_degrees();
     println!("instrument in the base frame:");
     println!("  position   x {x:.4} mm, y {y:.4} mm, z {z:.4} mm");

@@ -123,6 +123,14 @@ impl SimulateArgs {
 }
 
 pub fn run(geometry: &Geometry, args: &SimulateArgs) -> anyhow::Result<()> {
+    if let Some(fiducials_out) = &args.fiducials_out {
+        anyhow::ensure!(
+            fiducials_out != &args.out,
+            "--fiducials-out and --out name the same file {}",
+            args.out.display()
+        );
+        hexacomp_formats::refuse_same_file(fiducials_out, &[&args.out])?;
+    }
     let instrument = args.instrument()?;
     let plan = read_poses(&args.plan)?;
     let fiducials = match (&args.fiducials, &args.fiducials_out) {

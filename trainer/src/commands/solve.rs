@@ -75,7 +75,7 @@ impl SolveArgs {
 }
 
 pub fn run(geometry: &Geometry, args: &SolveArgs) -> anyhow::Result<()> {
-    let rows = args.reading.read(&args.measurements)?;
+    let rows = args.reading.read(&args.measurements, geometry)?;
     anyhow::ensure!(
         !rows.is_empty(),
         "{}: no configurations",
@@ -191,7 +191,7 @@ fn print_exclusions<T>(screening: &Screening, records: &Records<T>, id: impl Fn(
         total - screening.excluded(),
         screening.gross_errors(),
         if unmeasured > 0 {
-            format!(", {unmeasured} with too few targets seen")
+            format!(", {unmeasured} whose targets seen do not fix the pose")
         } else {
             String::new()
         },
