@@ -138,6 +138,17 @@ fn fewer_than_three_seen_targets_leave_the_pose_undetermined() {
             .is_none()
     );
     assert!(Observation::Pose([0.0; 6]).undetermined(&g).is_none());
+    let none = Observation::Targets(vec![None; 4])
+        .undetermined(&g)
+        .expect("none seen");
+    assert!(
+        none.contains("0 of 4 targets seen (P1, P2, P3, P4 not seen)"),
+        "{none}"
+    );
+    assert_eq!(
+        Observation::PoseMissed.undetermined(&g).as_deref(),
+        Some("the probe gave no pose")
+    );
     assert!(Observation::Targets(vec![point; 3]).check(&g).is_err());
 }
 

@@ -488,6 +488,33 @@ fn gaps_and_a_probe_in_pi_angles_are_solved_and_reported() {
         read_corrections(&d.join("gaps-dq.csv")).unwrap().len(),
         30 - gappy_rows
     );
+    // Read for a geometry with four targets, the file is refused at its first row.
+    let prototype = Geometry::prototype().to_toml_string();
+    std::fs::write(
+        d.join("four.toml"),
+        prototype.replace("targets = [", "targets = [[0.0, 0.0, 60.0], "),
+    )
+    .unwrap();
+    let output = trainer(
+        d,
+        &[
+            "--geometry",
+            "four.toml",
+            "solve",
+            "--measurements",
+            "gaps.csv",
+            "--out",
+            "x.csv",
+        ],
+    );
+    assert!(!output.status.success());
+    assert!(
+        text(&output.stderr).contains(
+            "gaps.csv:2: configuration 1: 3 measured targets, but geometry prototype names 4"
+        ),
+        "{}",
+        text(&output.stderr)
+    );
 
     // A 6-DoF probe writing PI's U, V, W: read in that convention, the corrections are those of
     // the targets it was fitted to (to the fit's noise); read as LinuxCNC angles, they are not.
