@@ -16,6 +16,7 @@
 
 mod error;
 mod fiducials;
+mod journal;
 mod lines;
 mod measurements;
 mod points_file;
@@ -31,6 +32,7 @@ use hexacomp_core::records::{JointCorrection, NamedCompensation, NamedLegs, Name
 
 pub use error::{Error, Result};
 pub use fiducials::{FIDUCIAL_COLUMNS, read_fiducials, write_fiducials};
+pub use journal::{JOURNAL_COLUMNS, JournalKind, MeasurementsJournal};
 pub use lines::MAX_LINE_BYTES;
 pub use measurements::{
     MEASURED_POSE_COLUMNS, read_measurements, read_measurements_in, target_columns,

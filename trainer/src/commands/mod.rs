@@ -1,6 +1,7 @@
 //! One module per subcommand.
 
 pub mod calibrate;
+pub mod campaign;
 pub mod deploy;
 pub mod evaluate;
 pub mod geometry;

@@ -1,0 +1,314 @@
+//! `hexacomp-trainer campaign` as a user runs it: killed with SIGKILL mid-campaign and run again,
+//! it records what an uninterrupted campaign does, no row twice; a row cut short is measured
+//! again; a user's instrument program that hangs or answers nonsense leaves a recorded gap; bad
+//! plans and another plan's record are refused with their place.
+
+use std::io::Write;
+use std::os::unix::fs::PermissionsExt;
+use std::path::Path;
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+use hexacomp_formats::read_measurements;
+use hexacomp_tests::{binary, run, signal_child};
+
+fn text(bytes: &[u8]) -> String {
+    String::from_utf8_lossy(bytes).into_owned()
+}
+
+/// Runs the trainer in `dir` with `args` (relative file names), asserting success; its stderr.
+fn trainer_ok(dir: &Path, args: &[&str]) -> String {
+    let output = trainer(dir, args);
+    assert!(
+        output.status.success(),
+        "{args:?}: {}",
+        text(&output.stderr)
+    );
+    text(&output.stderr)
+}
+
+fn trainer(dir: &Path, args: &[&str]) -> std::process::Output {
+    let args: Vec<String> = args
+        .iter()
+        .map(|a| {
+            if a.ends_with(".csv") || a.ends_with(".sh") {
+                dir.join(a).display().to_string()
+            } else {
+                a.to_string()
+            }
+        })
+        .collect();
+    let refs: Vec<&str> = args.iter().map(String::as_str).collect();
+    run("hexacomp-trainer", &refs)
+}
+
+/// The data lines of a file (header left out), whole lines only.
+fn data_lines(path: &Path) -> Vec<String> {
+    let bytes = std::fs::read(path).unwrap_or_default();
+    let whole = bytes
+        .iter()
+        .rposition(|b| *b == b'\n')
+        .map_or(0, |last| last + 1);
+    text(&bytes[..whole])
+        .lines()
+        .skip(1)
+        .map(str::to_string)
+        .collect()
+}
+
+/// A row without its last cell (the time it was measured), keyed by id.
+fn rows_without_time(path: &Path) -> Vec<String> {
+    let mut rows: Vec<String> = data_lines(path)
+        .iter()
+        .map(|line| line.rsplit_once(',').expect("cells").0.to_string())
+        .collect();
+    rows.sort();
+    rows
+}
+
+#[test]
+fn a_campaign_killed_and_run_again_records_what_an_uninterrupted_one_does() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    trainer_ok(d, &["plan", "--count", "20", "--out", "plan.csv"]);
+    trainer_ok(d, &["campaign", "--plan", "plan.csv", "--out", "whole.csv"]);
+
+    // The same campaign, slowed down by a dwell between readings, killed once three
+    // configurations are on disk.
+    let mut child = Command::new(binary("hexacomp-trainer"))
+        .args(["campaign", "--plan"])
+        .arg(d.join("plan.csv"))
+        .arg("--out")
+        .arg(d.join("killed.csv"))
+        .args(["--dwell", "0.2"])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let start = Instant::now();
+    while data_lines(&d.join("killed.csv")).len() < 3 {
+        assert!(
+            start.elapsed() < Duration::from_secs(60),
+            "no rows recorded"
+        );
+        assert!(
+            child.try_wait().unwrap().is_none(),
+            "the campaign ended early"
+        );
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    signal_child(&child, libc::SIGKILL);
+    child.wait().unwrap();
+    let at_kill = data_lines(&d.join("killed.csv")).len();
+    assert!((3..20).contains(&at_kill), "{at_kill} rows at the kill");
+
+    let said = trainer_ok(
+        d,
+        &["campaign", "--plan", "plan.csv", "--out", "killed.csv"],
+    );
+    assert!(
+        said.contains(&format!("{} of 20 configurations to measure", 20 - at_kill)),
+        "{said}"
+    );
+    assert_eq!(
+        rows_without_time(&d.join("killed.csv")),
+        rows_without_time(&d.join("whole.csv"))
+    );
+    // Read as a measurements file: 20 configurations, none twice (the reader refuses duplicates).
+    assert_eq!(read_measurements(&d.join("killed.csv")).unwrap().len(), 20);
+
+    // Finished: run again, it says so and changes nothing.
+    let before = std::fs::read(d.join("killed.csv")).unwrap();
+    let said = trainer_ok(
+        d,
+        &["campaign", "--plan", "plan.csv", "--out", "killed.csv"],
+    );
+    assert!(said.contains("the campaign is finished"), "{said}");
+    assert_eq!(std::fs::read(d.join("killed.csv")).unwrap(), before);
+}
+
+#[test]
+fn a_row_cut_short_by_a_kill_is_measured_again() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    trainer_ok(d, &["plan", "--count", "6", "--out", "plan.csv"]);
+    trainer_ok(d, &["campaign", "--plan", "plan.csv", "--out", "whole.csv"]);
+    // The record as a kill during the last append leaves it: the last line cut short.
+    let whole = std::fs::read_to_string(d.join("whole.csv")).unwrap();
+    let cut = whole.trim_end().rfind('\n').unwrap() + 1 + 17;
+    std::fs::write(d.join("cut.csv"), &whole[..cut]).unwrap();
+    let said = trainer_ok(d, &["campaign", "--plan", "plan.csv", "--out", "cut.csv"]);
+    assert!(said.contains("1 of 6 configurations to measure"), "{said}");
+    assert_eq!(
+        rows_without_time(&d.join("cut.csv")),
+        rows_without_time(&d.join("whole.csv"))
+    );
+}
+
+/// Writes an executable shell script `name` in `dir`.
+fn script(dir: &Path, name: &str, body: &str) {
+    let path = dir.join(name);
+    let mut file = std::fs::File::create(&path).unwrap();
+    writeln!(file, "#!/bin/sh\n{body}").unwrap();
+    drop(file);
+    std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o755)).unwrap();
+}
+
+#[test]
+fn a_users_instrument_program_is_read_and_its_failures_are_recorded_gaps() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    trainer_ok(d, &["plan", "--count", "3", "--out", "plan.csv"]);
+    // The example program of integrations/instrument replays a tracker's export; target 2 is
+    // not seen. Every reading of the three configurations is in the export.
+    let ids: Vec<String> = data_lines(&d.join("plan.csv"))
+        .iter()
+        .map(|line| line.split(',').next().unwrap().to_string())
+        .collect();
+    let mut export = String::from("id,reading,p1x,p1y,p1z,p2x,p2y,p2z,p3x,p3y,p3z\n");
+    for id in &ids {
+        for reading in 1..=3 {
+            export += &format!("{id},{reading},1.5,2,3,,,,7,8,9.25\n");
+        }
+    }
+    std::fs::write(d.join("export.csv"), export).unwrap();
+    let program = format!(
+        "{} {}",
+        Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../integrations/instrument/replay-export.sh")
+            .display(),
+        d.join("export.csv").display()
+    );
+    trainer_ok(
+        d,
+        &[
+            "campaign",
+            "--plan",
+            "plan.csv",
+            "--out",
+            "good.csv",
+            "--instrument",
+            "command",
+            "--instrument-command",
+            &program,
+        ],
+    );
+    let rows = read_measurements(&d.join("good.csv")).unwrap();
+    assert_eq!(rows.len(), 3);
+    assert_eq!(
+        rows[0].observed,
+        hexacomp_core::observation::Observation::Targets(vec![
+            Some(glam::DVec3::new(1.5, 2.0, 3.0)),
+            None,
+            Some(glam::DVec3::new(7.0, 8.0, 9.25)),
+        ])
+    );
+
+    // A program that hangs is killed after the timeout; one that answers a line of the wrong
+    // width is retried; both leave gaps, listed, and the campaign goes on to the end.
+    script(d, "hang.sh", "sleep 30");
+    let hang = d.join("hang.sh").display().to_string();
+    let start = Instant::now();
+    let said = trainer_ok(
+        d,
+        &[
+            "campaign",
+            "--plan",
+            "plan.csv",
+            "--out",
+            "hang.csv",
+            "--instrument",
+            "command",
+            "--instrument-command",
+            &hang,
+            "--command-timeout",
+            "0.2",
+            "--readings",
+            "1",
+            "--retries",
+            "1",
+        ],
+    );
+    assert!(start.elapsed() < Duration::from_secs(20));
+    assert_eq!(
+        said.matches("did not answer within 200ms (killed)").count(),
+        3,
+        "{said}"
+    );
+    assert!(
+        said.contains("measured 3 configurations (0 recorded before, 3 gaps)"),
+        "{said}"
+    );
+    assert_eq!(data_lines(&d.join("hang.csv")).len(), 3);
+    script(d, "narrow.sh", "echo 1,2,3,4");
+    let narrow = d.join("narrow.sh").display().to_string();
+    let said = trainer_ok(
+        d,
+        &[
+            "campaign",
+            "--plan",
+            "plan.csv",
+            "--out",
+            "narrow.csv",
+            "--instrument",
+            "command",
+            "--instrument-command",
+            &narrow,
+            "--readings",
+            "1",
+        ],
+    );
+    assert!(
+        said.contains("has 4 cells, expected 9 (3 targets × x,y,z)"),
+        "{said}"
+    );
+    // solve lists the gaps as configurations with nothing seen.
+    let output = trainer(
+        d,
+        &["solve", "--measurements", "narrow.csv", "--out", "dq.csv"],
+    );
+    assert!(
+        text(&output.stderr).matches("0 of 3 targets seen").count() == 3,
+        "{}",
+        text(&output.stderr)
+    );
+}
+
+#[test]
+fn a_plan_outside_the_stroke_and_another_plans_record_are_refused_with_their_place() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(
+        d.join("plan.csv"),
+        "id,x,y,z,a,b,c\n1,0,0,280,0,0,0\n2,0,0,900,0,0,0\n",
+    )
+    .unwrap();
+    let output = trainer(d, &["campaign", "--plan", "plan.csv", "--out", "m.csv"]);
+    assert!(!output.status.success());
+    assert!(
+        text(&output.stderr).contains("plan.csv:3: configuration 2: the pose needs leg 1"),
+        "{}",
+        text(&output.stderr)
+    );
+    assert!(!d.join("m.csv").exists(), "a record was started");
+
+    trainer_ok(
+        d,
+        &["plan", "--count", "4", "--seed", "1", "--out", "one.csv"],
+    );
+    trainer_ok(
+        d,
+        &["plan", "--count", "4", "--seed", "2", "--out", "two.csv"],
+    );
+    trainer_ok(d, &["campaign", "--plan", "one.csv", "--out", "m.csv"]);
+    let before = std::fs::read(d.join("m.csv")).unwrap();
+    let output = trainer(d, &["campaign", "--plan", "two.csv", "--out", "m.csv"]);
+    assert!(!output.status.success());
+    assert!(
+        text(&output.stderr).contains("m.csv:2: configuration")
+            && text(&output.stderr).contains("was not recorded from this plan"),
+        "{}",
+        text(&output.stderr)
+    );
+    assert_eq!(std::fs::read(d.join("m.csv")).unwrap(), before);
+}
