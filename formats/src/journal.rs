@@ -1,9 +1,10 @@
 //! A measurements file recorded row by row (a campaign's record): each row is appended and on
 //! disk before the next configuration is measured, and a file reopened after any kill continues
 //! where it stopped — a row cut short by the kill is dropped (its configuration is measured
-//! again), every whole row is kept.
+//! again), every whole row is kept. The file holds its campaign's settings in a comment line
+//! after the header, so a run with other settings cannot continue it.
 
-use std::io::{Read, Seek, Write};
+use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 
 use hexacomp_core::durable::sync_directory_of;
@@ -51,12 +52,19 @@ fn header(kind: JournalKind) -> String {
 }
 
 impl MeasurementsJournal {
-    /// Opens the journal at `path` to record into: creates it with its header (on disk before
-    /// this returns) when it does not exist or holds no whole line; otherwise drops a last line
-    /// cut short (no line end), checks that the header is the one of `kind`, and reads the rows
-    /// already recorded (strictly: a damaged row is an error naming its line, and nothing is
-    /// changed).
-    pub fn open(path: &Path, kind: JournalKind) -> Result<(Self, Records<MeasuredConfiguration>)> {
+    /// Opens the journal at `path` to record into, for a campaign described by `settings` (one
+    /// line of text: the instrument, seeds and the like): creates it with its header and a
+    /// `# campaign: settings` comment line (on disk before this returns) when it does not exist
+    /// or is empty; otherwise requires that header and that line — a record of another campaign
+    /// or another file is refused and left as it is — drops a last line cut short (no line end),
+    /// and reads the rows already recorded (strictly: a damaged row is an error naming its
+    /// line). The file stays locked (`flock`) while the journal is open: a second campaign on
+    /// the same file is refused.
+    pub fn open(
+        path: &Path,
+        kind: JournalKind,
+        settings: &str,
+    ) -> Result<(Self, Records<MeasuredConfiguration>)> {
         let file_name = path.display().to_string();
         let fail = |line: u64, message: String| Error::Format {
             file: file_name.clone(),
@@ -66,49 +74,66 @@ impl MeasurementsJournal {
         };
         let mut file = std::fs::OpenOptions::new()
             .read(true)
-            .write(true)
+            .append(true)
             .create(true)
-            .truncate(false)
             .open(path)
             .map_err(|e| fail(0, format!("cannot open the journal: {e}")))?;
+        rustix::fs::flock(&file, rustix::fs::FlockOperation::NonBlockingLockExclusive).map_err(
+            |e| {
+                fail(
+                    0,
+                    format!(
+                        "another campaign is recording into this file ({e}): one campaign per \
+                         file"
+                    ),
+                )
+            },
+        )?;
         let mut bytes = Vec::new();
         file.read_to_end(&mut bytes)
             .map_err(|e| fail(0, format!("cannot read the journal: {e}")))?;
+        let expected = format!("{}# campaign: {settings}\n", header(kind));
         let whole = bytes
             .iter()
             .rposition(|b| *b == b'\n')
             .map_or(0, |last| last + 1);
-        let expected = header(kind);
-        if whole < bytes.len() {
-            // The last row was cut short by a kill: it was never recorded.
-            file.set_len(whole as u64)
-                .and_then(|()| file.sync_data())
-                .map_err(|e| fail(0, format!("cannot drop the row cut short: {e}")))?;
-            bytes.truncate(whole);
-        }
-        if bytes.is_empty() {
-            file.seek(std::io::SeekFrom::Start(0))
-                .and_then(|_| file.write_all(expected.as_bytes()))
-                .and_then(|()| file.sync_data())
-                .and_then(|()| sync_directory_of(path))
-                .map_err(|e| fail(0, format!("cannot write the journal's header: {e}")))?;
-        } else if !bytes.starts_with(expected.as_bytes()) {
-            let found = String::from_utf8_lossy(
-                &bytes[..bytes.iter().position(|b| *b == b'\n').unwrap_or(0)],
-            )
-            .into_owned();
+        let ours =
+            bytes.starts_with(expected.as_bytes()) || expected.as_bytes().starts_with(&bytes[..]);
+        if !ours {
+            let first = bytes.split(|b| *b == b'\n').next().unwrap_or_default();
+            let second = bytes.split(|b| *b == b'\n').nth(1).unwrap_or_default();
+            let expected_header = expected.lines().next().unwrap_or_default();
+            let (line, found, wanted) = if first == expected_header.as_bytes() {
+                (2, second, expected.lines().nth(1).unwrap_or_default())
+            } else {
+                (1, first, expected.lines().next().unwrap_or_default())
+            };
             return Err(fail(
-                1,
+                line,
                 format!(
-                    "this file was not recorded by a campaign like this one: its header is \
-                     {found:?}, this campaign writes {:?} (another file, or another number of \
-                     targets or kind of instrument)",
-                    expected.trim_end()
+                    "this file was not recorded by this campaign: it has {:?} where this \
+                     campaign writes {wanted:?} (another file, another instrument, seed or \
+                     geometry: give another --out, or the settings it was recorded with); it was \
+                     left as it is",
+                    String::from_utf8_lossy(found)
                 ),
             ));
         }
-        file.seek(std::io::SeekFrom::End(0))
-            .map_err(|e| fail(0, format!("cannot append to the journal: {e}")))?;
+        if whole < bytes.len() || bytes.len() < expected.len() {
+            // A last row cut short by a kill was never recorded; a header cut short is written
+            // again.
+            let keep = if whole < expected.len() { 0 } else { whole };
+            file.set_len(keep as u64)
+                .and_then(|()| file.sync_data())
+                .map_err(|e| fail(0, format!("cannot drop the row cut short: {e}")))?;
+            bytes.truncate(keep);
+        }
+        if bytes.is_empty() {
+            file.write_all(expected.as_bytes())
+                .and_then(|()| file.sync_data())
+                .and_then(|()| sync_directory_of(path))
+                .map_err(|e| fail(0, format!("cannot write the journal's header: {e}")))?;
+        }
         let rows = read_measurements(path)?;
         Ok((
             Self {
@@ -164,7 +189,8 @@ impl MeasurementsJournal {
             csv.write_record(&record)?;
             csv.flush()?;
         }
-        // One write of the whole line: a kill leaves it whole or cut short, never interleaved.
+        // One write of the whole line at the end (append mode, the file locked): a kill leaves
+        // it whole or cut short.
         self.file.write_all(&line)?;
         self.file.sync_data()
     }

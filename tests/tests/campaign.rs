@@ -42,7 +42,7 @@ fn trainer(dir: &Path, args: &[&str]) -> std::process::Output {
     run("hexacomp-trainer", &refs)
 }
 
-/// The data lines of a file (header left out), whole lines only.
+/// The data lines of a file (header and comment lines left out), whole lines only.
 fn data_lines(path: &Path) -> Vec<String> {
     let bytes = std::fs::read(path).unwrap_or_default();
     let whole = bytes
@@ -52,6 +52,7 @@ fn data_lines(path: &Path) -> Vec<String> {
     text(&bytes[..whole])
         .lines()
         .skip(1)
+        .filter(|line| !line.starts_with('#'))
         .map(str::to_string)
         .collect()
 }
@@ -204,12 +205,13 @@ fn a_users_instrument_program_is_read_and_its_failures_are_recorded_gaps() {
         ])
     );
 
-    // A program that hangs is killed after the timeout; one that answers a line of the wrong
-    // width is retried; both leave gaps, listed, and the campaign goes on to the end.
-    script(d, "hang.sh", "sleep 30");
+    // A program that hangs is killed after the timeout, with what it started; one that answers
+    // a line of the wrong width is retried; both leave gaps, named as they happen, and after
+    // three gaps in a row the campaign stops with an error (what it recorded stays).
+    script(d, "hang.sh", "sleep 30 &\nsleep 30");
     let hang = d.join("hang.sh").display().to_string();
     let start = Instant::now();
-    let said = trainer_ok(
+    let output = trainer(
         d,
         &[
             "campaign",
@@ -229,34 +231,39 @@ fn a_users_instrument_program_is_read_and_its_failures_are_recorded_gaps() {
             "1",
         ],
     );
+    let said = text(&output.stderr);
+    assert!(!output.status.success(), "{said}");
     assert!(start.elapsed() < Duration::from_secs(20));
-    assert_eq!(
-        said.matches("did not answer within 200ms (killed)").count(),
-        3,
+    assert_eq!(said.matches("gap: configuration").count(), 3, "{said}");
+    assert!(
+        said.contains("did not answer within 200ms (killed with what it started)"),
         "{said}"
     );
     assert!(
-        said.contains("measured 3 configurations (0 recorded before, 3 gaps)"),
+        said.contains("3 configurations in a row gave no reading"),
         "{said}"
     );
     assert_eq!(data_lines(&d.join("hang.csv")).len(), 3);
     script(d, "narrow.sh", "echo 1,2,3,4");
     let narrow = d.join("narrow.sh").display().to_string();
-    let said = trainer_ok(
-        d,
-        &[
-            "campaign",
-            "--plan",
-            "plan.csv",
-            "--out",
-            "narrow.csv",
-            "--instrument",
-            "command",
-            "--instrument-command",
-            &narrow,
-            "--readings",
-            "1",
-        ],
+    let said = text(
+        &trainer(
+            d,
+            &[
+                "campaign",
+                "--plan",
+                "plan.csv",
+                "--out",
+                "narrow.csv",
+                "--instrument",
+                "command",
+                "--instrument-command",
+                &narrow,
+                "--readings",
+                "1",
+            ],
+        )
+        .stderr,
     );
     assert!(
         said.contains("has 4 cells, expected 9 (3 targets × x,y,z)"),
@@ -305,10 +312,103 @@ fn a_plan_outside_the_stroke_and_another_plans_record_are_refused_with_their_pla
     let output = trainer(d, &["campaign", "--plan", "two.csv", "--out", "m.csv"]);
     assert!(!output.status.success());
     assert!(
-        text(&output.stderr).contains("m.csv:2: configuration")
+        text(&output.stderr).contains("m.csv:3: configuration")
             && text(&output.stderr).contains("was not recorded from this plan"),
         "{}",
         text(&output.stderr)
     );
     assert_eq!(std::fs::read(d.join("m.csv")).unwrap(), before);
+}
+
+#[test]
+fn a_program_that_cannot_start_stops_the_campaign_before_anything_is_recorded() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    trainer_ok(d, &["plan", "--count", "5", "--out", "plan.csv"]);
+    let missing = d.join("no such tracker.sh").display().to_string();
+    let output = trainer(
+        d,
+        &[
+            "campaign",
+            "--plan",
+            "plan.csv",
+            "--out",
+            "m.csv",
+            "--instrument",
+            "command",
+            "--instrument-command",
+            &format!("'{missing}' --fast"),
+        ],
+    );
+    assert!(!output.status.success());
+    let said = text(&output.stderr);
+    assert!(said.contains(&format!("cannot run {missing}")), "{said}");
+    let record = std::fs::read_to_string(d.join("m.csv")).unwrap();
+    assert!(data_lines(&d.join("m.csv")).is_empty(), "{record}");
+}
+
+#[test]
+fn two_campaigns_on_one_file_other_settings_and_foreign_files_are_refused_and_left_as_they_are() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    trainer_ok(d, &["plan", "--count", "8", "--out", "plan.csv"]);
+    // A second campaign while the first records.
+    let mut first = Command::new(binary("hexacomp-trainer"))
+        .args(["campaign", "--plan"])
+        .arg(d.join("plan.csv"))
+        .arg("--out")
+        .arg(d.join("m.csv"))
+        .args(["--dwell", "0.3"])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let start = Instant::now();
+    while data_lines(&d.join("m.csv")).is_empty() {
+        assert!(
+            start.elapsed() < Duration::from_secs(60),
+            "no rows recorded"
+        );
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    let output = trainer(d, &["campaign", "--plan", "plan.csv", "--out", "m.csv"]);
+    assert!(!output.status.success());
+    assert!(
+        text(&output.stderr).contains("another campaign is recording into this file"),
+        "{}",
+        text(&output.stderr)
+    );
+    signal_child(&first, libc::SIGKILL);
+    first.wait().unwrap();
+
+    // The same record with another seed: refused at its settings line, unchanged.
+    let before = std::fs::read(d.join("m.csv")).unwrap();
+    let output = trainer(
+        d,
+        &[
+            "campaign", "--plan", "plan.csv", "--out", "m.csv", "--seed", "2",
+        ],
+    );
+    assert!(!output.status.success());
+    assert!(
+        text(&output.stderr).contains("m.csv:2: this file was not recorded by this campaign"),
+        "{}",
+        text(&output.stderr)
+    );
+    assert_eq!(std::fs::read(d.join("m.csv")).unwrap(), before);
+
+    // A file of another kind, its last line without a line end: refused, not cut.
+    let foreign = "id,x,y,z\n1,2,3,4";
+    std::fs::write(d.join("other.csv"), foreign).unwrap();
+    let output = trainer(d, &["campaign", "--plan", "plan.csv", "--out", "other.csv"]);
+    assert!(!output.status.success());
+    assert!(
+        text(&output.stderr).contains("other.csv:1: this file was not recorded by this campaign"),
+        "{}",
+        text(&output.stderr)
+    );
+    assert_eq!(
+        std::fs::read_to_string(d.join("other.csv")).unwrap(),
+        foreign
+    );
 }

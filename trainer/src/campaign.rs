@@ -15,6 +15,7 @@ use std::time::Duration;
 
 use glam::DVec3;
 use hexacomp_core::observation::Observation;
+use hexacomp_core::pose::{rotation_from_vector, rotation_vector};
 use hexacomp_core::records::{MeasuredConfiguration, NamedPose};
 use hexacomp_core::{Geometry, LEGS, Pose, inverse_kinematics};
 use hexacomp_virtual::VirtualPlatform;
@@ -36,18 +37,29 @@ pub trait Machine {
     fn go_to(&mut self, id: &str, pose: &Pose) -> Result<Arrival>;
 }
 
+/// Why a reading failed.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum ReadError {
+    /// This reading failed (no answer in time, a line of the wrong width, a beam lost): retried,
+    /// then the configuration is a gap.
+    Failed(String),
+    /// The instrument cannot work at all (its program cannot be started): the campaign stops
+    /// before recording anything for the configuration.
+    Broken(String),
+}
+
 /// An instrument a campaign reads.
 pub trait Instrument {
-    /// Reading number `reading` (0-based) of configuration `id`, commanded to `pose`: the
-    /// targets or the pose the instrument reports, in its frame; an error (the instrument did not
-    /// answer, answered nonsense) is retried by the campaign.
+    /// Reading number `reading` (0-based) of configuration `id`, commanded to `pose_mm_deg` (the
+    /// plan's numbers, mm and degrees): the targets or the pose the instrument reports, in its
+    /// frame.
     fn read(
         &mut self,
         id: &str,
         reading: usize,
-        pose: &Pose,
+        pose_mm_deg: &[f64; 6],
         arrival: &Arrival,
-    ) -> std::result::Result<Observation, String>;
+    ) -> std::result::Result<Observation, ReadError>;
 }
 
 /// How each configuration is measured.
@@ -59,18 +71,28 @@ pub struct CampaignOptions {
     pub dwell: Duration,
     /// Attempts at a reading that fails before the configuration is recorded as a gap.
     pub retries: usize,
-    /// A reading farther from the readings' median than this many times their median distance
-    /// from it (and than 1 µm) is rejected as an outlier.
+    /// With at least [`MIN_READINGS_TO_REJECT`] readings, a reading farther from their median
+    /// than this many times their median distance from it (and than 1 µm, or 1e-5 rad for a
+    /// probe's rotation) is rejected as an outlier.
     pub outlier_factor: f64,
+    /// The campaign stops after this many configurations in a row recorded as gaps (the
+    /// instrument is not answering).
+    pub max_consecutive_gaps: usize,
 }
+
+/// The fewest readings outliers are rejected among: with fewer the median distance is too
+/// unsteady (with three readings of pure Gaussian noise and a factor of 5, 3 % of points would
+/// lose a good reading; with four, 0.5 %; two are always equally far from their median).
+pub const MIN_READINGS_TO_REJECT: usize = 4;
 
 impl Default for CampaignOptions {
     fn default() -> Self {
         Self {
-            readings: 3,
+            readings: 5,
             dwell: Duration::ZERO,
             retries: 2,
-            outlier_factor: 3.0,
+            outlier_factor: 5.0,
+            max_consecutive_gaps: 3,
         }
     }
 }
@@ -87,6 +109,8 @@ pub struct Combined {
     pub rejected: usize,
     /// RMS distance of the kept readings from their mean, worst target, mm.
     pub spread_mm: f64,
+    /// Readings lost (every attempt at them failed), and the last failure's reason.
+    pub lost: (usize, Option<String>),
 }
 
 /// The median of `values` (not empty).
@@ -100,17 +124,30 @@ fn median(values: &mut [f64]) -> f64 {
     }
 }
 
-/// The readings of one point combined: outliers rejected against the coordinate-wise median,
-/// the mean of the rest, their RMS distance from it, and which readings were kept.
-fn combine_points(points: &[DVec3], outlier_factor: f64) -> (DVec3, f64, Vec<bool>) {
+/// Which of `points` are outliers: farther from their coordinate-wise median than
+/// `outlier_factor` times their median distance from it and than `floor`; none with fewer than
+/// [`MIN_READINGS_TO_REJECT`] points.
+fn outliers(points: &[DVec3], outlier_factor: f64, floor: f64) -> Vec<bool> {
+    if points.len() < MIN_READINGS_TO_REJECT {
+        return vec![false; points.len()];
+    }
     let centre = DVec3::new(
         median(&mut points.iter().map(|p| p.x).collect::<Vec<_>>()),
         median(&mut points.iter().map(|p| p.y).collect::<Vec<_>>()),
         median(&mut points.iter().map(|p| p.z).collect::<Vec<_>>()),
     );
     let distances: Vec<f64> = points.iter().map(|p| p.distance(centre)).collect();
-    let limit = (outlier_factor * median(&mut distances.clone())).max(1e-3);
-    let kept: Vec<bool> = distances.iter().map(|d| *d <= limit).collect();
+    let limit = (outlier_factor * median(&mut distances.clone())).max(floor);
+    distances.iter().map(|d| *d > limit).collect()
+}
+
+/// The readings of one point combined: outliers rejected against the coordinate-wise median,
+/// the mean of the rest, their RMS distance from it, and which readings were kept.
+fn combine_points(points: &[DVec3], outlier_factor: f64) -> (DVec3, f64, Vec<bool>) {
+    let kept: Vec<bool> = outliers(points, outlier_factor, 1e-3)
+        .iter()
+        .map(|o| !o)
+        .collect();
     let chosen: Vec<DVec3> = points
         .iter()
         .zip(&kept)
@@ -156,33 +193,46 @@ pub fn combine(readings: &[Observation], outlier_factor: f64) -> Combined {
                 .collect();
             Observation::Targets(targets)
         }
-        Some(Observation::Pose(_)) => {
-            let poses: Vec<(usize, [f64; 6])> = readings
+        Some(Observation::Pose(first)) => {
+            let poses: Vec<(usize, Pose)> = readings
                 .iter()
                 .enumerate()
                 .filter_map(|(k, r)| match r {
-                    Observation::Pose(values) => Some((k, *values)),
+                    Observation::Pose(values) => Some((k, Pose::from_mm_deg(*values))),
                     _ => None,
                 })
                 .collect();
-            let positions: Vec<DVec3> = poses
+            // Rotations as rotation vectors relative to the first reading: averaged and judged
+            // without the ±180° wrap of the angles.
+            let reference = Pose::from_mm_deg(*first).rotation();
+            let turns: Vec<DVec3> = poses
                 .iter()
-                .map(|(_, v)| DVec3::new(v[0], v[1], v[2]))
+                .map(|(_, p)| rotation_vector(&(p.rotation() * reference.transpose())))
                 .collect();
-            let (_, spread, kept) = combine_points(&positions, outlier_factor);
+            let positions: Vec<DVec3> = poses.iter().map(|(_, p)| p.position).collect();
+            let (_, spread, kept_position) = combine_points(&positions, outlier_factor);
+            let odd_turn = outliers(&turns, outlier_factor, 1e-5);
+            let kept: Vec<bool> = kept_position
+                .iter()
+                .zip(&odd_turn)
+                .map(|(k, odd)| *k && !odd)
+                .collect();
             spread_mm = spread;
-            let chosen: Vec<&[f64; 6]> = poses
-                .iter()
-                .zip(&kept)
-                .filter(|(_, k)| **k)
-                .map(|((_, v), _)| v)
-                .collect();
-            for ((k, _), keep) in poses.iter().zip(kept) {
+            for ((k, _), keep) in poses.iter().zip(&kept) {
                 rejected_reading[*k] |= !keep;
             }
-            Observation::Pose(std::array::from_fn(|i| {
-                chosen.iter().map(|v| v[i]).sum::<f64>() / chosen.len() as f64
-            }))
+            let count = kept.iter().filter(|k| **k).count() as f64;
+            let mean_of = |values: &[DVec3]| {
+                values
+                    .iter()
+                    .zip(&kept)
+                    .filter(|(_, k)| **k)
+                    .map(|(v, _)| *v)
+                    .sum::<DVec3>()
+                    / count
+            };
+            let rotation = rotation_from_vector(mean_of(&turns)) * reference;
+            Observation::Pose(Pose::from_rotation(mean_of(&positions), &rotation).to_mm_deg())
         }
         Some(Observation::PoseMissed) | None => Observation::PoseMissed,
     };
@@ -192,6 +242,7 @@ pub fn combine(readings: &[Observation], outlier_factor: f64) -> Combined {
         kept: count - rejected,
         rejected,
         spread_mm,
+        lost: (0, None),
     }
 }
 
@@ -254,8 +305,10 @@ impl Campaign<'_> {
     /// `options.readings` times (each reading retried up to `options.retries` times), combined,
     /// and passed to `record` with its [`Combined`] figures before the next move; `progress()`
     /// is called after each. A configuration whose readings all fail is recorded as a gap
-    /// (`nothing_seen`) and listed in the summary. An error of the machine or of `record` stops
-    /// the campaign; what was recorded stays.
+    /// (`nothing_seen`) and listed in the summary; after `options.max_consecutive_gaps` gaps in
+    /// a row the campaign stops ([`Error::Instrument`]). An instrument that cannot work
+    /// ([`ReadError::Broken`]), an error of the machine or of `record` stop it at once; what was
+    /// recorded stays.
     pub fn run(
         &self,
         machine: &mut dyn Machine,
@@ -268,27 +321,35 @@ impl Campaign<'_> {
             return Err(Error::InvalidSetting("readings must be ≥ 1".into()));
         }
         let mut summary = CampaignSummary::default();
+        let mut gaps_in_a_row = 0;
         for &index in self.order {
             let row = &self.plan[index];
             if self.done.contains(&row.id) {
                 summary.already += 1;
                 continue;
             }
-            let pose = row.pose();
-            let arrival = machine.go_to(&row.id, &pose)?;
-            let (readings, failure) = self.read_all(instrument, &row.id, &pose, &arrival);
-            let combined = if readings.is_empty() {
-                let why = failure.unwrap_or_else(|| "no reading".into());
+            let arrival = machine.go_to(&row.id, &row.pose())?;
+            let (readings, lost, failure) =
+                self.read_all(instrument, &row.id, &row.pose_mm_deg, &arrival)?;
+            gaps_in_a_row = if readings.is_empty() {
+                gaps_in_a_row + 1
+            } else {
+                0
+            };
+            let mut combined = if readings.is_empty() {
+                let why = failure.clone().unwrap_or_else(|| "no reading".into());
                 summary.gaps.push((row.id.clone(), why));
                 Combined {
                     observed: self.nothing_seen.clone(),
                     kept: 0,
                     rejected: 0,
                     spread_mm: 0.0,
+                    lost: (0, None),
                 }
             } else {
                 combine(&readings, options.outlier_factor)
             };
+            combined.lost = (lost, failure);
             record(
                 MeasuredConfiguration {
                     id: row.id.clone(),
@@ -300,37 +361,54 @@ impl Campaign<'_> {
             )?;
             summary.measured += 1;
             progress();
+            if gaps_in_a_row >= options.max_consecutive_gaps {
+                let (_, why) = summary.gaps.last().cloned().unwrap_or_default();
+                return Err(Error::Instrument(format!(
+                    "{gaps_in_a_row} configurations in a row gave no reading (the last: {why}); \
+                     the campaign stops: check the instrument and run again to continue"
+                )));
+            }
         }
         Ok(summary)
     }
 
     /// The readings of one configuration that succeeded (each retried up to `retries` times),
-    /// and the last failure's reason.
+    /// how many were lost, and the last failure's reason; an instrument that cannot work is an
+    /// error.
     fn read_all(
         &self,
         instrument: &mut dyn Instrument,
         id: &str,
-        pose: &Pose,
+        pose_mm_deg: &[f64; 6],
         arrival: &Arrival,
-    ) -> (Vec<Observation>, Option<String>) {
+    ) -> Result<(Vec<Observation>, usize, Option<String>)> {
         let options = &self.options;
-        let mut readings = Vec::with_capacity(options.readings);
+        let mut readings = Vec::new();
         let mut failure = None;
+        let mut lost = 0;
         for reading in 0..options.readings {
             if reading > 0 && !options.dwell.is_zero() {
                 std::thread::sleep(options.dwell);
             }
+            let mut read = false;
             for _attempt in 0..=options.retries {
-                match instrument.read(id, reading, pose, arrival) {
+                match instrument.read(id, reading, pose_mm_deg, arrival) {
                     Ok(observation) => {
                         readings.push(observation);
+                        read = true;
                         break;
                     }
-                    Err(why) => failure = Some(why),
+                    Err(ReadError::Failed(why)) => failure = Some(why),
+                    Err(ReadError::Broken(why)) => {
+                        return Err(Error::Instrument(format!(
+                            "{why}; the campaign stops before configuration {id}"
+                        )));
+                    }
                 }
             }
+            lost += usize::from(!read);
         }
-        (readings, failure)
+        Ok((readings, lost, failure))
     }
 }
 
@@ -400,12 +478,12 @@ impl Instrument for VirtualInstrument {
         &mut self,
         id: &str,
         reading: usize,
-        _pose: &Pose,
+        _pose_mm_deg: &[f64; 6],
         arrival: &Arrival,
-    ) -> std::result::Result<Observation, String> {
-        let reached = arrival
-            .reached
-            .ok_or("the virtual instrument measures the virtual machine only")?;
+    ) -> std::result::Result<Observation, ReadError> {
+        let reached = arrival.reached.ok_or_else(|| {
+            ReadError::Broken("the virtual instrument measures the virtual machine only".into())
+        })?;
         let mut device = self
             .platform
             .reseeded(noise_key(self.seed, id, 1 + reading as u64));
@@ -418,7 +496,7 @@ impl Instrument for VirtualInstrument {
         if self.probe {
             let pose = observed
                 .fitted_pose(self.platform.nominal())
-                .map_err(|e| e.to_string())?;
+                .map_err(|e| ReadError::Failed(e.to_string()))?;
             observed = Observation::Pose(pose.to_mm_deg());
         }
         Ok(observed.in_frame(&self.instrument.inverse()))
@@ -443,7 +521,7 @@ mod tests {
             targets(&[p(1.250), p(5.0)]), // knocked during the reading
             targets(&[p(1.000), None]),
         ];
-        let combined = combine(&readings, 3.0);
+        let combined = combine(&readings, 5.0);
         assert_eq!((combined.kept, combined.rejected), (4, 1));
         let Observation::Targets(mean) = &combined.observed else {
             panic!("targets")
@@ -460,7 +538,28 @@ mod tests {
             targets(&[None]),
             targets(&[None]),
         ];
-        assert_eq!(combine(&rare, 3.0).observed, targets(&[None]));
+        assert_eq!(combine(&rare, 5.0).observed, targets(&[None]));
+    }
+
+    #[test]
+    fn probe_poses_across_180_degrees_average_to_180_not_0_and_odd_turns_are_rejected() {
+        let pose = |c: f64, x: f64| Observation::Pose([x, 0.0, 300.0, 0.0, 0.0, c]);
+        let readings = [
+            pose(179.99, 1.0),
+            pose(-179.99, 1.0),
+            pose(179.995, 1.0),
+            pose(-179.995, 1.0),
+            pose(170.0, 1.0), // the probe's orientation read wrong
+        ];
+        let combined = combine(&readings, 5.0);
+        assert_eq!((combined.kept, combined.rejected), (4, 1));
+        let Observation::Pose(mean) = combined.observed else {
+            panic!("a pose")
+        };
+        assert!((mean[5].abs() - 180.0).abs() < 1e-9, "{mean:?}");
+        assert!((mean[0] - 1.0).abs() < 1e-12);
+        // Fewer than four readings: nothing is rejected.
+        assert_eq!(combine(&readings[2..], 5.0).rejected, 0);
     }
 
     #[test]

@@ -6,8 +6,10 @@
 //! standard output: the measured target points `p1x,p1y,p1z,…,pNx,pNy,pNz` in the instrument's
 //! frame (mm; a target not seen as three empty cells), or the platform's pose `x,y,z,a,b,c` from
 //! a 6-DoF probe. Exit status 0; anything else, no line, a line of another width, a cell that is
-//! not a finite number, or no answer within the timeout is a failed reading (retried by the
-//! campaign). Lines after the first and standard error are ignored (standard error is shown).
+//! not a number (or beyond 1e9 mm), or no answer within the timeout is a failed reading (retried
+//! by the campaign); a program that cannot be started stops the campaign. Lines after the first
+//! are ignored, standard error is shown. The program runs in its own process group, killed whole
+//! on a timeout, and is killed when the campaign dies.
 
 use std::io::Read;
 use std::os::unix::process::CommandExt;
@@ -15,10 +17,9 @@ use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 use glam::DVec3;
-use hexacomp_core::Pose;
 use hexacomp_core::observation::Observation;
 
-use crate::campaign::{Arrival, Instrument};
+use crate::campaign::{Arrival, Instrument, ReadError};
 
 /// A user's program that reads the instrument.
 #[derive(Debug, Clone)]
@@ -55,9 +56,13 @@ impl CommandInstrument {
             }
             text.parse::<f64>()
                 .ok()
-                .filter(|v| v.is_finite())
+                .filter(|v| v.is_finite() && v.abs() <= MAX_COORDINATE_MM)
                 .map(Some)
-                .ok_or_else(|| format!("{text:?} in the line {line:?} is not a finite number"))
+                .ok_or_else(|| {
+                    format!(
+                        "{text:?} in the line {line:?} is not a number of at most                          {MAX_COORDINATE_MM:e} in size"
+                    )
+                })
         };
         let values: Vec<Option<f64>> = cells.iter().map(|c| number(c)).collect::<Result<_, _>>()?;
         if self.probe {
@@ -93,62 +98,106 @@ fn kill_group(child: &Child) {
     }
 }
 
+/// The most a program may print for one reading; the rest is read and dropped.
+const MAX_OUTPUT_BYTES: u64 = 1 << 20;
+
+/// The largest magnitude a coordinate may have, mm (1000 km): beyond it, a sentinel or garbage.
+const MAX_COORDINATE_MM: f64 = 1e9;
+
 impl Instrument for CommandInstrument {
     fn read(
         &mut self,
         id: &str,
         reading: usize,
-        pose: &Pose,
+        pose_mm_deg: &[f64; 6],
         _arrival: &Arrival,
-    ) -> Result<Observation, String> {
-        let (program, fixed) = self.program.split_first().ok_or("no program given")?;
+    ) -> Result<Observation, ReadError> {
+        let (program, fixed) = self
+            .program
+            .split_first()
+            .ok_or_else(|| ReadError::Broken("no instrument program given".into()))?;
+        let mut command = Command::new(program);
         // Its own process group: on a timeout the program and whatever it started are killed
         // together (a child left behind would hold our standard error open).
-        let mut child = Command::new(program)
+        command
             .process_group(0)
             .args(fixed)
             .arg(id)
-            .args(pose.to_mm_deg().map(|v| v.to_string()))
+            .args(pose_mm_deg.map(|v| v.to_string()))
             .arg((reading + 1).to_string())
             .stdin(Stdio::null())
             .stdout(Stdio::piped())
-            .stderr(Stdio::inherit())
-            .spawn()
-            .map_err(|e| format!("cannot run {program}: {e}"))?;
-        let mut stdout = child.stdout.take().expect("stdout piped");
-        let reader = std::thread::spawn(move || {
-            let mut text = String::new();
-            stdout.read_to_string(&mut text).map(|_| text)
+            .stderr(Stdio::inherit());
+        // SAFETY: between fork and exec the closure only calls prctl(2), which is
+        // async-signal-safe; it asks the kernel to kill the program when the campaign dies
+        // (Ctrl-C, SIGKILL), so it does not keep the tracker busy.
+        unsafe {
+            command.pre_exec(|| {
+                if libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGKILL) == 0 {
+                    Ok(())
+                } else {
+                    Err(std::io::Error::last_os_error())
+                }
+            });
+        }
+        let mut child = command.spawn().map_err(|e| {
+            ReadError::Broken(format!(
+                "cannot run {program}: {e} (is the path right, the file executable, with a \
+                 #! line?)"
+            ))
+        })?;
+        let stdout = child.stdout.take().expect("stdout piped");
+        let (sender, receiver) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            let mut bytes = Vec::new();
+            let mut limited = stdout.take(MAX_OUTPUT_BYTES);
+            let result = limited.read_to_end(&mut bytes).map(|_| bytes);
+            // Whatever is printed beyond the limit is read and dropped.
+            let _ = std::io::copy(&mut limited.into_inner(), &mut std::io::sink());
+            let _ = sender.send(result);
         });
-        let start = Instant::now();
+        let deadline = Instant::now() + self.timeout;
+        let timeout = self.timeout;
+        let timed_out = |child: &mut Child| {
+            kill_group(child);
+            let _ = child.wait();
+            ReadError::Failed(format!(
+                "{program} did not answer within {timeout:?} (killed with what it started)"
+            ))
+        };
         let status = loop {
             match child.try_wait() {
                 Ok(Some(status)) => break status,
-                Ok(None) if start.elapsed() < self.timeout => {
+                Ok(None) if Instant::now() < deadline => {
                     std::thread::sleep(Duration::from_millis(5));
                 }
-                Ok(None) => {
+                Ok(None) => return Err(timed_out(&mut child)),
+                Err(e) => {
                     kill_group(&child);
                     let _ = child.wait();
-                    return Err(format!(
-                        "{program} did not answer within {:?} (killed)",
-                        self.timeout
-                    ));
+                    return Err(ReadError::Failed(format!("waiting for {program}: {e}")));
                 }
-                Err(e) => return Err(format!("waiting for {program}: {e}")),
             }
         };
-        let text = reader
-            .join()
-            .map_err(|_| format!("reading {program}'s output failed"))?
-            .map_err(|e| format!("reading {program}'s output: {e}"))?;
+        // A program that exited but left something holding its output open gets the rest of
+        // the time, then its group is killed.
+        let left = deadline.saturating_duration_since(Instant::now());
+        let bytes = match receiver.recv_timeout(left) {
+            Ok(result) => {
+                result.map_err(|e| ReadError::Failed(format!("reading {program}'s output: {e}")))?
+            }
+            Err(_) => return Err(timed_out(&mut child)),
+        };
         if !status.success() {
-            return Err(format!("{program} exited with {status}"));
+            return Err(ReadError::Failed(format!("{program} exited with {status}")));
         }
-        let line = text
-            .lines()
-            .next()
-            .ok_or_else(|| format!("{program} printed no line"))?;
-        self.parse(line)
+        if bytes.is_empty() {
+            return Err(ReadError::Failed(format!("{program} printed no line")));
+        }
+        let first = bytes.split(|b| *b == b'\n').next().unwrap_or_default();
+        let line = std::str::from_utf8(first)
+            .map_err(|_| ReadError::Failed(format!("{program}'s first line is not UTF-8 text")))?
+            .trim_end_matches('\r');
+        self.parse(line).map_err(ReadError::Failed)
     }
 }

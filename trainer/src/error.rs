@@ -61,6 +61,11 @@ pub enum Error {
     #[error("the measurements do not fit the geometry: {0}")]
     GeometryMismatch(String),
 
+    /// A campaign's instrument cannot work (its program cannot be started) or keeps failing: the
+    /// campaign stopped; what was recorded stays.
+    #[error("the instrument: {0}")]
+    Instrument(String),
+
     /// The data cannot support the requested computation (too few configurations, none usable).
     #[error("insufficient data: {0}")]
     InsufficientData(String),

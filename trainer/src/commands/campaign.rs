@@ -48,10 +48,11 @@ pub struct CampaignArgs {
     /// The instrument that measures.
     #[arg(long, value_enum, default_value_t = InstrumentArg::Virtual)]
     instrument: InstrumentArg,
-    /// With --instrument command: the program (and fixed arguments, separated by spaces) run for
-    /// every reading as `PROGRAM ARGS… ID X Y Z A B C READING`; it prints one CSV line, the
-    /// targets p1x..pNz in the instrument's frame (empty cells: not seen) or, with --probe, the
-    /// pose x,y,z,a,b,c (docs/measuring.md).
+    /// With --instrument command: the program and fixed arguments (split as a shell does: quote
+    /// a path with spaces) run for every reading as `PROGRAM ARGS… ID X Y Z A B C READING`; it
+    /// prints one CSV line, the targets p1x..pNz in the instrument's frame (empty cells: not
+    /// seen) or, with --probe, the pose x,y,z,a,b,c (docs/measuring.md). A program that cannot be
+    /// started stops the campaign.
     #[arg(long, value_name = "PROGRAM", required_if_eq("instrument", "command"))]
     instrument_command: Option<String>,
     /// Seconds a reading of --instrument-command may take before it is killed and retried.
@@ -60,9 +61,9 @@ pub struct CampaignArgs {
     /// The instrument reports the platform's pose (a 6-DoF probe) instead of the targets.
     #[arg(long)]
     probe: bool,
-    /// Readings per configuration.
-    #[arg(long, default_value_t = CampaignOptions::default().readings)]
-    readings: usize,
+    /// Readings per configuration, 1 to 1000 (outliers are rejected among four or more).
+    #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u16).range(1..=1000))]
+    readings: u16,
     /// Seconds between two readings (trackers need about 2 s per point for their stated
     /// accuracy).
     #[arg(long, default_value_t = 0.0, value_name = "SECONDS")]
@@ -131,6 +132,28 @@ impl CampaignArgs {
         Ok(Pose::from_mm_deg(values))
     }
 
+    /// What makes the record this campaign's: the machine, the instrument and the noise they
+    /// draw, the geometry. Operational settings (readings, dwell, timeouts) may change between
+    /// runs.
+    fn settings(&self, geometry: &Geometry, program: &[String]) -> String {
+        let instrument = match self.instrument {
+            InstrumentArg::Virtual => format!(
+                "virtual instrument at {:?}",
+                self.instrument_pose.clone().unwrap_or_else(|| vec![0.0; 6])
+            ),
+            InstrumentArg::Command => format!("command {program:?}"),
+        };
+        format!(
+            "machine {:?} (seed {}, machine seed {}, {} errors); {instrument}{}; geometry {}",
+            self.machine,
+            self.seed,
+            self.machine_seed,
+            self.error_variant,
+            if self.probe { ", probe" } else { "" },
+            geometry.fingerprint()
+        )
+    }
+
     /// A duration option in seconds.
     fn seconds(name: &str, value: f64) -> anyhow::Result<Duration> {
         Duration::try_from_secs_f64(value)
@@ -146,19 +169,35 @@ pub fn run(geometry: &Geometry, args: &CampaignArgs) -> anyhow::Result<()> {
         args.plan.display()
     );
     check_plan(geometry, &plan)?;
+    // Every setting is checked before the record is opened: a bad option leaves no file.
     let options = CampaignOptions {
-        readings: args.readings,
+        readings: usize::from(args.readings),
         dwell: CampaignArgs::seconds("dwell", args.dwell)?,
         retries: args.retries,
         ..CampaignOptions::default()
     };
-    anyhow::ensure!(args.readings >= 1, "--readings must be at least 1");
+    let timeout = CampaignArgs::seconds("command-timeout", args.command_timeout)?;
+    let program = match args.instrument {
+        InstrumentArg::Command => {
+            let text = args.instrument_command.as_deref().unwrap_or_default();
+            let words = shlex::split(text).ok_or_else(|| {
+                anyhow::anyhow!("--instrument-command {text:?}: unbalanced quotes")
+            })?;
+            anyhow::ensure!(!words.is_empty(), "--instrument-command is empty");
+            words
+        }
+        InstrumentArg::Virtual => Vec::new(),
+    };
+    let instrument_pose = args.instrument_pose()?;
     let kind = if args.probe {
         JournalKind::Pose
     } else {
         JournalKind::Targets(geometry.targets.len())
     };
-    let (mut journal, recorded) = MeasurementsJournal::open(&args.out, kind)?;
+    let model = ErrorModel::variant(args.error_variant);
+    let platform = VirtualPlatform::new(geometry, &model, args.machine_seed, args.seed)?;
+    let (mut journal, recorded) =
+        MeasurementsJournal::open(&args.out, kind, &args.settings(geometry, &program))?;
     let done = check_recorded(&plan, &recorded)?;
     if done.len() == plan.len() {
         eprintln!(
@@ -170,8 +209,6 @@ pub fn run(geometry: &Geometry, args: &CampaignArgs) -> anyhow::Result<()> {
         );
         return Ok(());
     }
-    let model = ErrorModel::variant(args.error_variant);
-    let platform = VirtualPlatform::new(geometry, &model, args.machine_seed, args.seed)?;
     let mut machine: Box<dyn Machine> = match args.machine {
         MachineArg::Virtual => Box::new(VirtualMachine {
             platform: platform.clone(),
@@ -181,21 +218,15 @@ pub fn run(geometry: &Geometry, args: &CampaignArgs) -> anyhow::Result<()> {
     let mut instrument: Box<dyn Instrument> = match args.instrument {
         InstrumentArg::Virtual => Box::new(VirtualInstrument {
             platform,
-            instrument: args.instrument_pose()?,
+            instrument: instrument_pose,
             probe: args.probe,
             seed: args.seed,
         }),
         InstrumentArg::Command => Box::new(CommandInstrument {
-            program: args
-                .instrument_command
-                .as_deref()
-                .unwrap_or_default()
-                .split_whitespace()
-                .map(str::to_string)
-                .collect(),
+            program,
             targets: geometry.targets.len(),
             probe: args.probe,
-            timeout: CampaignArgs::seconds("command-timeout", args.command_timeout)?,
+            timeout,
         }),
     };
     let order = tour(geometry, &plan, &geometry.home_pose());
@@ -236,6 +267,20 @@ pub fn run(geometry: &Geometry, args: &CampaignArgs) -> anyhow::Result<()> {
         machine.as_mut(),
         instrument.as_mut(),
         &mut |row, combined| {
+            match &combined.lost {
+                (_, Some(why)) if combined.kept == 0 => {
+                    bar.suspend(|| {
+                        eprintln!("gap: configuration {}: nothing measured ({why})", row.id);
+                    });
+                }
+                (lost, Some(why)) if *lost > 0 => bar.suspend(|| {
+                    eprintln!(
+                        "configuration {}: {lost} readings lost ({why}); recorded from the others",
+                        row.id
+                    );
+                }),
+                _ => {}
+            }
             let measured_at = humantime::format_rfc3339_seconds(SystemTime::now()).to_string();
             journal
                 .append(
@@ -247,20 +292,37 @@ pub fn run(geometry: &Geometry, args: &CampaignArgs) -> anyhow::Result<()> {
                         measured_at,
                     ],
                 )
-                .map_err(|e| hexacomp_formats::Error::write(&args.out, e).into())
+                .map_err(|e| {
+                    hexacomp_trainer::Error::InsufficientData(format!(
+                        "{}: cannot record configuration {}: {e} (the rows before it are on \
+                         disk; run again to continue)",
+                        args.out.display(),
+                        row.id
+                    ))
+                })
         },
         &mut || bar.inc(1),
     );
     bar.finish_and_clear();
     let summary = summary?;
-    for (id, why) in &summary.gaps {
-        eprintln!("gap: configuration {id}: nothing measured ({why})");
-    }
     eprintln!(
         "measured {} configurations ({} recorded before, {} gaps) → {}",
         summary.measured,
         summary.already,
         summary.gaps.len(),
+        args.out.display()
+    );
+    anyhow::ensure!(
+        summary.gaps.is_empty(),
+        "{} configurations were recorded with nothing measured ({}); they stay gaps in {} \
+         (delete their lines to measure them again)",
+        summary.gaps.len(),
+        summary
+            .gaps
+            .iter()
+            .map(|(id, _)| id.as_str())
+            .collect::<Vec<_>>()
+            .join(", "),
         args.out.display()
     );
     Ok(())
