@@ -60,6 +60,23 @@ pub fn run(name: &str, args: &[&str]) -> Output {
         .unwrap_or_else(|e| panic!("running {name}: {e}"))
 }
 
+/// Runs `hexacomp-trainer` with `args`, its arguments that name `.csv`, `.toml` or `.sh` files
+/// taken in `dir`.
+pub fn trainer_in(dir: &std::path::Path, args: &[&str]) -> Output {
+    let args: Vec<String> = args
+        .iter()
+        .map(|a| {
+            if [".csv", ".toml", ".sh"].iter().any(|end| a.ends_with(end)) {
+                dir.join(a).display().to_string()
+            } else {
+                a.to_string()
+            }
+        })
+        .collect();
+    let refs: Vec<&str> = args.iter().map(String::as_str).collect();
+    run("hexacomp-trainer", &refs)
+}
+
 /// A unique instance name for one test: tests run in parallel, each with its own service.
 pub fn unique_instance(test: &str) -> String {
     use std::sync::atomic::{AtomicUsize, Ordering};

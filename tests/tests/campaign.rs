@@ -10,7 +10,7 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use hexacomp_formats::read_measurements;
-use hexacomp_tests::{binary, run, signal_child};
+use hexacomp_tests::{binary, signal_child};
 
 fn text(bytes: &[u8]) -> String {
     String::from_utf8_lossy(bytes).into_owned()
@@ -27,19 +27,8 @@ fn trainer_ok(dir: &Path, args: &[&str]) -> String {
     text(&output.stderr)
 }
 
-fn trainer(dir: &Path, args: &[&str]) -> std::process::Output {
-    let args: Vec<String> = args
-        .iter()
-        .map(|a| {
-            if a.ends_with(".csv") || a.ends_with(".sh") {
-                dir.join(a).display().to_string()
-            } else {
-                a.to_string()
-            }
-        })
-        .collect();
-    let refs: Vec<&str> = args.iter().map(String::as_str).collect();
-    run("hexacomp-trainer", &refs)
+fn trainer(dir: &std::path::Path, args: &[&str]) -> std::process::Output {
+    hexacomp_tests::trainer_in(dir, args)
 }
 
 /// The data lines of a file (header and comment lines left out), whole lines only.

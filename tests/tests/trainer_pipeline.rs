@@ -12,20 +12,8 @@ fn text(bytes: &[u8]) -> String {
     String::from_utf8_lossy(bytes).into_owned()
 }
 
-/// Runs the trainer with `args`, its `.csv` and `.toml` arguments taken in `dir`.
 fn trainer(dir: &std::path::Path, args: &[&str]) -> std::process::Output {
-    let args: Vec<String> = args
-        .iter()
-        .map(|a| {
-            if a.ends_with(".csv") || a.ends_with(".toml") {
-                dir.join(a).display().to_string()
-            } else {
-                a.to_string()
-            }
-        })
-        .collect();
-    let refs: Vec<&str> = args.iter().map(String::as_str).collect();
-    run("hexacomp-trainer", &refs)
+    hexacomp_tests::trainer_in(dir, args)
 }
 
 /// [`trainer`], asserting success; returns stderr.

@@ -114,14 +114,8 @@ pub struct Combined {
 }
 
 /// The median of `values` (not empty).
-fn median(values: &mut [f64]) -> f64 {
-    values.sort_by(f64::total_cmp);
-    let middle = values.len() / 2;
-    if values.len().is_multiple_of(2) {
-        0.5 * (values[middle - 1] + values[middle])
-    } else {
-        values[middle]
-    }
+fn median(values: &[f64]) -> f64 {
+    crate::screening::median(values).unwrap_or(f64::NAN)
 }
 
 /// Which of `points` are outliers: farther from their coordinate-wise median than
@@ -132,12 +126,12 @@ fn outliers(points: &[DVec3], outlier_factor: f64, floor: f64) -> Vec<bool> {
         return vec![false; points.len()];
     }
     let centre = DVec3::new(
-        median(&mut points.iter().map(|p| p.x).collect::<Vec<_>>()),
-        median(&mut points.iter().map(|p| p.y).collect::<Vec<_>>()),
-        median(&mut points.iter().map(|p| p.z).collect::<Vec<_>>()),
+        median(&points.iter().map(|p| p.x).collect::<Vec<_>>()),
+        median(&points.iter().map(|p| p.y).collect::<Vec<_>>()),
+        median(&points.iter().map(|p| p.z).collect::<Vec<_>>()),
     );
     let distances: Vec<f64> = points.iter().map(|p| p.distance(centre)).collect();
-    let limit = (outlier_factor * median(&mut distances.clone())).max(floor);
+    let limit = (outlier_factor * median(&distances)).max(floor);
     distances.iter().map(|d| *d > limit).collect()
 }
 

@@ -435,7 +435,7 @@ const IDENTIFICATION_PASSES: usize = 4;
 pub const MIN_ROWS_FOR_IDENTIFICATION: usize = 20;
 
 /// The median of `values` (`None` when empty).
-fn median(values: &[f64]) -> Option<f64> {
+pub(crate) fn median(values: &[f64]) -> Option<f64> {
     if values.is_empty() {
         return None;
     }

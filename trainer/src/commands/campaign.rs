@@ -7,7 +7,7 @@ use std::time::{Duration, SystemTime};
 
 use hexacomp_core::error::compact;
 use hexacomp_core::observation::Observation;
-use hexacomp_core::{Geometry, Pose, inverse_kinematics};
+use hexacomp_core::{Geometry, inverse_kinematics};
 use hexacomp_formats::{JournalKind, MeasurementsJournal, Records, read_poses};
 use hexacomp_trainer::campaign::{
     Campaign, CampaignOptions, Instrument, Machine, VirtualInstrument, VirtualMachine, tour,
@@ -116,22 +116,6 @@ impl CampaignArgs {
         }
     }
 
-    /// The virtual instrument's pose in the base frame.
-    fn instrument_pose(&self) -> anyhow::Result<Pose> {
-        let Some(values) = &self.instrument_pose else {
-            return Ok(Pose::default());
-        };
-        let values: [f64; 6] = values
-            .as_slice()
-            .try_into()
-            .map_err(|_| anyhow::anyhow!("--instrument-pose needs six numbers x,y,z,a,b,c"))?;
-        anyhow::ensure!(
-            values.iter().all(|v| v.is_finite()),
-            "--instrument-pose {values:?}: every number must be finite"
-        );
-        Ok(Pose::from_mm_deg(values))
-    }
-
     /// What makes the record this campaign's: the machine, the instrument and the noise they
     /// draw, the geometry. Operational settings (readings, dwell, timeouts) may change between
     /// runs.
@@ -188,7 +172,7 @@ pub fn run(geometry: &Geometry, args: &CampaignArgs) -> anyhow::Result<()> {
         }
         InstrumentArg::Virtual => Vec::new(),
     };
-    let instrument_pose = args.instrument_pose()?;
+    let instrument_pose = super::instrument_pose(args.instrument_pose.as_deref())?;
     let kind = if args.probe {
         JournalKind::Pose
     } else {

@@ -19,6 +19,22 @@ pub mod train;
 use std::io::Write;
 use std::path::Path;
 
+/// The instrument's pose in the base frame from `--instrument-pose x,y,z,a,b,c` (mm, degrees);
+/// the identity (the base frame itself) when the option is not given.
+pub fn instrument_pose(values: Option<&[f64]>) -> anyhow::Result<hexacomp_core::Pose> {
+    let Some(values) = values else {
+        return Ok(hexacomp_core::Pose::default());
+    };
+    let values: [f64; 6] = values
+        .try_into()
+        .map_err(|_| anyhow::anyhow!("--instrument-pose needs six numbers x,y,z,a,b,c"))?;
+    anyhow::ensure!(
+        values.iter().all(|v| v.is_finite()),
+        "--instrument-pose {values:?}: every number must be finite"
+    );
+    Ok(hexacomp_core::Pose::from_mm_deg(values))
+}
+
 /// Writes `bytes` to the file at `path`, whole or not at all ([`hexacomp_formats::write_file`]).
 pub fn write_bytes(path: &Path, bytes: &[u8]) -> hexacomp_formats::Result<()> {
     hexacomp_formats::write_file(path, |file| file.write_all(bytes))

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use anyhow::Context;
 use hexacomp_core::error::compact;
 use hexacomp_core::pose::PoseConvention;
-use hexacomp_core::{Geometry, Pose, inverse_kinematics};
+use hexacomp_core::{Geometry, inverse_kinematics};
 use hexacomp_formats::{read_fiducials, read_poses, write_fiducials, write_measurements_in};
 use hexacomp_trainer::acquire::{Reporting, as_reported, measure_plan};
 use hexacomp_virtual::{
@@ -104,24 +104,6 @@ fn fiducial_seed(seed: u64) -> u64 {
     seed ^ 0x6669_6475_6369_616c
 }
 
-impl SimulateArgs {
-    /// The instrument's pose in the base frame (the identity without --instrument-pose).
-    fn instrument(&self) -> anyhow::Result<Pose> {
-        let Some(values) = &self.instrument_pose else {
-            return Ok(Pose::default());
-        };
-        let values: [f64; 6] = values
-            .as_slice()
-            .try_into()
-            .map_err(|_| anyhow::anyhow!("--instrument-pose needs six numbers x,y,z,a,b,c"))?;
-        anyhow::ensure!(
-            values.iter().all(|v| v.is_finite()),
-            "--instrument-pose {values:?}: every number must be finite"
-        );
-        Ok(Pose::from_mm_deg(values))
-    }
-}
-
 pub fn run(geometry: &Geometry, args: &SimulateArgs) -> anyhow::Result<()> {
     if let Some(fiducials_out) = &args.fiducials_out {
         anyhow::ensure!(
@@ -131,7 +113,7 @@ pub fn run(geometry: &Geometry, args: &SimulateArgs) -> anyhow::Result<()> {
         );
         hexacomp_formats::refuse_same_file(fiducials_out, &[&args.out])?;
     }
-    let instrument = args.instrument()?;
+    let instrument = super::instrument_pose(args.instrument_pose.as_deref())?;
     let plan = read_poses(&args.plan)?;
     let fiducials = match (&args.fiducials, &args.fiducials_out) {
         (Some(path), _) => Some((
