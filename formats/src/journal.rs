@@ -8,11 +8,11 @@ use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 
 use hexacomp_core::durable::sync_directory_of;
-use hexacomp_core::observation::Observation;
+use hexacomp_core::pose::PoseConvention;
 use hexacomp_core::records::MeasuredConfiguration;
 
-use crate::measurements::{MEASURED_POSE_COLUMNS, read_measurements, target_columns};
-use crate::{Error, LEG_COLUMNS, POSE_COLUMNS, Records, Result, cells};
+use crate::measurements::{kind_of, measured_columns, read_measurements, row_cells};
+use crate::{Error, LEG_COLUMNS, POSE_COLUMNS, Records, Result};
 
 /// What a journal's rows hold after the commanded pose and legs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -38,10 +38,7 @@ pub struct MeasurementsJournal {
 
 /// The header line of a journal of `kind`.
 fn header(kind: JournalKind) -> String {
-    let measured: Vec<String> = match kind {
-        JournalKind::Targets(count) => (1..=count).flat_map(target_columns).collect(),
-        JournalKind::Pose => MEASURED_POSE_COLUMNS.map(str::to_string).to_vec(),
-    };
+    let measured = measured_columns(kind);
     let columns: Vec<String> = std::iter::once("id".to_string())
         .chain(POSE_COLUMNS.iter().map(|c| c.to_string()))
         .chain(LEG_COLUMNS.iter().map(|c| c.to_string()))
@@ -152,37 +149,18 @@ impl MeasurementsJournal {
         row: &MeasuredConfiguration,
         campaign_cells: [String; 4],
     ) -> std::io::Result<()> {
-        let measured: Vec<String> = match (&row.observed, self.kind) {
-            (Observation::Targets(targets), JournalKind::Targets(count))
-                if targets.len() == count =>
-            {
-                targets
-                    .iter()
-                    .flat_map(|p| match p {
-                        Some(p) => cells(&p.to_array()).collect::<Vec<_>>(),
-                        None => vec![String::new(); 3],
-                    })
-                    .collect()
-            }
-            (Observation::Pose(values), JournalKind::Pose) => cells(values).collect(),
-            (Observation::PoseMissed, JournalKind::Pose) => vec![String::new(); 6],
-            _ => {
-                return Err(std::io::Error::new(
-                    std::io::ErrorKind::InvalidInput,
-                    format!(
-                        "configuration {} was measured otherwise than the journal {} records",
-                        row.id,
-                        self.path.display()
-                    ),
-                ));
-            }
-        };
-        let record: Vec<String> = std::iter::once(row.id.clone())
-            .chain(cells(&row.pose_mm_deg))
-            .chain(cells(&row.legs))
-            .chain(measured)
-            .chain(campaign_cells)
-            .collect();
+        if kind_of(&row.observed) != self.kind {
+            return Err(std::io::Error::new(
+                std::io::ErrorKind::InvalidInput,
+                format!(
+                    "configuration {} was measured otherwise than the journal {} records",
+                    row.id,
+                    self.path.display()
+                ),
+            ));
+        }
+        let mut record = row_cells(row, PoseConvention::Linuxcnc);
+        record.extend(campaign_cells);
         let mut line = Vec::new();
         {
             let mut csv = csv::Writer::from_writer(&mut line);

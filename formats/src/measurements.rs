@@ -2,6 +2,7 @@
 //! measured — the target points `p1x..pNz` (any number N ≥ 3; a target not seen has its three
 //! cells empty), or the platform's pose `mx,my,mz,ma,mb,mc` from a 6-DoF probe.
 
+use std::collections::HashMap;
 use std::io::Write;
 use std::path::Path;
 
@@ -12,7 +13,8 @@ use hexacomp_core::pose::PoseConvention;
 use hexacomp_core::records::MeasuredConfiguration;
 
 use crate::{
-    Error, LEG_COLUMNS, POSE_COLUMNS, Records, Result, Row, Rows, cells, header, write_rows,
+    Error, JournalKind, LEG_COLUMNS, POSE_COLUMNS, Records, Result, Row, Rows, cells, header,
+    write_rows,
 };
 
 /// The measured-pose columns of a 6-DoF probe: position (mm) and angles (degrees).
@@ -24,10 +26,47 @@ pub fn target_columns(j: usize) -> [String; 3] {
 }
 
 /// How many targets a header names: N when `p1x..pNz` are all present and `p(N+1)x` is not.
-fn targets_named(row: &Row) -> usize {
+fn targets_named(columns: &HashMap<String, usize>) -> usize {
     (1..)
-        .take_while(|&j| row.header.columns.contains_key(&format!("p{j}x")))
+        .take_while(|&j| columns.contains_key(&format!("p{j}x")))
         .count()
+}
+
+/// The kind of `observed`, as a file's measured columns hold it (a missed pose is a pose).
+pub(crate) fn kind_of(observed: &Observation) -> JournalKind {
+    match observed {
+        Observation::Targets(targets) => JournalKind::Targets(targets.len()),
+        Observation::Pose(_) | Observation::PoseMissed => JournalKind::Pose,
+    }
+}
+
+/// The measured columns of a file of `kind`: `p1x..pNz` or `mx..mc`.
+pub(crate) fn measured_columns(kind: JournalKind) -> Vec<String> {
+    match kind {
+        JournalKind::Targets(count) => (1..=count).flat_map(target_columns).collect(),
+        JournalKind::Pose => MEASURED_POSE_COLUMNS.map(str::to_string).to_vec(),
+    }
+}
+
+/// The cells of `row`: id, commanded pose, legs, then what was measured (a target not seen or a
+/// missed pose as empty cells; a pose in `convention`).
+pub(crate) fn row_cells(row: &MeasuredConfiguration, convention: PoseConvention) -> Vec<String> {
+    let measured: Vec<String> = match &row.observed {
+        Observation::Targets(targets) => targets
+            .iter()
+            .flat_map(|p| match p {
+                Some(p) => cells(&p.to_array()).collect::<Vec<_>>(),
+                None => vec![String::new(); 3],
+            })
+            .collect(),
+        Observation::Pose(values) => cells(&convention.from_linuxcnc(*values)).collect(),
+        Observation::PoseMissed => vec![String::new(); 6],
+    };
+    std::iter::once(row.id.clone())
+        .chain(cells(&row.pose_mm_deg))
+        .chain(cells(&row.legs))
+        .chain(measured)
+        .collect()
 }
 
 /// Reads a measurements file (`id,x,y,z,a,b,c,q1..q6`, then `p1x..pNz` or `mx..mc`), its
@@ -79,9 +118,7 @@ fn check_measured_columns<T>(rows: &Rows<T>) -> Result<()> {
     let has_pose = MEASURED_POSE_COLUMNS
         .iter()
         .any(|c| columns.contains_key(*c));
-    let named = (1..)
-        .take_while(|&j| columns.contains_key(&format!("p{j}x")))
-        .count();
+    let named = targets_named(columns);
     if has_pose {
         if named > 0 {
             return Err(fail(
@@ -126,7 +163,7 @@ fn observation(row: &Row) -> Result<Observation> {
         }
         return Ok(Observation::Pose(row.numbers(MEASURED_POSE_COLUMNS)?));
     }
-    let targets = (1..=targets_named(row))
+    let targets = (1..=targets_named(&row.header.columns))
         .map(|j| {
             let columns = target_columns(j);
             let texts = columns
@@ -159,12 +196,10 @@ pub fn write_measurements_in<W: Write>(
     rows: &[MeasuredConfiguration],
     convention: PoseConvention,
 ) -> std::io::Result<()> {
-    let kind = |row: &MeasuredConfiguration| match &row.observed {
-        Observation::Targets(targets) => Some(targets.len()),
-        Observation::Pose(_) | Observation::PoseMissed => None,
-    };
-    let first = rows.first().map(kind).unwrap_or(Some(MIN_TARGETS));
-    if let Some(row) = rows.iter().find(|r| kind(r) != first) {
+    let first = rows
+        .first()
+        .map_or(JournalKind::Targets(MIN_TARGETS), |r| kind_of(&r.observed));
+    if let Some(row) = rows.iter().find(|r| kind_of(&r.observed) != first) {
         return Err(std::io::Error::new(
             std::io::ErrorKind::InvalidInput,
             format!(
@@ -174,34 +209,10 @@ pub fn write_measurements_in<W: Write>(
             ),
         ));
     }
-    let measured: Vec<String> = match first {
-        Some(count) => (1..=count).flat_map(target_columns).collect(),
-        None => MEASURED_POSE_COLUMNS.map(str::to_string).to_vec(),
-    };
+    let measured = measured_columns(first);
     let mut head = header(&[&POSE_COLUMNS, &LEG_COLUMNS]);
     head.extend(measured.iter().map(String::as_str));
-    write_rows(
-        writer,
-        &head,
-        rows.iter().map(|r| {
-            let observed: Vec<String> = match &r.observed {
-                Observation::Targets(targets) => targets
-                    .iter()
-                    .flat_map(|p| match p {
-                        Some(p) => cells(&p.to_array()).collect::<Vec<_>>(),
-                        None => vec![String::new(); 3],
-                    })
-                    .collect(),
-                Observation::Pose(values) => cells(&convention.from_linuxcnc(*values)).collect(),
-                Observation::PoseMissed => vec![String::new(); 6],
-            };
-            std::iter::once(r.id.clone())
-                .chain(cells(&r.pose_mm_deg))
-                .chain(cells(&r.legs))
-                .chain(observed)
-                .collect()
-        }),
-    )
+    write_rows(writer, &head, rows.iter().map(|r| row_cells(r, convention)))
 }
 
 /// Writes a measurements file, measured poses (if any) in LinuxCNC's convention.

@@ -45,6 +45,23 @@ pub struct Reporting {
     pub seed: u64,
 }
 
+/// Targets measured in the base frame as an instrument reports them: in its frame
+/// (`into_instrument`: the base frame's pose in the instrument's), and as a 6-DoF probe's pose
+/// fitted to them when `probe`.
+pub fn as_instrument_reports(
+    geometry: &Geometry,
+    observed: &Observation,
+    into_instrument: &Pose,
+    probe: bool,
+) -> Result<Observation> {
+    let observed = if probe {
+        Observation::Pose(observed.fitted_pose(geometry)?.to_mm_deg())
+    } else {
+        observed.clone()
+    };
+    Ok(observed.in_frame(into_instrument))
+}
+
 /// `rows` (measured in the base frame) as the instrument of `reporting` reports them: a probe's
 /// pose instead of the targets, in the instrument's frame, with targets missed.
 pub fn as_reported(
@@ -61,11 +78,8 @@ pub fn as_reported(
     let into_instrument = reporting.instrument.inverse();
     let mut rng = ChaCha8Rng::seed_from_u64(reporting.seed ^ 0x6d69_7373_6564);
     for row in rows {
-        if reporting.probe {
-            let pose = row.observed.fitted_pose(geometry)?;
-            row.observed = Observation::Pose(pose.to_mm_deg());
-        }
-        row.observed = row.observed.in_frame(&into_instrument);
+        row.observed =
+            as_instrument_reports(geometry, &row.observed, &into_instrument, reporting.probe)?;
         let missed = rng.random_bool(reporting.missed_share);
         if let Observation::Targets(targets) = &mut row.observed
             && missed

@@ -20,6 +20,7 @@ use hexacomp_core::records::{MeasuredConfiguration, NamedPose};
 use hexacomp_core::{Geometry, LEGS, Pose, inverse_kinematics};
 use hexacomp_virtual::VirtualPlatform;
 
+use crate::acquire::as_instrument_reports;
 use crate::error::{Error, Result};
 
 /// Where the machine went for a configuration.
@@ -486,14 +487,13 @@ impl Instrument for VirtualInstrument {
             .into_iter()
             .map(Some)
             .collect();
-        let mut observed = Observation::Targets(targets);
-        if self.probe {
-            let pose = observed
-                .fitted_pose(self.platform.nominal())
-                .map_err(|e| ReadError::Failed(e.to_string()))?;
-            observed = Observation::Pose(pose.to_mm_deg());
-        }
-        Ok(observed.in_frame(&self.instrument.inverse()))
+        as_instrument_reports(
+            self.platform.nominal(),
+            &Observation::Targets(targets),
+            &self.instrument.inverse(),
+            self.probe,
+        )
+        .map_err(|e| ReadError::Failed(e.to_string()))
     }
 }
 

@@ -5,9 +5,9 @@ use std::collections::HashSet;
 use std::path::PathBuf;
 use std::time::{Duration, SystemTime};
 
+use hexacomp_core::Geometry;
 use hexacomp_core::error::compact;
 use hexacomp_core::observation::Observation;
-use hexacomp_core::{Geometry, inverse_kinematics};
 use hexacomp_formats::{JournalKind, MeasurementsJournal, Records, read_poses};
 use hexacomp_trainer::campaign::{
     Campaign, CampaignOptions, Instrument, Machine, VirtualInstrument, VirtualMachine, tour,
@@ -320,8 +320,7 @@ fn check_plan(
 ) -> anyhow::Result<()> {
     let [min, max] = geometry.leg_range;
     for (index, row) in plan.iter().enumerate() {
-        let legs = inverse_kinematics(geometry, &row.pose()).lengths;
-        if let Some((leg, length)) = (1..).zip(legs).find(|(_, l)| !(min..=max).contains(l)) {
+        if let Some((leg, length)) = super::leg_outside_stroke(geometry, &row.pose()) {
             anyhow::bail!(
                 "{}:{}: configuration {}: the pose needs leg {leg} at {} mm, outside the stroke \
                  [{min}, {max}] mm (a pose outside the workspace?); nothing was moved",

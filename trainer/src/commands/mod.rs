@@ -35,6 +35,17 @@ pub fn instrument_pose(values: Option<&[f64]>) -> anyhow::Result<hexacomp_core::
     Ok(hexacomp_core::Pose::from_mm_deg(values))
 }
 
+/// The first leg (1–6) whose commanded length at `pose` lies outside the geometry's stroke, and
+/// that length (mm); `None` when every leg is inside.
+pub fn leg_outside_stroke(
+    geometry: &hexacomp_core::Geometry,
+    pose: &hexacomp_core::Pose,
+) -> Option<(usize, f64)> {
+    let [min, max] = geometry.leg_range;
+    let legs = hexacomp_core::inverse_kinematics(geometry, pose).lengths;
+    (1..).zip(legs).find(|(_, l)| !(min..=max).contains(l))
+}
+
 /// Writes `bytes` to the file at `path`, whole or not at all ([`hexacomp_formats::write_file`]).
 pub fn write_bytes(path: &Path, bytes: &[u8]) -> hexacomp_formats::Result<()> {
     hexacomp_formats::write_file(path, |file| file.write_all(bytes))

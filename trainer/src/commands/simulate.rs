@@ -3,9 +3,9 @@
 use std::path::PathBuf;
 
 use anyhow::Context;
+use hexacomp_core::Geometry;
 use hexacomp_core::error::compact;
 use hexacomp_core::pose::PoseConvention;
-use hexacomp_core::{Geometry, inverse_kinematics};
 use hexacomp_formats::{read_fiducials, read_poses, write_fiducials, write_measurements_in};
 use hexacomp_trainer::acquire::{Reporting, as_reported, measure_plan};
 use hexacomp_virtual::{
@@ -138,9 +138,8 @@ pub fn run(geometry: &Geometry, args: &SimulateArgs) -> anyhow::Result<()> {
                 row.id
             )
         };
-        let legs = inverse_kinematics(geometry, &row.pose()).lengths;
         let [min, max] = geometry.leg_range;
-        if let Some((leg, length)) = (1..).zip(legs).find(|(_, l)| !(min..=max).contains(l)) {
+        if let Some((leg, length)) = super::leg_outside_stroke(geometry, &row.pose()) {
             anyhow::bail!(
                 "{}: the pose needs leg {leg} at {} mm, outside the geometry's stroke [{min}, \
                  {max}] mm",
