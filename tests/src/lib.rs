@@ -60,8 +60,9 @@ pub fn run(name: &str, args: &[&str]) -> Output {
         .unwrap_or_else(|e| panic!("running {name}: {e}"))
 }
 
-/// Runs `hexacomp-trainer` with `args`, its arguments that name `.csv`, `.toml` or `.sh` files
-/// taken in `dir`.
+/// Runs `hexacomp-trainer` in `dir` with `args`, its arguments that name `.csv`, `.toml` or
+/// `.sh` files made absolute in `dir` (as a user's shell would complete them); other relative
+/// paths are taken in `dir` too.
 pub fn trainer_in(dir: &std::path::Path, args: &[&str]) -> Output {
     let args: Vec<String> = args
         .iter()
@@ -73,8 +74,11 @@ pub fn trainer_in(dir: &std::path::Path, args: &[&str]) -> Output {
             }
         })
         .collect();
-    let refs: Vec<&str> = args.iter().map(String::as_str).collect();
-    run("hexacomp-trainer", &refs)
+    Command::new(binary("hexacomp-trainer"))
+        .args(&args)
+        .current_dir(dir)
+        .output()
+        .unwrap_or_else(|e| panic!("running hexacomp-trainer: {e}"))
 }
 
 /// A unique instance name for one test: tests run in parallel, each with its own service.

@@ -14,6 +14,8 @@ use std::collections::HashSet;
 use std::time::Duration;
 
 use glam::DVec3;
+use hexacomp_core::compensator::{PointStatus, compensate_legs};
+use hexacomp_core::model::Model;
 use hexacomp_core::observation::Observation;
 use hexacomp_core::pose::{rotation_from_vector, rotation_vector};
 use hexacomp_core::records::{MeasuredConfiguration, NamedPose};
@@ -26,7 +28,8 @@ use crate::error::{Error, Result};
 /// Where the machine went for a configuration.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Arrival {
-    /// The nominal leg lengths commanded, mm.
+    /// The leg lengths commanded, mm: the nominal inverse kinematics plus the corrections of
+    /// the compensation active in the machine, if any.
     pub legs: [f64; LEGS],
     /// The pose really reached, when the machine knows it (the virtual one does).
     pub reached: Option<Pose>,
@@ -325,7 +328,7 @@ impl Campaign<'_> {
             }
             let arrival = machine.go_to(&row.id, &row.pose())?;
             let (readings, lost, failure) =
-                self.read_all(instrument, &row.id, &row.pose_mm_deg, &arrival)?;
+                read_configuration(instrument, options, &row.id, &row.pose_mm_deg, &arrival)?;
             gaps_in_a_row = if readings.is_empty() {
                 gaps_in_a_row + 1
             } else {
@@ -366,45 +369,44 @@ impl Campaign<'_> {
         }
         Ok(summary)
     }
+}
 
-    /// The readings of one configuration that succeeded (each retried up to `retries` times),
-    /// how many were lost, and the last failure's reason; an instrument that cannot work is an
-    /// error.
-    fn read_all(
-        &self,
-        instrument: &mut dyn Instrument,
-        id: &str,
-        pose_mm_deg: &[f64; 6],
-        arrival: &Arrival,
-    ) -> Result<(Vec<Observation>, usize, Option<String>)> {
-        let options = &self.options;
-        let mut readings = Vec::new();
-        let mut failure = None;
-        let mut lost = 0;
-        for reading in 0..options.readings {
-            if reading > 0 && !options.dwell.is_zero() {
-                std::thread::sleep(options.dwell);
-            }
-            let mut read = false;
-            for _attempt in 0..=options.retries {
-                match instrument.read(id, reading, pose_mm_deg, arrival) {
-                    Ok(observation) => {
-                        readings.push(observation);
-                        read = true;
-                        break;
-                    }
-                    Err(ReadError::Failed(why)) => failure = Some(why),
-                    Err(ReadError::Broken(why)) => {
-                        return Err(Error::Instrument(format!(
-                            "{why}; the campaign stops before configuration {id}"
-                        )));
-                    }
+/// The readings of configuration `id` that succeeded (each reading retried up to
+/// `options.retries` times, `options.dwell` apart), how many were lost, and the last failure's
+/// reason; an instrument that cannot work is an error.
+pub fn read_configuration(
+    instrument: &mut dyn Instrument,
+    options: &CampaignOptions,
+    id: &str,
+    pose_mm_deg: &[f64; 6],
+    arrival: &Arrival,
+) -> Result<(Vec<Observation>, usize, Option<String>)> {
+    let mut readings = Vec::new();
+    let mut failure = None;
+    let mut lost = 0;
+    for reading in 0..options.readings {
+        if reading > 0 && !options.dwell.is_zero() {
+            std::thread::sleep(options.dwell);
+        }
+        let mut read = false;
+        for _attempt in 0..=options.retries {
+            match instrument.read(id, reading, pose_mm_deg, arrival) {
+                Ok(observation) => {
+                    readings.push(observation);
+                    read = true;
+                    break;
+                }
+                Err(ReadError::Failed(why)) => failure = Some(why),
+                Err(ReadError::Broken(why)) => {
+                    return Err(Error::Instrument(format!(
+                        "{why}; measuring stops before configuration {id}"
+                    )));
                 }
             }
-            lost += usize::from(!read);
         }
-        Ok((readings, lost, failure))
+        lost += usize::from(!read);
     }
+    Ok((readings, lost, failure))
 }
 
 /// A stable 64-bit key of `seed`, a configuration id and a number (FNV-1a): the virtual
@@ -432,22 +434,43 @@ pub struct VirtualMachine {
     pub platform: VirtualPlatform,
     /// The seed the keys are drawn from.
     pub seed: u64,
+    /// The compensation active in the machine's controller, whose corrections are added to the
+    /// nominal legs (`verify --model`); none for a calibration campaign, which measures the
+    /// machine as it is.
+    pub compensation: Option<Model>,
 }
 
 impl Machine for VirtualMachine {
     fn go_to(&mut self, id: &str, pose: &Pose) -> Result<Arrival> {
         let geometry = self.platform.nominal().clone();
-        let legs = inverse_kinematics(&geometry, pose);
-        if !legs.all_in_stroke() {
+        let nominal = inverse_kinematics(&geometry, pose);
+        if !nominal.all_in_stroke() {
             return Err(Error::InvalidSetting(format!(
                 "configuration {id}: the pose needs legs outside the stroke (a pose outside the \
                  workspace?)"
             )));
         }
+        let legs = match &self.compensation {
+            None => nominal.lengths,
+            Some(model) => {
+                let compensated = compensate_legs(&geometry, Some(model), &nominal.lengths);
+                match compensated.status {
+                    PointStatus::Ok | PointStatus::Clamped | PointStatus::OutsideTrainedRange => {
+                        compensated.legs
+                    }
+                    status => {
+                        return Err(Error::InvalidSetting(format!(
+                            "configuration {id}: the model does not compensate the pose ({})",
+                            status.name()
+                        )));
+                    }
+                }
+            }
+        };
         self.platform = self.platform.reseeded(noise_key(self.seed, id, 0));
-        let reached = self.platform.move_legs(&legs.lengths, pose)?;
+        let reached = self.platform.move_legs(&legs, pose)?;
         Ok(Arrival {
-            legs: legs.lengths,
+            legs,
             reached: Some(reached),
         })
     }

@@ -18,6 +18,8 @@
 //!   iterative least squares, compensation by the identified inverse kinematics;
 //! - [`registration`]: locating the instrument in the base frame from fiducials, and bringing
 //!   measurements from its frame into the base frame;
+//! - [`iso9283`], [`verify`], [`verify_report`]: the ISO 9283 pose test — its poses, running
+//!   its cycles, pose accuracy and repeatability, and its report;
 //! - [`linuxcnc`]: the geometry of a LinuxCNC hexapod configuration (genhexkins).
 //!
 //! Units: mm and radians in memory, mm and degrees in files.
@@ -31,6 +33,7 @@ pub mod corrections;
 pub mod error;
 pub mod evaluate;
 pub mod identify;
+pub mod iso9283;
 pub mod linuxcnc;
 pub mod pipeline;
 pub mod plan;
@@ -39,5 +42,7 @@ pub mod screening;
 pub mod svg;
 pub mod table;
 pub mod train;
+pub mod verify;
+pub mod verify_report;
 
 pub use error::{Error, Result};

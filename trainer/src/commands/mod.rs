@@ -11,10 +11,12 @@ pub mod measurements_input;
 pub mod plan;
 pub mod predict;
 pub mod register;
+pub mod rig;
 pub mod simulate;
 pub mod solve;
 pub mod survey;
 pub mod train;
+pub mod verify;
 
 use std::io::Write;
 use std::path::Path;

@@ -1,0 +1,209 @@
+//! The machine and the instrument a measuring command drives (`campaign`, `verify`): their
+//! options, and building them.
+
+use std::time::Duration;
+
+use hexacomp_core::Geometry;
+use hexacomp_core::model::Model;
+use hexacomp_trainer::campaign::{
+    CampaignOptions, Instrument, Machine, VirtualInstrument, VirtualMachine,
+};
+use hexacomp_trainer::command_instrument::CommandInstrument;
+use hexacomp_virtual::{DEFAULT_MACHINE_SEED, ErrorModel, ErrorVariant, VirtualPlatform};
+
+/// The machine, the instrument and how each pose is read.
+#[derive(Debug, clap::Args)]
+pub struct RigArgs {
+    /// The machine to drive.
+    #[arg(long, value_enum, default_value_t = MachineArg::Virtual)]
+    machine: MachineArg,
+    /// The instrument that measures.
+    #[arg(long, value_enum, default_value_t = InstrumentArg::Virtual)]
+    instrument: InstrumentArg,
+    /// With --instrument command: the program and fixed arguments (split as a shell does: quote
+    /// a path with spaces) run for every reading as `PROGRAM ARGS… ID X Y Z A B C READING`; it
+    /// prints one CSV line, the targets p1x..pNz in the instrument's frame (empty cells: not
+    /// seen) or, with --probe, the pose x,y,z,a,b,c (docs/measuring.md). A program that cannot be
+    /// started stops the run.
+    #[arg(long, value_name = "PROGRAM", required_if_eq("instrument", "command"))]
+    instrument_command: Option<String>,
+    /// Seconds a reading of --instrument-command may take before it is killed and retried.
+    #[arg(long, default_value_t = 60.0, value_name = "SECONDS")]
+    command_timeout: f64,
+    /// The instrument reports the platform's pose (a 6-DoF probe) instead of the targets.
+    #[arg(long)]
+    probe: bool,
+    /// Readings per pose, 1 to 1000 (outliers are rejected among four or more).
+    #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u16).range(1..=1000))]
+    readings: u16,
+    /// Seconds between two readings (trackers need about 2 s per point for their stated
+    /// accuracy).
+    #[arg(long, default_value_t = 0.0, value_name = "SECONDS")]
+    dwell: f64,
+    /// Attempts after a failed reading before the pose is recorded as a gap.
+    #[arg(long, default_value_t = CampaignOptions::default().retries)]
+    retries: usize,
+    /// Seed of the virtual machine's and instrument's noise.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Seed that draws the virtual machine (its errors).
+    #[arg(long, default_value_t = DEFAULT_MACHINE_SEED)]
+    machine_seed: u64,
+    /// Error variant of the virtual machine.
+    #[arg(long, default_value_t = ErrorVariant::Paper)]
+    error_variant: ErrorVariant,
+    /// Where the virtual instrument stands: its pose in the base frame `x,y,z,a,b,c` (mm,
+    /// degrees); default: the base frame itself.
+    #[arg(
+        long,
+        value_name = "X,Y,Z,A,B,C",
+        value_delimiter = ',',
+        allow_negative_numbers = true
+    )]
+    instrument_pose: Option<Vec<f64>>,
+}
+
+/// The machines a campaign can drive.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum MachineArg {
+    /// The built-in virtual platform.
+    Virtual,
+}
+
+/// The instruments a campaign can read.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum InstrumentArg {
+    /// The virtual platform's tracker.
+    Virtual,
+    /// A user's program (--instrument-command).
+    Command,
+}
+
+/// A machine and an instrument, built and checked.
+pub struct Rig {
+    /// The machine.
+    pub machine: Box<dyn Machine>,
+    /// The instrument.
+    pub instrument: Box<dyn Instrument>,
+    /// How each pose is read.
+    pub options: CampaignOptions,
+    /// What makes a record this rig's ([`RigArgs::settings`]).
+    pub settings: String,
+}
+
+impl RigArgs {
+    /// Whether the instrument reports poses (a probe) rather than targets.
+    pub fn probe(&self) -> bool {
+        self.probe
+    }
+
+    /// Whether the instrument is the virtual platform's tracker, standing away from the base
+    /// frame (its measurements need a registration).
+    pub fn virtual_instrument_away_from_base(&self) -> bool {
+        self.instrument == InstrumentArg::Virtual
+            && self
+                .instrument_pose
+                .as_ref()
+                .is_some_and(|p| p.iter().any(|v| *v != 0.0))
+    }
+
+    /// A short description of the machine and the instrument for reports.
+    pub fn description(&self) -> String {
+        match self.instrument {
+            InstrumentArg::Virtual => format!(
+                "{:?} machine ({} errors, machine seed {}), virtual instrument{}",
+                self.machine,
+                self.error_variant,
+                self.machine_seed,
+                if self.probe { " (probe)" } else { "" }
+            ),
+            InstrumentArg::Command => format!(
+                "{:?} machine, instrument command {:?}{}",
+                self.machine,
+                self.instrument_command.as_deref().unwrap_or_default(),
+                if self.probe { " (probe)" } else { "" }
+            ),
+        }
+    }
+
+    /// What makes a record this rig's: the machine, the instrument and the noise they draw, the
+    /// geometry. Operational settings (readings, dwell, timeouts) may change between runs.
+    fn settings(&self, geometry: &Geometry, program: &[String]) -> String {
+        let instrument = match self.instrument {
+            InstrumentArg::Virtual => format!(
+                "virtual instrument at {:?}",
+                self.instrument_pose.clone().unwrap_or_else(|| vec![0.0; 6])
+            ),
+            InstrumentArg::Command => format!("command {program:?}"),
+        };
+        format!(
+            "machine {:?} (seed {}, machine seed {}, {} errors); {instrument}{}; geometry {}",
+            self.machine,
+            self.seed,
+            self.machine_seed,
+            self.error_variant,
+            if self.probe { ", probe" } else { "" },
+            geometry.fingerprint()
+        )
+    }
+
+    /// A duration option in seconds.
+    fn seconds(name: &str, value: f64) -> anyhow::Result<Duration> {
+        Duration::try_from_secs_f64(value)
+            .map_err(|_| anyhow::anyhow!("--{name} {value}: a number of seconds ≥ 0 is needed"))
+    }
+
+    /// The machine and the instrument, every option checked; `compensation`: the model the
+    /// virtual machine's controller applies (`verify --model`).
+    pub fn build(&self, geometry: &Geometry, compensation: Option<Model>) -> anyhow::Result<Rig> {
+        let options = CampaignOptions {
+            readings: usize::from(self.readings),
+            dwell: Self::seconds("dwell", self.dwell)?,
+            retries: self.retries,
+            ..CampaignOptions::default()
+        };
+        let timeout = Self::seconds("command-timeout", self.command_timeout)?;
+        let program = match self.instrument {
+            InstrumentArg::Command => {
+                let text = self.instrument_command.as_deref().unwrap_or_default();
+                let words = shlex::split(text).ok_or_else(|| {
+                    anyhow::anyhow!("--instrument-command {text:?}: unbalanced quotes")
+                })?;
+                anyhow::ensure!(!words.is_empty(), "--instrument-command is empty");
+                words
+            }
+            InstrumentArg::Virtual => Vec::new(),
+        };
+        let instrument_pose = super::instrument_pose(self.instrument_pose.as_deref())?;
+        let model = ErrorModel::variant(self.error_variant);
+        let platform = VirtualPlatform::new(geometry, &model, self.machine_seed, self.seed)?;
+        let settings = self.settings(geometry, &program);
+        let machine: Box<dyn Machine> = match self.machine {
+            MachineArg::Virtual => Box::new(VirtualMachine {
+                platform: platform.clone(),
+                seed: self.seed,
+                compensation,
+            }),
+        };
+        let instrument: Box<dyn Instrument> = match self.instrument {
+            InstrumentArg::Virtual => Box::new(VirtualInstrument {
+                platform,
+                instrument: instrument_pose,
+                probe: self.probe,
+                seed: self.seed,
+            }),
+            InstrumentArg::Command => Box::new(CommandInstrument {
+                program,
+                targets: geometry.targets.len(),
+                probe: self.probe,
+                timeout,
+            }),
+        };
+        Ok(Rig {
+            machine,
+            instrument,
+            options,
+            settings,
+        })
+    }
+}
