@@ -1,8 +1,8 @@
-//! A measurements file recorded row by row (a campaign's record): each row is appended and on
-//! disk before the next configuration is measured, and a file reopened after any kill continues
-//! where it stopped — a row cut short by the kill is dropped (its configuration is measured
-//! again), every whole row is kept. The file holds its campaign's settings in a comment line
-//! after the header, so a run with other settings cannot continue it.
+//! A measurements file recorded row by row (a campaign's record, or its drift log): each row is
+//! appended and on disk before the next configuration is measured, and a file reopened after any
+//! kill continues where it stopped — a row cut short by the kill is dropped (its configuration
+//! is measured again), every whole row is kept. The file holds its campaign's settings in a
+//! comment line after the header, so a run with other settings cannot continue it.
 
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
@@ -11,8 +11,8 @@ use hexacomp_core::durable::sync_directory_of;
 use hexacomp_core::pose::PoseConvention;
 use hexacomp_core::records::MeasuredConfiguration;
 
-use crate::measurements::{kind_of, measured_columns, read_measurements, row_cells};
-use crate::{Error, LEG_COLUMNS, POSE_COLUMNS, Records, Result};
+use crate::measurements::{kind_of, measured_columns, row_cells};
+use crate::{Error, LEG_COLUMNS, POSE_COLUMNS, Result};
 
 /// What a journal's rows hold after the commanded pose and legs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -28,40 +28,68 @@ pub enum JournalKind {
 /// (RFC 3339 UTC).
 pub const JOURNAL_COLUMNS: [&str; 4] = ["readings", "rejected", "spread_mm", "measured_at"];
 
-/// A measurements file open for appending.
+/// The columns of a campaign's drift log after the measured ones (docs/formats.md): the event
+/// (`warm-up`, `start`, `reference`, `end`), how many configurations the record held, the
+/// largest movement of a target from the baseline and the mean movement (mm, the record's
+/// frame), the decision (`baseline`, `ok`, `stopped`, `accepted`, `warming`, `stable`), the
+/// instrument's pose in the base frame of the run's registration (mm, degrees; empty without
+/// one), and the time (RFC 3339 UTC).
+pub const DRIFT_COLUMNS: [&str; 15] = [
+    "event",
+    "configurations",
+    "deviation_mm",
+    "dx",
+    "dy",
+    "dz",
+    "decision",
+    "ix",
+    "iy",
+    "iz",
+    "ia",
+    "ib",
+    "ic",
+    "measured_at",
+    "note",
+];
+
+/// A measurements file open for appending, with its columns after the measured ones.
 #[derive(Debug)]
 pub struct MeasurementsJournal {
     path: PathBuf,
     file: std::fs::File,
     kind: JournalKind,
+    extra: &'static [&'static str],
 }
 
-/// The header line of a journal of `kind`.
-fn header(kind: JournalKind) -> String {
+/// The header line of a journal of `kind` with the `extra` columns after the measured ones.
+fn header(kind: JournalKind, extra: &[&str]) -> String {
     let measured = measured_columns(kind);
     let columns: Vec<String> = std::iter::once("id".to_string())
         .chain(POSE_COLUMNS.iter().map(|c| c.to_string()))
         .chain(LEG_COLUMNS.iter().map(|c| c.to_string()))
         .chain(measured)
-        .chain(JOURNAL_COLUMNS.iter().map(|c| c.to_string()))
+        .chain(extra.iter().map(|c| c.to_string()))
         .collect();
     columns.join(",") + "\n"
 }
 
 impl MeasurementsJournal {
-    /// Opens the journal at `path` to record into, for a campaign described by `settings` (one
+    /// Opens the journal at `path` to record into, with the `extra` columns after the measured
+    /// ones ([`JOURNAL_COLUMNS`] for a campaign's record, [`DRIFT_COLUMNS`] for its drift log),
+    /// for a campaign described by `settings` (one
     /// line of text: the instrument, seeds and the like): creates it with its header and a
     /// `# campaign: settings` comment line (on disk before this returns) when it does not exist
     /// or is empty; otherwise requires that header and that line — a record of another campaign
-    /// or another file is refused and left as it is — drops a last line cut short (no line end),
-    /// and reads the rows already recorded (strictly: a damaged row is an error naming its
-    /// line). The file stays locked (`flock`) while the journal is open: a second campaign on
-    /// the same file is refused.
+    /// or another file is refused and left as it is — and drops a last line cut short (no line
+    /// end). The file stays locked (`flock`) while the journal is open: a second campaign on the
+    /// same file is refused. Read the rows already recorded with [`crate::read_measurements`] or
+    /// [`crate::read_drift_log`] once it is open.
     pub fn open(
         path: &Path,
         kind: JournalKind,
         settings: &str,
-    ) -> Result<(Self, Records<MeasuredConfiguration>)> {
+        extra: &'static [&'static str],
+    ) -> Result<Self> {
         let file_name = path.display().to_string();
         let fail = |line: u64, message: String| Error::Format {
             file: file_name.clone(),
@@ -89,7 +117,7 @@ impl MeasurementsJournal {
         let mut bytes = Vec::new();
         file.read_to_end(&mut bytes)
             .map_err(|e| fail(0, format!("cannot read the journal: {e}")))?;
-        let expected = format!("{}# campaign: {settings}\n", header(kind));
+        let expected = format!("{}# campaign: {settings}\n", header(kind, extra));
         let whole = bytes
             .iter()
             .rposition(|b| *b == b'\n')
@@ -131,24 +159,29 @@ impl MeasurementsJournal {
                 .and_then(|()| sync_directory_of(path))
                 .map_err(|e| fail(0, format!("cannot write the journal's header: {e}")))?;
         }
-        let rows = read_measurements(path)?;
-        Ok((
-            Self {
-                path: path.to_path_buf(),
-                file,
-                kind,
-            },
-            rows,
-        ))
+        Ok(Self {
+            path: path.to_path_buf(),
+            file,
+            kind,
+            extra,
+        })
     }
 
-    /// Appends `row` with the campaign's cells (`readings`, `rejected`, `spread_mm`,
-    /// `measured_at`) as one line, on disk when this returns.
-    pub fn append(
-        &mut self,
-        row: &MeasuredConfiguration,
-        campaign_cells: [String; 4],
-    ) -> std::io::Result<()> {
+    /// Appends `row` with the cells of the journal's extra columns as one line, on disk when
+    /// this returns.
+    pub fn append(&mut self, row: &MeasuredConfiguration, extra: &[String]) -> std::io::Result<()> {
+        if extra.len() != self.extra.len() {
+            return Err(std::io::Error::new(
+                std::io::ErrorKind::InvalidInput,
+                format!(
+                    "{} cells for the {} columns {:?} of {}",
+                    extra.len(),
+                    self.extra.len(),
+                    self.extra,
+                    self.path.display()
+                ),
+            ));
+        }
         if kind_of(&row.observed) != self.kind {
             return Err(std::io::Error::new(
                 std::io::ErrorKind::InvalidInput,
@@ -160,7 +193,7 @@ impl MeasurementsJournal {
             ));
         }
         let mut record = row_cells(row, PoseConvention::Linuxcnc);
-        record.extend(campaign_cells);
+        record.extend(extra.iter().cloned());
         let mut line = Vec::new();
         {
             let mut csv = csv::Writer::from_writer(&mut line);

@@ -32,11 +32,11 @@ use hexacomp_core::records::{JointCorrection, NamedCompensation, NamedLegs, Name
 
 pub use error::{Error, Result};
 pub use fiducials::{FIDUCIAL_COLUMNS, read_fiducials, write_fiducials};
-pub use journal::{JOURNAL_COLUMNS, JournalKind, MeasurementsJournal};
+pub use journal::{DRIFT_COLUMNS, JOURNAL_COLUMNS, JournalKind, MeasurementsJournal};
 pub use lines::MAX_LINE_BYTES;
 pub use measurements::{
-    MEASURED_POSE_COLUMNS, read_measurements, read_measurements_in, target_columns,
-    write_measurements, write_measurements_in,
+    DriftEntry, MEASURED_POSE_COLUMNS, read_drift_log, read_measurements, read_measurements_in,
+    target_columns, write_measurements, write_measurements_in,
 };
 pub use points_file::{FileSummary, PointsFile, bytes_progress, compensate_file};
 pub use registration::{
@@ -229,6 +229,11 @@ impl Row<'_> {
 }
 
 impl Row<'_> {
+    /// The text of column `name` (a column the file was opened to require).
+    fn text(&self, name: &str) -> &str {
+        &self.record[self.header.columns[name]]
+    }
+
     /// The finite number of column `name`, or `None` when the file has no such column.
     fn optional_number(&self, name: &str) -> Result<Option<f64>> {
         if !self.header.columns.contains_key(name) {

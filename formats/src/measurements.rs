@@ -105,6 +105,69 @@ pub fn read_measurements(path: &Path) -> Result<Records<MeasuredConfiguration>> 
     read_measurements_in(path, PoseConvention::Linuxcnc)
 }
 
+/// One row of a campaign's drift log: a measurement of the reference configuration and what
+/// was decided about it (the columns [`crate::DRIFT_COLUMNS`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct DriftEntry {
+    /// The reference configuration as measured (its id numbers the measurements: `R1`, `R2`…),
+    /// in the record's frame.
+    pub reference: MeasuredConfiguration,
+    /// `warm-up`, `start`, `reference` or `end`.
+    pub event: String,
+    /// The configurations the record held when it was measured.
+    pub configurations: usize,
+    /// `baseline`, `ok`, `stopped`, `accepted`, `warming` or `stable`.
+    pub decision: String,
+    /// The instrument's pose in the base frame of the run's registration (mm, degrees), when the
+    /// run had one.
+    pub instrument_pose: Option<[f64; 6]>,
+}
+
+/// The instrument-pose columns of a drift log.
+const INSTRUMENT_POSE_COLUMNS: [&str; 6] = ["ix", "iy", "iz", "ia", "ib", "ic"];
+
+/// Reads a campaign's drift log (a measurements file with [`crate::DRIFT_COLUMNS`] after the
+/// measured ones).
+pub fn read_drift_log(path: &Path) -> Result<Records<DriftEntry>> {
+    let rows = Rows::open(
+        path,
+        &[&POSE_COLUMNS, &LEG_COLUMNS, &crate::DRIFT_COLUMNS],
+        |row| {
+            let configurations = row.text("configurations").parse().map_err(|_| {
+                row.error(
+                    Some("configurations"),
+                    format!(
+                        "{} is not a count",
+                        crate::quote(row.text("configurations"))
+                    ),
+                )
+            })?;
+            let instrument_pose = if INSTRUMENT_POSE_COLUMNS
+                .iter()
+                .all(|c| row.text(c).is_empty())
+            {
+                None
+            } else {
+                Some(row.numbers(INSTRUMENT_POSE_COLUMNS)?)
+            };
+            Ok(DriftEntry {
+                reference: MeasuredConfiguration {
+                    id: row.id.to_string(),
+                    pose_mm_deg: row.numbers(POSE_COLUMNS)?,
+                    legs: row.numbers(LEG_COLUMNS)?,
+                    observed: observation(row)?,
+                },
+                event: row.text("event").to_string(),
+                configurations,
+                decision: row.text("decision").to_string(),
+                instrument_pose,
+            })
+        },
+    )?;
+    check_measured_columns(&rows)?;
+    rows.collect()
+}
+
 /// Refuses a header with neither targets nor a measured pose, both, or fewer than three
 /// targets, or a target with one of its three columns missing.
 fn check_measured_columns<T>(rows: &Rows<T>) -> Result<()> {

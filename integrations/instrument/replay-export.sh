@@ -4,7 +4,11 @@
 # drives a tracker's SDK follows.
 #
 #   hexacomp-trainer campaign --plan plan.csv --out campaign.csv --instrument command \
-#       --instrument-command "replay-export.sh tracker-export.csv"
+#       --instrument-command "replay-export.sh tracker-export.csv" --no-reference
+#
+# (--no-reference: an export holds the plan's configurations only, not the reference
+# configuration R1, R2, ... the campaign measures again and again to watch for drift; a program
+# that drives a live tracker measures those too.)
 #
 # The campaign runs it once per reading as
 #   replay-export.sh EXPORT ID X Y Z A B C READING

@@ -179,6 +179,7 @@ fn a_users_instrument_program_is_read_and_its_failures_are_recorded_gaps() {
             "good.csv",
             "--instrument",
             "command",
+            "--no-reference",
             "--instrument-command",
             &program,
         ],
@@ -210,6 +211,7 @@ fn a_users_instrument_program_is_read_and_its_failures_are_recorded_gaps() {
             "hang.csv",
             "--instrument",
             "command",
+            "--no-reference",
             "--instrument-command",
             &hang,
             "--command-timeout",
@@ -246,6 +248,7 @@ fn a_users_instrument_program_is_read_and_its_failures_are_recorded_gaps() {
                 "narrow.csv",
                 "--instrument",
                 "command",
+                "--no-reference",
                 "--instrument-command",
                 &narrow,
                 "--readings",
@@ -325,6 +328,7 @@ fn a_program_that_cannot_start_stops_the_campaign_before_anything_is_recorded() 
             "m.csv",
             "--instrument",
             "command",
+            "--no-reference",
             "--instrument-command",
             &format!("'{missing}' --fast"),
         ],
@@ -399,5 +403,230 @@ fn two_campaigns_on_one_file_other_settings_and_foreign_files_are_refused_and_le
     assert_eq!(
         std::fs::read_to_string(d.join("other.csv")).unwrap(),
         foreign
+    );
+}
+
+/// The reference configuration's rows of a drift log: `(event, decision, note)`.
+fn drift_events(path: &Path) -> Vec<(String, String, String)> {
+    let text = std::fs::read_to_string(path).unwrap();
+    let header: Vec<&str> = text.lines().next().unwrap().split(',').collect();
+    let column = |name: &str| header.iter().position(|c| *c == name).unwrap();
+    let (event, decision, note) = (column("event"), column("decision"), column("note"));
+    let mut reader = csv::ReaderBuilder::new()
+        .comment(Some(b'#'))
+        .from_reader(text.as_bytes());
+    reader
+        .records()
+        .map(|r| {
+            let r = r.unwrap();
+            (
+                r[event].to_string(),
+                r[decision].to_string(),
+                r[note].to_string(),
+            )
+        })
+        .collect()
+}
+
+/// The target points of each row of a record, by id.
+fn targets_by_id(path: &Path) -> std::collections::BTreeMap<String, Vec<glam::DVec3>> {
+    read_measurements(path)
+        .unwrap()
+        .iter()
+        .map(|row| {
+            let points = row
+                .observed
+                .points(&hexacomp_core::Geometry::prototype())
+                .into_iter()
+                .map(|(_, p)| p)
+                .collect();
+            (row.id.clone(), points)
+        })
+        .collect()
+}
+
+/// The arguments of a campaign recording `plan` into `out`, the virtual tracker standing at `at`.
+fn campaign<'a>(plan: &'a str, out: &'a str, at: &'a str, more: &[&'a str]) -> Vec<&'a str> {
+    [
+        &[
+            "campaign",
+            "--plan",
+            plan,
+            "--out",
+            out,
+            "--instrument-pose",
+            at,
+        ][..],
+        more,
+    ]
+    .concat()
+}
+
+/// Registers the virtual tracker standing at `at` as `out` (its fiducials read by `simulate`).
+fn register_tracker(d: &Path, at: &str, out: &str) {
+    let fiducials = format!("{out}.fiducials.csv");
+    trainer_ok(
+        d,
+        &[
+            "simulate",
+            "--plan",
+            "first.csv",
+            "--out",
+            "unused.csv",
+            "--instrument-pose",
+            at,
+            "--fiducials-out",
+            &fiducials,
+        ],
+    );
+    trainer_ok(d, &["register", "--measured", &fiducials, "--out", out]);
+}
+
+#[test]
+fn a_tracker_moved_between_runs_stops_the_campaign_and_registered_again_it_goes_on_in_the_first_frame()
+ {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let (at_a, at_b) = (
+        "2500,-1500,-800,0.3,-0.2,135",
+        "2300,-1800,-780,0.1,0.2,150",
+    );
+    trainer_ok(d, &["plan", "--count", "24", "--out", "plan.csv"]);
+    let plan = std::fs::read_to_string(d.join("plan.csv")).unwrap();
+    let first: Vec<&str> = plan.lines().take(13).collect();
+    std::fs::write(d.join("first.csv"), first.join("\n") + "\n").unwrap();
+    register_tracker(d, at_a, "a.toml");
+    register_tracker(d, at_b, "b.toml");
+    let under_a = ["--registration", "a.toml"];
+    trainer_ok(d, &campaign("plan.csv", "whole.csv", at_a, &under_a));
+    // The first twelve configurations with the tracker at A.
+    trainer_ok(d, &campaign("first.csv", "c.csv", at_a, &under_a));
+    assert_eq!(data_lines(&d.join("c.csv")).len(), 12);
+    // The tracker moved to B; the campaign still believes it at A: the reference moved metres.
+    let output = trainer(d, &campaign("plan.csv", "c.csv", at_b, &under_a));
+    let error = text(&output.stderr);
+    assert!(!output.status.success());
+    assert!(
+        error.contains("the targets moved together") && error.contains("register it again"),
+        "{error}"
+    );
+    assert_eq!(
+        data_lines(&d.join("c.csv")).len(),
+        12,
+        "a row recorded after the drift"
+    );
+    let events = drift_events(&d.join("c.drift.csv"));
+    assert_eq!(events.last().unwrap().1, "stopped", "{events:?}");
+    // A run without a registration cannot continue a campaign begun with one.
+    let error = text(&trainer(d, &campaign("plan.csv", "c.csv", at_b, &[])).stderr);
+    assert!(error.contains("began with a registration"), "{error}");
+    // Registered again at B: it goes on, its readings brought into A's frame.
+    trainer_ok(
+        d,
+        &campaign("plan.csv", "c.csv", at_b, &["--registration", "b.toml"]),
+    );
+    let events = drift_events(&d.join("c.drift.csv"));
+    let start = events
+        .iter()
+        .rev()
+        .find(|(event, _, _)| event == "start")
+        .unwrap();
+    assert_eq!(start.1, "ok", "{events:?}");
+    assert!(start.2.starts_with("re-registered"), "{events:?}");
+    let (resumed, whole) = (
+        targets_by_id(&d.join("c.csv")),
+        targets_by_id(&d.join("whole.csv")),
+    );
+    assert_eq!(resumed.len(), 24);
+    let firsts: Vec<&str> = first[1..]
+        .iter()
+        .map(|line| line.split(',').next().unwrap())
+        .collect();
+    for (id, points) in &resumed {
+        let largest = points
+            .iter()
+            .zip(&whole[id])
+            .map(|(p, q)| p.distance(*q))
+            .fold(0.0, f64::max);
+        if firsts.contains(&id.as_str()) {
+            assert_eq!(largest, 0.0, "configuration {id} measured at A");
+        } else {
+            // Measured from B: the same attained pose, through two registrations.
+            assert!(
+                largest > 0.0 && largest < 0.05,
+                "configuration {id}: {largest} mm"
+            );
+        }
+    }
+}
+
+#[test]
+fn accepted_drift_is_logged_and_a_warm_up_that_does_not_settle_records_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    trainer_ok(d, &["plan", "--count", "6", "--out", "plan.csv"]);
+    // A reference that never agrees with itself to 0.1 µm: the gate gives up after three.
+    let error = text(
+        &trainer(
+            d,
+            &[
+                "campaign",
+                "--plan",
+                "plan.csv",
+                "--out",
+                "w.csv",
+                "--warm-up-limit",
+                "0.0001",
+                "--warm-up-interval",
+                "0",
+                "--warm-up-max",
+                "3",
+            ],
+        )
+        .stderr,
+    );
+    assert!(
+        error.contains("did not settle in 3 measurements"),
+        "{error}"
+    );
+    assert!(data_lines(&d.join("w.csv")).is_empty());
+    let events = drift_events(&d.join("w.drift.csv"));
+    assert_eq!(events.len(), 3);
+    assert!(
+        events
+            .iter()
+            .all(|(e, decision, _)| e == "warm-up" && decision == "warming")
+    );
+
+    // A limit below the machine's repeatability: the first periodic reference stops the
+    // campaign, naming the configurations measured since the last good one; accepted, it goes on.
+    let tight = [
+        "campaign",
+        "--plan",
+        "plan.csv",
+        "--out",
+        "t.csv",
+        "--drift-limit",
+        "0.001",
+        "--reference-every",
+        "2",
+    ];
+    let error = text(&trainer(d, &tight).stderr);
+    assert!(error.contains("may hold the drift"), "{error}");
+    let recorded = data_lines(&d.join("t.csv")).len();
+    assert_eq!(recorded, 2, "{error}");
+    let ids: Vec<String> = data_lines(&d.join("t.csv"))
+        .iter()
+        .map(|l| l.split(',').next().unwrap().to_string())
+        .collect();
+    assert!(error.contains(&ids.join(", ")), "{error}");
+    let output = trainer(d, &[&tight[..], &["--accept-drift"]].concat());
+    let events = drift_events(&d.join("t.drift.csv"));
+    assert!(
+        events
+            .iter()
+            .any(|(e, decision, _)| e == "start" && decision == "accepted"),
+        "{events:?}: {}",
+        text(&output.stderr)
     );
 }

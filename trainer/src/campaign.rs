@@ -23,6 +23,7 @@ use hexacomp_core::{Geometry, LEGS, Pose, inverse_kinematics};
 use hexacomp_virtual::VirtualPlatform;
 
 use crate::acquire::as_instrument_reports;
+use crate::drift::{Decision, DriftCheck, ReferenceEvent, ReferenceMeasurement, deviation};
 use crate::error::{Error, Result};
 
 /// Where the machine went for a configuration.
@@ -82,6 +83,9 @@ pub struct CampaignOptions {
     /// The campaign stops after this many configurations in a row recorded as gaps (the
     /// instrument is not answering).
     pub max_consecutive_gaps: usize,
+    /// Time to wait once the machine is in position, before the first reading (the structure
+    /// and the drives settle).
+    pub settle: Duration,
 }
 
 /// The fewest readings outliers are rejected among: with fewer the median distance is too
@@ -97,6 +101,7 @@ impl Default for CampaignOptions {
             retries: 2,
             outlier_factor: 5.0,
             max_consecutive_gaps: 3,
+            settle: Duration::ZERO,
         }
     }
 }
@@ -286,6 +291,8 @@ pub struct CampaignSummary {
 /// A campaign over a plan: what to measure, in which order, what is already recorded.
 #[derive(Debug, Clone)]
 pub struct Campaign<'a> {
+    /// The geometry (its targets compare measurements of the reference).
+    pub geometry: &'a Geometry,
     /// The planned configurations.
     pub plan: &'a [NamedPose],
     /// The order to visit them in (indices into `plan`, each once; [`tour`]).
@@ -296,27 +303,66 @@ pub struct Campaign<'a> {
     pub nothing_seen: Observation,
     /// How each configuration is measured.
     pub options: CampaignOptions,
+    /// Brings a combined reading into the record's frame: the poses applied in turn with
+    /// [`Observation::in_frame`] (after a re-registration: the instrument's pose now, then the
+    /// inverse of its pose when the record began); none when the instrument has not moved.
+    pub into_record_frame: Vec<Pose>,
+    /// The reference configuration watched for drift, if any.
+    pub drift: Option<DriftCheck>,
+}
+
+/// A campaign's state while it runs: the reference's baseline and numbering, and what was
+/// recorded since the last good measurement of it.
+struct Watch {
+    baseline: Option<Observation>,
+    number: usize,
+    recorded: usize,
+    since_reference: Vec<String>,
+    note: Option<String>,
 }
 
 impl Campaign<'_> {
     /// Runs the campaign: each configuration not yet recorded is driven to, read
     /// `options.readings` times (each reading retried up to `options.retries` times), combined,
-    /// and passed to `record` with its [`Combined`] figures before the next move; `progress()`
-    /// is called after each. A configuration whose readings all fail is recorded as a gap
-    /// (`nothing_seen`) and listed in the summary; after `options.max_consecutive_gaps` gaps in
-    /// a row the campaign stops ([`Error::Instrument`]). An instrument that cannot work
-    /// ([`ReadError::Broken`]), an error of the machine or of `record` stop it at once; what was
-    /// recorded stays.
+    /// brought into the record's frame and passed to `record` with its [`Combined`] figures
+    /// before the next move; `progress()` is called after each. A configuration whose readings
+    /// all fail is recorded as a gap (`nothing_seen`) and listed in the summary; after
+    /// `options.max_consecutive_gaps` gaps in a row the campaign stops ([`Error::Instrument`]).
+    /// An instrument that cannot work ([`ReadError::Broken`]), an error of the machine or of
+    /// `record` stop it at once; what was recorded stays.
+    ///
+    /// With `drift`, the reference configuration is measured (each measurement passed to
+    /// `log` before the campaign goes on): until it settles (the warm-up gate), at the start,
+    /// after every `every` configurations and after the last; a movement from its baseline
+    /// beyond the limit stops the campaign ([`Error::Drift`], naming what moved and the
+    /// configurations recorded since the last good measurement) unless accepted at the start.
     pub fn run(
         &self,
         machine: &mut dyn Machine,
         instrument: &mut dyn Instrument,
         record: &mut dyn FnMut(MeasuredConfiguration, &Combined) -> Result<()>,
+        log: &mut dyn FnMut(&ReferenceMeasurement) -> Result<()>,
         progress: &mut dyn FnMut(),
     ) -> Result<CampaignSummary> {
         let options = &self.options;
         if options.readings == 0 {
             return Err(Error::InvalidSetting("readings must be ≥ 1".into()));
+        }
+        let mut watch = Watch {
+            baseline: self.drift.as_ref().and_then(|d| d.baseline.clone()),
+            number: self.drift.as_ref().map_or(1, |d| d.first_number),
+            recorded: self.done.len(),
+            since_reference: Vec::new(),
+            note: self.drift.as_ref().and_then(|d| d.note.clone()),
+        };
+        let left = self
+            .order
+            .iter()
+            .filter(|&&k| !self.done.contains(&self.plan[k].id))
+            .count();
+        if left > 0 {
+            self.warm_up(machine, instrument, log, &mut watch)?;
+            self.check_reference(ReferenceEvent::Start, machine, instrument, log, &mut watch)?;
         }
         let mut summary = CampaignSummary::default();
         let mut gaps_in_a_row = 0;
@@ -326,28 +372,22 @@ impl Campaign<'_> {
                 summary.already += 1;
                 continue;
             }
-            let arrival = machine.go_to(&row.id, &row.pose())?;
-            let (readings, lost, failure) =
-                read_configuration(instrument, options, &row.id, &row.pose_mm_deg, &arrival)?;
-            gaps_in_a_row = if readings.is_empty() {
+            let (arrival, mut combined) =
+                self.measure(machine, instrument, &row.id, &row.pose_mm_deg)?;
+            gaps_in_a_row = if combined.kept == 0 {
                 gaps_in_a_row + 1
             } else {
                 0
             };
-            let mut combined = if readings.is_empty() {
-                let why = failure.clone().unwrap_or_else(|| "no reading".into());
+            if combined.kept == 0 {
+                let why = combined
+                    .lost
+                    .1
+                    .clone()
+                    .unwrap_or_else(|| "no reading".into());
                 summary.gaps.push((row.id.clone(), why));
-                Combined {
-                    observed: self.nothing_seen.clone(),
-                    kept: 0,
-                    rejected: 0,
-                    spread_mm: 0.0,
-                    lost: (0, None),
-                }
-            } else {
-                combine(&readings, options.outlier_factor)
-            };
-            combined.lost = (lost, failure);
+                combined.observed = self.nothing_seen.clone();
+            }
             record(
                 MeasuredConfiguration {
                     id: row.id.clone(),
@@ -358,6 +398,8 @@ impl Campaign<'_> {
                 &combined,
             )?;
             summary.measured += 1;
+            watch.recorded += 1;
+            watch.since_reference.push(row.id.clone());
             progress();
             if gaps_in_a_row >= options.max_consecutive_gaps {
                 let (_, why) = summary.gaps.last().cloned().unwrap_or_default();
@@ -366,8 +408,202 @@ impl Campaign<'_> {
                      the campaign stops: check the instrument and run again to continue"
                 )));
             }
+            let every = self.drift.as_ref().map_or(0, |d| d.every);
+            let last = summary.measured == left;
+            if every > 0 && watch.since_reference.len() >= every && !last {
+                self.check_reference(
+                    ReferenceEvent::Periodic,
+                    machine,
+                    instrument,
+                    log,
+                    &mut watch,
+                )?;
+            }
+        }
+        if summary.measured > 0 {
+            self.check_reference(ReferenceEvent::End, machine, instrument, log, &mut watch)?;
         }
         Ok(summary)
+    }
+
+    /// Drives to `pose_mm_deg` (the configuration `id`), settles, reads and combines the
+    /// readings in the record's frame; `kept` is 0 when every reading failed (`lost` says why).
+    fn measure(
+        &self,
+        machine: &mut dyn Machine,
+        instrument: &mut dyn Instrument,
+        id: &str,
+        pose_mm_deg: &[f64; 6],
+    ) -> Result<(Arrival, Combined)> {
+        let arrival = machine.go_to(id, &Pose::from_mm_deg(*pose_mm_deg))?;
+        if !self.options.settle.is_zero() {
+            std::thread::sleep(self.options.settle);
+        }
+        let (readings, lost, failure) =
+            read_configuration(instrument, &self.options, id, pose_mm_deg, &arrival)?;
+        let mut combined = if readings.is_empty() {
+            Combined {
+                observed: self.nothing_seen.clone(),
+                kept: 0,
+                rejected: 0,
+                spread_mm: 0.0,
+                lost: (0, None),
+            }
+        } else {
+            combine(&readings, self.options.outlier_factor)
+        };
+        combined.lost = (lost, failure);
+        combined.observed = self
+            .into_record_frame
+            .iter()
+            .fold(combined.observed, |o, frame| o.in_frame(frame));
+        Ok((arrival, combined))
+    }
+
+    /// Measures the reference configuration as `R<n>` (a failure to measure it stops the
+    /// campaign).
+    fn measure_reference(
+        &self,
+        machine: &mut dyn Machine,
+        instrument: &mut dyn Instrument,
+        watch: &mut Watch,
+    ) -> Result<(String, Arrival, Observation)> {
+        let check = self.drift.as_ref().expect("a reference to measure");
+        let id = format!("R{}", watch.number);
+        watch.number += 1;
+        let (arrival, combined) = self.measure(machine, instrument, &id, &check.pose_mm_deg)?;
+        if combined.kept == 0 {
+            return Err(Error::Instrument(format!(
+                "the reference configuration ({id}) could not be measured ({}); the campaign \
+                 stops: check the instrument and run again to continue",
+                combined.lost.1.unwrap_or_else(|| "no reading".into())
+            )));
+        }
+        Ok((id, arrival, combined.observed))
+    }
+
+    /// The warm-up gate: the reference measured every `interval` until two measurements in a
+    /// row agree within the limit; an error after `max_measurements`.
+    fn warm_up(
+        &self,
+        machine: &mut dyn Machine,
+        instrument: &mut dyn Instrument,
+        log: &mut dyn FnMut(&ReferenceMeasurement) -> Result<()>,
+        watch: &mut Watch,
+    ) -> Result<()> {
+        let Some(gate) = self.drift.as_ref().and_then(|d| d.warm_up) else {
+            return Ok(());
+        };
+        let mut previous: Option<Observation> = None;
+        let mut last_change = None;
+        for k in 0..gate.max_measurements {
+            if k > 0 && !gate.interval.is_zero() {
+                std::thread::sleep(gate.interval);
+            }
+            let (id, arrival, observed) = self.measure_reference(machine, instrument, watch)?;
+            let change = previous
+                .as_ref()
+                .and_then(|p| deviation(self.geometry, &observed, p));
+            let stable = change.is_some_and(|d| d.largest_mm <= gate.limit_mm);
+            log(&ReferenceMeasurement {
+                id,
+                legs: arrival.legs,
+                observed: observed.clone(),
+                event: ReferenceEvent::WarmUp,
+                configurations: watch.recorded,
+                deviation: change,
+                decision: if stable {
+                    Decision::Stable
+                } else {
+                    Decision::Warming
+                },
+                note: watch.note.take().unwrap_or_default(),
+            })?;
+            if stable {
+                return Ok(());
+            }
+            last_change = change;
+            previous = Some(observed);
+        }
+        Err(Error::Drift(format!(
+            "the reference configuration did not settle in {} measurements{}: the machine or \
+             the instrument is still warming up; run again to go on waiting (nothing was \
+             recorded)",
+            gate.max_measurements,
+            last_change.map_or(String::new(), |d| format!(
+                " (the last two {:.4} mm apart, limit {} mm)",
+                d.largest_mm, gate.limit_mm
+            ))
+        )))
+    }
+
+    /// Measures the reference and compares it with the baseline: the first becomes the
+    /// baseline; beyond the limit the campaign stops, unless this is the start of a run whose
+    /// user accepts the drift (the new baseline).
+    fn check_reference(
+        &self,
+        event: ReferenceEvent,
+        machine: &mut dyn Machine,
+        instrument: &mut dyn Instrument,
+        log: &mut dyn FnMut(&ReferenceMeasurement) -> Result<()>,
+        watch: &mut Watch,
+    ) -> Result<()> {
+        let Some(check) = self.drift.as_ref() else {
+            return Ok(());
+        };
+        let (id, arrival, observed) = self.measure_reference(machine, instrument, watch)?;
+        let moved = watch
+            .baseline
+            .as_ref()
+            .and_then(|b| deviation(self.geometry, &observed, b));
+        let decision = match (&watch.baseline, moved) {
+            (None, _) => Decision::Baseline,
+            (Some(_), Some(d)) if d.largest_mm > check.limit_mm => {
+                if event == ReferenceEvent::Start && check.accept {
+                    Decision::Accepted
+                } else {
+                    Decision::Stopped
+                }
+            }
+            (Some(_), Some(_)) => Decision::Ok,
+            (Some(_), None) => Decision::Stopped,
+        };
+        log(&ReferenceMeasurement {
+            id: id.clone(),
+            legs: arrival.legs,
+            observed: observed.clone(),
+            event,
+            configurations: watch.recorded,
+            deviation: moved,
+            decision,
+            note: watch.note.take().unwrap_or_default(),
+        })?;
+        if decision == Decision::Stopped {
+            let what = moved.map_or_else(
+                || "the reference shares no target with its baseline".to_string(),
+                |d| d.explain(check.limit_mm),
+            );
+            let suspect = if watch.since_reference.is_empty() {
+                String::new()
+            } else {
+                format!(
+                    " The configurations recorded since the last good measurement of the \
+                     reference ({}) may hold the drift: delete their lines from the record to \
+                     measure them again.",
+                    watch.since_reference.join(", ")
+                )
+            };
+            return Err(Error::Drift(format!(
+                "{id}: {what}. The campaign stops (logged). If the tracker moved, register it \
+                 again (hexacomp-trainer register) and run again with --registration NEW; if \
+                 the drift is real and acceptable, run again with --accept-drift.{suspect}"
+            )));
+        }
+        if matches!(decision, Decision::Baseline | Decision::Accepted) {
+            watch.baseline = Some(observed);
+        }
+        watch.since_reference.clear();
+        Ok(())
     }
 }
 

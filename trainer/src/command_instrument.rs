@@ -1,7 +1,8 @@
 //! A user's program as a campaign's instrument: the hook for a tracker's SDK.
 //!
 //! The contract: for every reading the program is run as
-//! `PROGRAM [ARGS…] ID X Y Z A B C READING` — the configuration's id, its commanded pose (mm,
+//! `PROGRAM [ARGS…] ID X Y Z A B C READING` — the configuration's id (`R1`, `R2`… for the
+//! reference configuration the campaign watches for drift), its commanded pose (mm,
 //! degrees, `R = Rz(C)·Ry(B)·Rx(A)`) and the reading's number from 1 — and prints one line on
 //! standard output: the measured target points `p1x,p1y,p1z,…,pNx,pNy,pNz` in the instrument's
 //! frame (mm; a target not seen as three empty cells), or the platform's pose `x,y,z,a,b,c` from
@@ -60,7 +61,8 @@ impl CommandInstrument {
                 .map(Some)
                 .ok_or_else(|| {
                     format!(
-                        "{text:?} in the line {line:?} is not a number of at most                          {MAX_COORDINATE_MM:e} in size"
+                        "{text:?} in the line {line:?} is not a number of at most \
+                         {MAX_COORDINATE_MM:e} in size"
                     )
                 })
         };

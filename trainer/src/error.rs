@@ -14,6 +14,11 @@ pub enum Error {
     #[error(transparent)]
     Format(#[from] hexacomp_formats::Error),
 
+    /// The reference configuration moved beyond the limit during a campaign, or did not settle
+    /// in its warm-up (the message says what moved, by how much, and what to do).
+    #[error("drift: {0}")]
+    Drift(String),
+
     /// A setting is out of its valid range.
     #[error("invalid setting: {0}")]
     InvalidSetting(String),

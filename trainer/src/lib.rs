@@ -4,8 +4,9 @@
 //!
 //! - [`plan`]: measuring configurations spread over the task workspace (the paper's Fig. 8);
 //! - [`acquire`]: measuring a plan on the virtual platform;
-//! - [`campaign`], [`command_instrument`]: a measuring campaign — the machine driven through the
-//!   plan, several readings per configuration, recorded as it goes and resumable;
+//! - [`campaign`], [`command_instrument`], [`drift`]: a measuring campaign — the machine driven
+//!   through the plan, several readings per configuration, recorded as it goes and resumable,
+//!   its reference configuration watched for drift;
 //! - [`corrections`]: the robust Levenberg–Marquardt joint-correction solver (Fig. 2; Eq. 5,
 //!   Eq. 6, Eq. 7, Eq. 8, Eq. 9);
 //! - [`screening`]: gross-error screening — which configurations are excluded, and when an input
@@ -30,6 +31,7 @@ pub mod acquire;
 pub mod campaign;
 pub mod command_instrument;
 pub mod corrections;
+pub mod drift;
 pub mod error;
 pub mod evaluate;
 pub mod identify;

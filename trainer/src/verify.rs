@@ -86,6 +86,9 @@ impl PoseTest<'_> {
             for pose in self.poses {
                 let id = measurement_id(&pose.name, cycle);
                 let arrival = machine.go_to(&id, &Pose::from_mm_deg(pose.commanded))?;
+                if !options.settle.is_zero() {
+                    std::thread::sleep(options.settle);
+                }
                 let (readings, _lost, failure) =
                     read_configuration(instrument, options, &id, &pose.commanded, &arrival)?;
                 let missed = |why: String| Missed {

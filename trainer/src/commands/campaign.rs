@@ -8,8 +8,14 @@ use std::time::{Duration, SystemTime};
 use hexacomp_core::Geometry;
 use hexacomp_core::error::compact;
 use hexacomp_core::observation::Observation;
-use hexacomp_formats::{JournalKind, MeasurementsJournal, Records, read_poses};
+use hexacomp_formats::{
+    JOURNAL_COLUMNS, JournalKind, MeasurementsJournal, Records, read_measurements, read_poses,
+    read_registration,
+};
 use hexacomp_trainer::campaign::{Campaign, tour};
+use hexacomp_trainer::drift::Decision;
+
+use super::drift_log::DriftLog;
 
 /// Drive the machine through a plan and measure every configuration, recording each one (flushed
 /// to disk) before the next move.
@@ -26,6 +32,12 @@ use hexacomp_trainer::campaign::{Campaign, tour};
 /// finished campaign says so and does nothing. The output is a measurements file that solve,
 /// identify and calibrate read as it is (the campaign's columns come after the measured ones).
 ///
+/// Drift: the reference configuration (the home pose) is measured at the start of every run,
+/// every --reference-every configurations and at the end, into the drift log; a target moving
+/// more than --drift-limit from its baseline stops the campaign with what moved and what to do
+/// (register again and give --registration, or --accept-drift). --warm-up-limit holds the first
+/// configuration until the reference settles.
+///
 /// Machines: virtual (the built-in virtual platform). Instruments: virtual (its tracker,
 /// standing at --instrument-pose, noise keyed on --seed and each configuration's id, so a resumed
 /// campaign records exactly what an uninterrupted one does), command (your program reads the
@@ -38,15 +50,25 @@ pub struct CampaignArgs {
     /// The measurements file the campaign records into (and continues, if it exists).
     #[arg(long, value_name = "FILE")]
     out: PathBuf,
+    /// The registration the instrument stands under in this run (hexacomp-trainer register).
+    /// The record stays in the instrument's frame of the campaign's first registration: after
+    /// the tracker moved and was registered again, readings are brought into that frame.
+    #[arg(long, value_name = "FILE")]
+    registration: Option<PathBuf>,
     #[command(flatten)]
     rig: super::rig::RigArgs,
+    #[command(flatten)]
+    drift: super::drift_log::DriftArgs,
 }
 
 impl CampaignArgs {
     /// The files this command reads and writes.
     pub fn files(&self) -> super::Files<'_> {
         super::Files {
-            inputs: vec![&self.plan],
+            inputs: std::iter::once(&self.plan)
+                .chain(&self.registration)
+                .map(PathBuf::as_path)
+                .collect(),
             outputs: vec![&self.out],
         }
     }
@@ -67,7 +89,13 @@ pub fn run(geometry: &Geometry, args: &CampaignArgs) -> anyhow::Result<()> {
     } else {
         JournalKind::Targets(geometry.targets.len())
     };
-    let (mut journal, recorded) = MeasurementsJournal::open(&args.out, kind, &rig.settings)?;
+    let registration = args
+        .registration
+        .as_deref()
+        .map(read_registration)
+        .transpose()?;
+    let mut journal = MeasurementsJournal::open(&args.out, kind, &rig.settings, &JOURNAL_COLUMNS)?;
+    let recorded = read_measurements(&args.out)?;
     let done = check_recorded(&plan, &recorded)?;
     if done.len() == plan.len() {
         eprintln!(
@@ -79,6 +107,19 @@ pub fn run(geometry: &Geometry, args: &CampaignArgs) -> anyhow::Result<()> {
         );
         return Ok(());
     }
+    let (mut drift_log, drift, into_record_frame) = if args.drift.no_reference {
+        (None, None, Vec::new())
+    } else {
+        let (log, check, frame) = DriftLog::open(
+            &args.drift,
+            &args.out,
+            geometry,
+            kind,
+            &rig.settings,
+            registration.as_ref(),
+        )?;
+        (Some(log), Some(check), frame)
+    };
     let super::rig::Rig {
         mut machine,
         mut instrument,
@@ -110,6 +151,7 @@ pub fn run(geometry: &Geometry, args: &CampaignArgs) -> anyhow::Result<()> {
         .expect("a valid template"),
     );
     let campaign = Campaign {
+        geometry,
         plan: &plan,
         order: &order,
         done: &done,
@@ -118,6 +160,8 @@ pub fn run(geometry: &Geometry, args: &CampaignArgs) -> anyhow::Result<()> {
             JournalKind::Pose => Observation::PoseMissed,
         },
         options,
+        into_record_frame,
+        drift,
     };
     let summary = campaign.run(
         machine.as_mut(),
@@ -141,7 +185,7 @@ pub fn run(geometry: &Geometry, args: &CampaignArgs) -> anyhow::Result<()> {
             journal
                 .append(
                     &row,
-                    [
+                    &[
                         combined.kept.to_string(),
                         combined.rejected.to_string(),
                         combined.spread_mm.to_string(),
@@ -156,6 +200,36 @@ pub fn run(geometry: &Geometry, args: &CampaignArgs) -> anyhow::Result<()> {
                         row.id
                     ))
                 })
+        },
+        &mut |reference| {
+            bar.suspend(|| {
+                eprintln!(
+                    "reference {} ({}): {}{}",
+                    reference.id,
+                    reference.event.name(),
+                    reference
+                        .deviation
+                        .map_or("first measurement".to_string(), |d| format!(
+                            "moved {:.4} mm",
+                            d.largest_mm
+                        )),
+                    match reference.decision {
+                        Decision::Ok | Decision::Warming => String::new(),
+                        decision => format!(", {}", decision.name()),
+                    }
+                );
+            });
+            let Some(log) = drift_log.as_mut() else {
+                return Ok(());
+            };
+            log.append(reference).map_err(|e| {
+                hexacomp_trainer::Error::InsufficientData(format!(
+                    "{}: cannot log the reference {}: {e} (the campaign stops; run again to \
+                     continue)",
+                    log.path().display(),
+                    reference.id
+                ))
+            })
         },
         &mut || bar.inc(1),
     );

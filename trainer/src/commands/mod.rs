@@ -3,6 +3,7 @@
 pub mod calibrate;
 pub mod campaign;
 pub mod deploy;
+pub mod drift_log;
 pub mod evaluate;
 pub mod geometry;
 pub mod identify;

@@ -40,6 +40,10 @@ pub struct RigArgs {
     /// accuracy).
     #[arg(long, default_value_t = 0.0, value_name = "SECONDS")]
     dwell: f64,
+    /// Seconds to wait once the machine is in position, before the first reading (the structure
+    /// and the drives settle).
+    #[arg(long, default_value_t = 0.0, value_name = "SECONDS")]
+    settle: f64,
     /// Attempts after a failed reading before the pose is recorded as a gap.
     #[arg(long, default_value_t = CampaignOptions::default().retries)]
     retries: usize,
@@ -127,13 +131,12 @@ impl RigArgs {
     }
 
     /// What makes a record this rig's: the machine, the instrument and the noise they draw, the
-    /// geometry. Operational settings (readings, dwell, timeouts) may change between runs.
+    /// geometry. Operational settings (readings, dwell, timeouts) may change between runs, and
+    /// so may where the instrument stands (a tracker moved between runs is caught by the
+    /// campaign's drift check and registered again).
     fn settings(&self, geometry: &Geometry, program: &[String]) -> String {
         let instrument = match self.instrument {
-            InstrumentArg::Virtual => format!(
-                "virtual instrument at {:?}",
-                self.instrument_pose.clone().unwrap_or_else(|| vec![0.0; 6])
-            ),
+            InstrumentArg::Virtual => "virtual instrument".to_string(),
             InstrumentArg::Command => format!("command {program:?}"),
         };
         format!(
@@ -160,6 +163,7 @@ impl RigArgs {
             readings: usize::from(self.readings),
             dwell: Self::seconds("dwell", self.dwell)?,
             retries: self.retries,
+            settle: Self::seconds("settle", self.settle)?,
             ..CampaignOptions::default()
         };
         let timeout = Self::seconds("command-timeout", self.command_timeout)?;
