@@ -289,6 +289,18 @@ impl SimConfig {
             .unwrap_or_else(|e| panic!("running {}: {e}", program.to_string_lossy()))
     }
 
+    /// Starts `program` with `args` in the configuration directory as the LinuxCNC user, its
+    /// standard error into the directory's file `log`.
+    pub fn spawn(&self, program: impl AsRef<std::ffi::OsStr>, args: &[&str], log: &str) -> Child {
+        let program = program.as_ref();
+        self.command(program)
+            .args(args)
+            .stdout(Stdio::null())
+            .stderr(std::fs::File::create(self.dir.join(log)).expect("a log file"))
+            .spawn()
+            .unwrap_or_else(|e| panic!("starting {}: {e}", program.to_string_lossy()))
+    }
+
     /// A path in the configuration directory.
     pub fn path(&self, name: &str) -> PathBuf {
         self.dir.join(name)

@@ -30,6 +30,18 @@ use hexacomp_tests::linuxcnc::{
 use hexacomp_tests::{binary, smooth_model_for};
 use serde_json::json;
 
+/// The ini with fast moves, for tests about positions rather than the machine's dynamics.
+fn fast_moves(ini: String) -> String {
+    ini.replace("MAX_LINEAR_VELOCITY = 10.0", "MAX_LINEAR_VELOCITY = 200.0")
+        .replace(
+            "MAX_LINEAR_ACCELERATION = 20.0",
+            "MAX_LINEAR_ACCELERATION = 4000.0",
+        )
+        .replace("MAX_ANGULAR_VELOCITY = 6", "MAX_ANGULAR_VELOCITY = 2000")
+        .replace("MAX_VELOCITY = 20.0", "MAX_VELOCITY = 400.0")
+        .replace("MAX_ACCELERATION = 200.0", "MAX_ACCELERATION = 8000.0")
+}
+
 /// One LinuxCNC at a time.
 static LINUXCNC: Mutex<()> = Mutex::new(());
 const MM_PER_INCH: f64 = 25.4;
@@ -232,16 +244,7 @@ fn linuxcnc_joints_equal_hexacomp_inverse_kinematics_for_mdi_poses() {
     }
     let _guard = one_at_a_time();
     // Fast moves: this test is about kinematics, not the machine's dynamics.
-    let sim = SimConfig::prepare("ik", |ini| {
-        ini.replace("MAX_LINEAR_VELOCITY = 10.0", "MAX_LINEAR_VELOCITY = 200.0")
-            .replace(
-                "MAX_LINEAR_ACCELERATION = 20.0",
-                "MAX_LINEAR_ACCELERATION = 4000.0",
-            )
-            .replace("MAX_ANGULAR_VELOCITY = 6", "MAX_ANGULAR_VELOCITY = 2000")
-            .replace("MAX_VELOCITY = 20.0", "MAX_VELOCITY = 400.0")
-            .replace("MAX_ACCELERATION = 200.0", "MAX_ACCELERATION = 8000.0")
-    });
+    let sim = SimConfig::prepare("ik", fast_moves);
     let mut sampler =
         WorkspaceSampler::new(&sim.geometry, 8, SamplerOptions::default()).expect("sampler");
     // Machine units (inch, degrees), rounded to the 1e-6 the MDI text carries exactly.
@@ -655,4 +658,197 @@ fn while_connecting_hangs_the_servo_thread_runs_on_and_picks_up_the_connection_l
         report["connected_after"].as_f64().unwrap_or(f64::NAN)
     );
     drop(service);
+}
+
+/// A LinuxCNC session held up by drive.py until `done` exists: created when the session is
+/// dropped (a failing test included), which then waits for LinuxCNC to shut down cleanly.
+struct HeldSession {
+    run: hexacomp_tests::linuxcnc::LinuxCncRun,
+    done: std::path::PathBuf,
+}
+
+impl Drop for HeldSession {
+    fn drop(&mut self) {
+        let _ = std::fs::write(&self.done, "");
+        let deadline = std::time::Instant::now() + Duration::from_secs(60);
+        while !self.run.ended() && std::time::Instant::now() < deadline {
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+}
+
+/// Waits until `path` exists, or panics after `seconds` with LinuxCNC's logs.
+fn wait_for_file(
+    path: &std::path::Path,
+    seconds: u64,
+    linuxcnc: &mut hexacomp_tests::linuxcnc::LinuxCncRun,
+) {
+    let deadline = std::time::Instant::now() + Duration::from_secs(seconds);
+    while !path.exists() {
+        if linuxcnc.ended() || std::time::Instant::now() > deadline {
+            let results = linuxcnc.finish(Duration::from_secs(5));
+            panic!("{} never appeared: {results}", path.display());
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+/// The data rows of a CSV file (header and comments left out), whole lines only.
+fn data_rows(path: &std::path::Path) -> usize {
+    let text = std::fs::read_to_string(path).unwrap_or_default();
+    let whole = text.rfind('\n').map_or("", |end| &text[..end]);
+    whole
+        .lines()
+        .skip(1)
+        .filter(|l| !l.starts_with('#'))
+        .count()
+}
+
+#[test]
+fn a_campaign_through_linuxcnc_killed_and_resumed_calibrates_and_verify_shows_ap_ten_times_better()
+{
+    if !linuxcnc_available("campaign") {
+        return;
+    }
+    let _guard = one_at_a_time();
+    let sim = SimConfig::prepare("campaign", fast_moves);
+    // Compensation off while the machine is measured, as on a real machine.
+    let hal = sim.path("hexacomp.hal");
+    let wiring = std::fs::read_to_string(&hal).unwrap();
+    std::fs::write(
+        &hal,
+        wiring.replace("setp hexacomp.0.enable 1", "setp hexacomp.0.enable 0"),
+    )
+    .unwrap();
+    std::fs::copy(binary("hexacomp-trainer"), sim.path("hexacomp-trainer")).unwrap();
+    let trainer = |args: &[&str]| {
+        let output = sim.run(
+            sim.path("hexacomp-trainer"),
+            &[&["--geometry", "geometry.toml"][..], args].concat(),
+        );
+        (
+            output.status.success(),
+            format!(
+                "{}{}",
+                String::from_utf8_lossy(&output.stdout),
+                String::from_utf8_lossy(&output.stderr)
+            ),
+        )
+    };
+    let ok = |args: &[&str]| {
+        let (success, said) = trainer(args);
+        assert!(success, "{args:?}: {said}");
+        said
+    };
+    ok(&["plan", "--count", "80", "--out", "plan.csv"]);
+    let campaign = [
+        "campaign",
+        "--plan",
+        "plan.csv",
+        "--out",
+        "campaign.csv",
+        "--machine",
+        "linuxcnc",
+        "--readings",
+        "2",
+    ];
+    // LinuxCNC not running: a clear message, no record.
+    let (success, said) = trainer(&campaign);
+    assert!(
+        !success && said.contains("LinuxCNC is not running"),
+        "{said}"
+    );
+    assert!(!sim.path("campaign.csv").exists());
+
+    let _service = sim.start_service("service.log");
+    let mut session = HeldSession {
+        run: sim.start_linuxcnc(json!({
+            "unhomed": {"ready": sim.path("on"), "go": sim.path("home")},
+            "hold": {"ready": sim.path("ready"), "done": sim.path("done")},
+        })),
+        done: sim.path("done"),
+    };
+    wait_for_file(&sim.path("on"), 120, &mut session.run);
+    let (success, said) = trainer(&campaign);
+    assert!(!success && said.contains("not homed"), "{said}");
+    assert!(!sim.path("campaign.csv").exists());
+    std::fs::write(sim.path("home"), "").unwrap();
+    wait_for_file(&sim.path("ready"), 120, &mut session.run);
+
+    // Killed once a few configurations are on disk, then run again to the end.
+    let mut child = sim.spawn(
+        sim.path("hexacomp-trainer"),
+        &[&["--geometry", "geometry.toml"][..], &campaign].concat(),
+        "killed-campaign.err",
+    );
+    let deadline = std::time::Instant::now() + Duration::from_secs(120);
+    while data_rows(&sim.path("campaign.csv")) < 5 {
+        assert!(std::time::Instant::now() < deadline, "no rows recorded");
+        assert!(
+            child.try_wait().unwrap().is_none(),
+            "the campaign ended early: {}",
+            std::fs::read_to_string(sim.path("killed-campaign.err")).unwrap_or_default()
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    hexacomp_tests::signal_child(&child, libc::SIGKILL);
+    child.wait().unwrap();
+    let at_kill = data_rows(&sim.path("campaign.csv"));
+    assert!((5..80).contains(&at_kill), "{at_kill} rows at the kill");
+    let said = ok(&campaign);
+    assert!(
+        said.contains(&format!("{} of 80 configurations to measure", 80 - at_kill)),
+        "{said}"
+    );
+    let rows = hexacomp_formats::read_measurements(&sim.path("campaign.csv")).unwrap();
+    assert_eq!(rows.len(), 80, "every configuration once");
+
+    ok(&[
+        "calibrate",
+        "--measurements",
+        "campaign.csv",
+        "--out-dir",
+        "cal",
+    ]);
+    let cycles = ["--cycles", "5", "--readings", "1", "--machine", "linuxcnc"];
+    ok(&[&["verify", "--out", "before.csv"][..], &cycles].concat());
+    let deploy = ok(&["deploy", "--model", "cal/model.hxm"]);
+    assert!(deploy.contains("generation 2"), "{deploy}");
+    let setp = sim.run("halcmd", &["setp", "hexacomp.0.enable", "1"]);
+    assert!(setp.status.success(), "halcmd: {setp:?}");
+    let said = ok(&[
+        &["verify", "--out", "after.csv", "--before", "before.json"][..],
+        &cycles,
+    ]
+    .concat());
+    std::fs::write(sim.path("done"), "").unwrap();
+    let results = session.run.finish(SESSION);
+    let report = |name: &str| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(sim.path(name)).unwrap()).unwrap()
+    };
+    let (before, after) = (report("before.json"), report("after.json"));
+    let worst = |r: &serde_json::Value, key: &str| {
+        r["poses"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|p| p[key].as_f64().unwrap())
+            .fold(0.0, f64::max)
+    };
+    let (ap_before, ap_after) = (worst(&before, "ap_p_mm"), worst(&after, "ap_p_mm"));
+    eprintln!("{said}");
+    assert!(
+        ap_before >= 10.0 * ap_after,
+        "worst AP_P {ap_before} mm before, {ap_after} mm after"
+    );
+    assert!(
+        worst(&after, "rp_l_mm") <= 1.3 * worst(&before, "rp_l_mm"),
+        "RP_l {} after, {} before",
+        worst(&after, "rp_l_mm"),
+        worst(&before, "rp_l_mm")
+    );
+    assert!(
+        results["errors"].as_array().is_some_and(|e| e.is_empty()),
+        "{results}"
+    );
 }

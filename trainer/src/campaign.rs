@@ -29,9 +29,12 @@ use crate::error::{Error, Result};
 /// Where the machine went for a configuration.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Arrival {
-    /// The leg lengths commanded, mm: the nominal inverse kinematics plus the corrections of
-    /// the compensation active in the machine, if any.
+    /// The leg lengths the controller commands for the pose (its nominal inverse kinematics),
+    /// mm: what a campaign records.
     pub legs: [f64; LEGS],
+    /// What the drives are commanded, mm: the legs plus the corrections of the compensation
+    /// active in the machine, if any.
+    pub drives: [f64; LEGS],
     /// The pose really reached, when the machine knows it (the virtual one does).
     pub reached: Option<Pose>,
 }
@@ -686,7 +689,7 @@ impl Machine for VirtualMachine {
                  workspace?)"
             )));
         }
-        let legs = match &self.compensation {
+        let drives = match &self.compensation {
             None => nominal.lengths,
             Some(model) => {
                 let compensated = compensate_legs(&geometry, Some(model), &nominal.lengths);
@@ -704,11 +707,33 @@ impl Machine for VirtualMachine {
             }
         };
         self.platform = self.platform.reseeded(noise_key(self.seed, id, 0));
-        let reached = self.platform.move_legs(&legs, pose)?;
+        let reached = self.platform.move_legs(&drives, pose)?;
         Ok(Arrival {
-            legs,
+            legs: nominal.lengths,
+            drives,
             reached: Some(reached),
         })
+    }
+}
+
+/// A real controller (LinuxCNC) driving the virtual platform's hardware: the platform moves to
+/// what the controller commands its drives, with the repeatability noise of the configuration's
+/// own key, so that the virtual instrument measures what such a machine would reach.
+pub struct VirtualHardware {
+    /// The controller.
+    pub controller: Box<dyn Machine>,
+    /// The platform (its noise stream is replaced per configuration).
+    pub platform: VirtualPlatform,
+    /// The seed the keys are drawn from.
+    pub seed: u64,
+}
+
+impl Machine for VirtualHardware {
+    fn go_to(&mut self, id: &str, pose: &Pose) -> Result<Arrival> {
+        let mut arrival = self.controller.go_to(id, pose)?;
+        self.platform = self.platform.reseeded(noise_key(self.seed, id, 0));
+        arrival.reached = Some(self.platform.move_legs(&arrival.drives, pose)?);
+        Ok(arrival)
     }
 }
 

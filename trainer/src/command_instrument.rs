@@ -89,6 +89,22 @@ impl CommandInstrument {
     }
 }
 
+/// Has the kernel kill the program `command` starts when this process dies (any death: Ctrl-C,
+/// SIGKILL, a crash), so that no instrument or machine bridge outlives the campaign.
+pub(crate) fn die_with_parent(command: &mut Command) {
+    // SAFETY: between fork and exec the closure only calls prctl(2), which is
+    // async-signal-safe.
+    unsafe {
+        command.pre_exec(|| {
+            if libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGKILL) == 0 {
+                Ok(())
+            } else {
+                Err(std::io::Error::last_os_error())
+            }
+        });
+    }
+}
+
 /// Kills the process group `child` leads (its own, from `process_group(0)`).
 fn kill_group(child: &Child) {
     if let Ok(group) = libc::pid_t::try_from(child.id()) {
@@ -130,18 +146,8 @@ impl Instrument for CommandInstrument {
             .stdin(Stdio::null())
             .stdout(Stdio::piped())
             .stderr(Stdio::inherit());
-        // SAFETY: between fork and exec the closure only calls prctl(2), which is
-        // async-signal-safe; it asks the kernel to kill the program when the campaign dies
-        // (Ctrl-C, SIGKILL), so it does not keep the tracker busy.
-        unsafe {
-            command.pre_exec(|| {
-                if libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGKILL) == 0 {
-                    Ok(())
-                } else {
-                    Err(std::io::Error::last_os_error())
-                }
-            });
-        }
+        // Killed when the campaign dies (Ctrl-C, SIGKILL), so it does not keep the tracker busy.
+        die_with_parent(&mut command);
         let mut child = command.spawn().map_err(|e| {
             ReadError::Broken(format!(
                 "cannot run {program}: {e} (is the path right, the file executable, with a \

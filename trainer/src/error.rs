@@ -14,6 +14,11 @@ pub enum Error {
     #[error(transparent)]
     Format(#[from] hexacomp_formats::Error),
 
+    /// The machine cannot be driven (its controller is not running, not homed, refused a move,
+    /// or describes another machine than the geometry).
+    #[error("the machine: {0}")]
+    Machine(String),
+
     /// The reference configuration moved beyond the limit during a campaign, or did not settle
     /// in its warm-up (the message says what moved, by how much, and what to do).
     #[error("drift: {0}")]

@@ -21,7 +21,8 @@
 //!   measurements from its frame into the base frame;
 //! - [`iso9283`], [`verify`], [`verify_report`]: the ISO 9283 pose test — its poses, running
 //!   its cycles, pose accuracy and repeatability, and its report;
-//! - [`linuxcnc`]: the geometry of a LinuxCNC hexapod configuration (genhexkins).
+//! - [`linuxcnc`]: the geometry of a LinuxCNC hexapod configuration (genhexkins);
+//!   [`linuxcnc_machine`]: a running LinuxCNC as a campaign's machine.
 //!
 //! Units: mm and radians in memory, mm and degrees in files.
 
@@ -37,6 +38,7 @@ pub mod evaluate;
 pub mod identify;
 pub mod iso9283;
 pub mod linuxcnc;
+pub mod linuxcnc_machine;
 pub mod pipeline;
 pub mod plan;
 pub mod registration;

@@ -9,6 +9,11 @@ E-stop, switches the machine on, homes, enables world (teleop) mode, then, as th
   "mdi": [[x, y, z, a, b, c], ...]         moves to each pose by MDI G0 and records the joints;
   "program": FILE                          runs the G-code program to its end;
   "started": FILE                          is created once the program runs;
+  "unhomed": {"ready": FILE, "go": FILE}    before homing: creates "ready" with the machine on
+                                           but not homed, and waits for the test to create "go";
+  "hold": {"ready": FILE, "done": FILE}     after the moves: creates "ready" (the machine on,
+                                           homed, in world mode) and holds LinuxCNC up until the
+                                           test creates "done" (for hexacomp-trainer to drive it);
   "without_service": {"seconds": S, "measured": FILE, "restarted": FILE}
                                            after homing, counts the periods the component
                                            faults in S seconds with no service answering,
@@ -73,10 +78,21 @@ def steady_joints(seconds, where):
     return readings[-1]
 
 
+def wait_for_file(path, seconds, what):
+    deadline = time.time() + seconds
+    while not os.path.exists(path):
+        if time.time() > deadline:
+            raise TimeoutError(f"{what} within {seconds} s")
+        time.sleep(0.05)
+
+
 def prepare_machine():
     command.state(linuxcnc.STATE_ESTOP_RESET)
     command.state(linuxcnc.STATE_ON)
     wait_until(lambda: stat.task_state == linuxcnc.STATE_ON, 10, "machine on")
+    if "unhomed" in PLAN:
+        open(PLAN["unhomed"]["ready"], "w").close()
+        wait_for_file(PLAN["unhomed"]["go"], 300, "the test's go-ahead to home")
     command.home(-1)
     wait_until(lambda: all(stat.homed[j] for j in range(6)), 30, "homing")
     RESULTS["homed"] = True
@@ -187,6 +203,9 @@ def main():
             without_service(PLAN["without_service"])
         if "program" in PLAN:
             run_program(PLAN["program"], PLAN.get("started"))
+        if "hold" in PLAN:
+            open(PLAN["hold"]["ready"], "w").close()
+            wait_for_file(PLAN["hold"]["done"], 3600, "the test's end of the session")
         time.sleep(0.2)
         collect_errors()
     except Exception:

@@ -6,9 +6,10 @@ use std::time::Duration;
 use hexacomp_core::Geometry;
 use hexacomp_core::model::Model;
 use hexacomp_trainer::campaign::{
-    CampaignOptions, Instrument, Machine, VirtualInstrument, VirtualMachine,
+    CampaignOptions, Instrument, Machine, VirtualHardware, VirtualInstrument, VirtualMachine,
 };
 use hexacomp_trainer::command_instrument::CommandInstrument;
+use hexacomp_trainer::linuxcnc_machine::{LinuxCncMachine, LinuxCncOptions};
 use hexacomp_virtual::{DEFAULT_MACHINE_SEED, ErrorModel, ErrorVariant, VirtualPlatform};
 
 /// The machine, the instrument and how each pose is read.
@@ -17,6 +18,17 @@ pub struct RigArgs {
     /// The machine to drive.
     #[arg(long, value_enum, default_value_t = MachineArg::Virtual)]
     machine: MachineArg,
+    /// With --machine linuxcnc: the Python interpreter that has LinuxCNC's `linuxcnc` and `hal`
+    /// modules (Debian's packages install them for /usr/bin/python3).
+    #[arg(long, default_value = "/usr/bin/python3", value_name = "PROGRAM")]
+    linuxcnc_python: String,
+    /// With --machine linuxcnc: the HAL pins of the drives' commands, # for the joint number
+    /// (the hexacomp component's outputs); motion's motor commands where they do not exist.
+    #[arg(long, default_value = "hexacomp.0.motor-out-#", value_name = "PINS")]
+    linuxcnc_drive_pins: String,
+    /// Seconds a move may take before the machine counts as stuck.
+    #[arg(long, default_value_t = 600.0, value_name = "SECONDS")]
+    move_timeout: f64,
     /// The instrument that measures.
     #[arg(long, value_enum, default_value_t = InstrumentArg::Virtual)]
     instrument: InstrumentArg,
@@ -72,6 +84,10 @@ pub struct RigArgs {
 enum MachineArg {
     /// The built-in virtual platform.
     Virtual,
+    /// A running LinuxCNC (on, homed), through its Python interface: world coordinates, MDI
+    /// G0 moves. With --instrument virtual the virtual platform stands in for its hardware,
+    /// moved to what LinuxCNC commands the drives.
+    Linuxcnc,
 }
 
 /// The instruments a campaign can read.
@@ -188,6 +204,29 @@ impl RigArgs {
                 seed: self.seed,
                 compensation,
             }),
+            MachineArg::Linuxcnc => {
+                anyhow::ensure!(
+                    compensation.is_none(),
+                    "--model applies to the virtual machine: LinuxCNC compensates with what its \
+                     hexacomp component's service serves"
+                );
+                let controller = Box::new(LinuxCncMachine::connect(
+                    geometry,
+                    &LinuxCncOptions {
+                        python: self.linuxcnc_python.clone(),
+                        drive_pins: self.linuxcnc_drive_pins.clone(),
+                        move_timeout: Self::seconds("move-timeout", self.move_timeout)?,
+                    },
+                )?);
+                match self.instrument {
+                    InstrumentArg::Virtual => Box::new(VirtualHardware {
+                        controller,
+                        platform: platform.clone(),
+                        seed: self.seed,
+                    }),
+                    InstrumentArg::Command => controller,
+                }
+            }
         };
         let instrument: Box<dyn Instrument> = match self.instrument {
             InstrumentArg::Virtual => Box::new(VirtualInstrument {
