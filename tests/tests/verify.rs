@@ -1,6 +1,6 @@
 //! `hexacomp-trainer verify` as a user runs it on the virtual machine: the ISO 9283 pose test
 //! before and after a calibration (AP at least 10× better, RP not worse), its figures recomputed
-//! here from the raw attained poses by the standard's formulas, a registered tracker giving the
+//! here from the raw attained poses by the standard's formulas, `check` against it, a registered tracker giving the
 //! figures the base frame gives, and bad input refused with nothing written.
 
 use std::collections::BTreeMap;
@@ -201,6 +201,44 @@ fn a_calibrated_model_improves_ap_tenfold_rp_holds_and_the_report_agrees_with_th
     let html = std::fs::read_to_string(d.join("after.html")).unwrap();
     assert!(html.contains("<h2>Before</h2>") && html.contains("<h2>After</h2>"));
     assert_eq!(html.matches("<svg").count(), 2 * names.len());
+
+    // The monthly check against what verify proved: the same machine and model keep the
+    // promise; compensation lost, or a machine that changed (another draw of its errors, as after
+    // a crash), do not.
+    let said = trainer_ok(
+        d,
+        &[
+            "check",
+            "--promise",
+            "after.json",
+            "--model",
+            "cal/model.hxm",
+            "--out",
+            "c.csv",
+        ],
+    );
+    assert!(said.starts_with("still good: "), "{said}");
+    assert_eq!(raw_poses(&d.join("c.csv")).len(), names.len());
+    for other in [
+        &["check", "--promise", "after.json"][..],
+        &[
+            "check",
+            "--promise",
+            "after.json",
+            "--model",
+            "cal/model.hxm",
+            "--machine-seed",
+            "5",
+        ],
+    ] {
+        let output = hexacomp_tests::trainer_in(d, other);
+        assert!(!output.status.success(), "{other:?}");
+        assert!(
+            text(&output.stdout).starts_with("retrain: "),
+            "{other:?}: {}",
+            text(&output.stdout)
+        );
+    }
 }
 
 #[test]

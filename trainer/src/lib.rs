@@ -20,7 +20,8 @@
 //! - [`registration`]: locating the instrument in the base frame from fiducials, and bringing
 //!   measurements from its frame into the base frame;
 //! - [`iso9283`], [`verify`], [`verify_report`]: the ISO 9283 pose test — its poses, running
-//!   its cycles, pose accuracy and repeatability, and its report;
+//!   its cycles, pose accuracy and repeatability, and its report; [`check`]: the drift check
+//!   against what a verified calibration promises;
 //! - [`linuxcnc`]: the geometry of a LinuxCNC hexapod configuration (genhexkins);
 //!   [`linuxcnc_machine`]: a running LinuxCNC as a campaign's machine.
 //!
@@ -30,6 +31,7 @@
 
 pub mod acquire;
 pub mod campaign;
+pub mod check;
 pub mod command_instrument;
 pub mod corrections;
 pub mod drift;

@@ -2,6 +2,7 @@
 
 pub mod calibrate;
 pub mod campaign;
+pub mod check;
 pub mod deploy;
 pub mod drift_log;
 pub mod evaluate;

@@ -117,9 +117,37 @@ impl RigArgs {
         self.probe
     }
 
+    /// What `verify` and `check` measure with: the model the virtual machine's controller
+    /// applies (read from `model`), and the instrument's pose in the base frame from the
+    /// registration file `registration` (the identity without one; refused for the virtual
+    /// instrument standing away from the base frame).
+    pub fn compensation_and_frame(
+        &self,
+        geometry: &Geometry,
+        model: Option<&std::path::Path>,
+        registration: Option<&std::path::Path>,
+    ) -> anyhow::Result<(Option<Model>, hexacomp_core::Pose)> {
+        let compensation = model.map(|path| Model::load(path, geometry)).transpose()?;
+        let registration = registration
+            .map(hexacomp_formats::read_registration)
+            .transpose()?;
+        anyhow::ensure!(
+            registration.is_some() || !self.virtual_instrument_away_from_base(),
+            "the virtual instrument stands at --instrument-pose, away from the base frame: give \
+             --registration (hexacomp-trainer register) to bring its measurements into the base \
+             frame"
+        );
+        Ok((
+            compensation,
+            registration
+                .map(|r| r.instrument_pose())
+                .unwrap_or_default(),
+        ))
+    }
+
     /// Whether the instrument is the virtual platform's tracker, standing away from the base
     /// frame (its measurements need a registration).
-    pub fn virtual_instrument_away_from_base(&self) -> bool {
+    fn virtual_instrument_away_from_base(&self) -> bool {
         self.instrument == InstrumentArg::Virtual
             && self
                 .instrument_pose

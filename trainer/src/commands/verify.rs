@@ -7,8 +7,6 @@ use std::time::{Duration, SystemTime};
 
 use anyhow::Context;
 use hexacomp_core::Geometry;
-use hexacomp_core::model::Model;
-use hexacomp_formats::read_registration;
 use hexacomp_trainer::iso9283::{TestPoseOptions, cycle_poses, test_cube};
 use hexacomp_trainer::registration::InstrumentMpe;
 use hexacomp_trainer::table::Table;
@@ -145,21 +143,11 @@ pub fn run(geometry: &Geometry, args: &VerifyArgs) -> anyhow::Result<()> {
     }
     let air = temperature("air-temperature", args.air_temperature)?;
     let machine_temperature = temperature("machine-temperature", args.machine_temperature)?;
-    let compensation = args
-        .model
-        .as_deref()
-        .map(|path| Model::load(path, geometry))
-        .transpose()?;
-    let registration = args
-        .registration
-        .as_deref()
-        .map(read_registration)
-        .transpose()?;
-    anyhow::ensure!(
-        registration.is_some() || !args.rig.virtual_instrument_away_from_base(),
-        "the virtual instrument stands at --instrument-pose, away from the base frame: give \
-         --registration (hexacomp-trainer register) to bring its measurements into the base frame"
-    );
+    let (compensation, instrument_frame) = args.rig.compensation_and_frame(
+        geometry,
+        args.model.as_deref(),
+        args.registration.as_deref(),
+    )?;
     let before = args.before.as_deref().map(read_before).transpose()?;
     let rig = args.rig.build(geometry, compensation)?;
     let cube = test_cube(geometry)?;
@@ -173,10 +161,7 @@ pub fn run(geometry: &Geometry, args: &VerifyArgs) -> anyhow::Result<()> {
         },
     )?;
     let cycles = usize::from(args.cycles);
-    let instrument_frame = registration
-        .as_ref()
-        .map(|r| r.instrument_pose())
-        .unwrap_or_default();
+
     let super::rig::Rig {
         mut machine,
         mut instrument,
