@@ -35,8 +35,9 @@ pub use fiducials::{FIDUCIAL_COLUMNS, read_fiducials, write_fiducials};
 pub use journal::{DRIFT_COLUMNS, JOURNAL_COLUMNS, JournalKind, MeasurementsJournal};
 pub use lines::MAX_LINE_BYTES;
 pub use measurements::{
-    DriftEntry, MEASURED_POSE_COLUMNS, read_drift_log, read_measurements, read_measurements_in,
-    target_columns, write_measurements, write_measurements_in,
+    DRIFT_DECISIONS, DRIFT_EVENTS, DriftEntry, MEASURED_POSE_COLUMNS, read_drift_log,
+    read_measurements, read_measurements_in, target_columns, write_measurements,
+    write_measurements_in,
 };
 pub use points_file::{FileSummary, PointsFile, bytes_progress, compensate_file};
 pub use registration::{

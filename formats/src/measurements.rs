@@ -126,8 +126,14 @@ pub struct DriftEntry {
 /// The instrument-pose columns of a drift log.
 const INSTRUMENT_POSE_COLUMNS: [&str; 6] = ["ix", "iy", "iz", "ia", "ib", "ic"];
 
+/// The events a drift log names.
+pub const DRIFT_EVENTS: [&str; 4] = ["warm-up", "start", "reference", "end"];
+/// The decisions a drift log names.
+pub const DRIFT_DECISIONS: [&str; 6] =
+    ["baseline", "ok", "stopped", "accepted", "warming", "stable"];
+
 /// Reads a campaign's drift log (a measurements file with [`crate::DRIFT_COLUMNS`] after the
-/// measured ones).
+/// measured ones); an event or a decision it does not know is an error naming its line.
 pub fn read_drift_log(path: &Path) -> Result<Records<DriftEntry>> {
     let rows = Rows::open(
         path,
@@ -150,6 +156,21 @@ pub fn read_drift_log(path: &Path) -> Result<Records<DriftEntry>> {
             } else {
                 Some(row.numbers(INSTRUMENT_POSE_COLUMNS)?)
             };
+            for (column, known) in [
+                ("event", &DRIFT_EVENTS[..]),
+                ("decision", &DRIFT_DECISIONS[..]),
+            ] {
+                if !known.contains(&row.text(column)) {
+                    return Err(row.error(
+                        Some(column),
+                        format!(
+                            "{} is not one of {}",
+                            crate::quote(row.text(column)),
+                            known.join(", ")
+                        ),
+                    ));
+                }
+            }
             Ok(DriftEntry {
                 reference: MeasuredConfiguration {
                     id: row.id.to_string(),

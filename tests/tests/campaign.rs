@@ -122,7 +122,8 @@ fn a_row_cut_short_by_a_kill_is_measured_again() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     trainer_ok(d, &["plan", "--count", "6", "--out", "plan.csv"]);
-    trainer_ok(d, &["campaign", "--plan", "plan.csv", "--out", "whole.csv"]);
+    trainer_ok(d, &["campaign", "--plan", "plan.csv", "--out", "cut.csv"]);
+    std::fs::copy(d.join("cut.csv"), d.join("whole.csv")).unwrap();
     // The record as a kill during the last append leaves it: the last line cut short.
     let whole = std::fs::read_to_string(d.join("whole.csv")).unwrap();
     let cut = whole.trim_end().rfind('\n').unwrap() + 1 + 17;
@@ -620,13 +621,107 @@ fn accepted_drift_is_logged_and_a_warm_up_that_does_not_settle_records_nothing()
         .map(|l| l.split(',').next().unwrap().to_string())
         .collect();
     assert!(error.contains(&ids.join(", ")), "{error}");
-    let output = trainer(d, &[&tight[..], &["--accept-drift"]].concat());
-    let events = drift_events(&d.join("t.drift.csv"));
+    // Run again as it is: refused before anything moves, the suspect rows named.
+    let error = text(&trainer(d, &tight).stderr);
     assert!(
-        events
-            .iter()
-            .any(|(e, decision, _)| e == "start" && decision == "accepted"),
-        "{events:?}: {}",
+        error.contains("stopped on drift") && error.contains(&ids.join(", ")),
+        "{error}"
+    );
+    assert_eq!(data_lines(&d.join("t.csv")).len(), 2);
+    // Kept with --accept-drift: the start's reference, beyond the limit, becomes the baseline and
+    // the kept rows are logged; the tight limit stops the campaign again at its next reference.
+    let output = trainer(d, &[&tight[..], &["--accept-drift"]].concat());
+    assert!(!output.status.success());
+    let events = drift_events(&d.join("t.drift.csv"));
+    let accepted = events
+        .iter()
+        .find(|(e, decision, _)| e == "start" && decision == "accepted")
+        .unwrap_or_else(|| panic!("{events:?}"));
+    assert!(
+        accepted.2.contains(&format!("kept {}", ids.join(", "))),
+        "{events:?}"
+    );
+    assert_eq!(data_lines(&d.join("t.csv")).len(), 4);
+    // With a limit above the machine's repeatability it ends.
+    let output = trainer(
+        d,
+        &[&tight[..5], &["--accept-drift", "--reference-every", "2"]].concat(),
+    );
+    assert!(output.status.success(), "{}", text(&output.stderr));
+    assert_eq!(data_lines(&d.join("t.csv")).len(), 6);
+    let events = drift_events(&d.join("t.drift.csv"));
+    assert_eq!(events.last().unwrap().0, "end", "{events:?}");
+}
+
+#[test]
+fn a_drift_log_lost_edited_or_shared_is_refused_and_a_missing_end_reference_is_taken() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    trainer_ok(d, &["plan", "--count", "6", "--out", "plan.csv"]);
+    let first: Vec<String> = std::fs::read_to_string(d.join("plan.csv"))
+        .unwrap()
+        .lines()
+        .take(4)
+        .map(str::to_string)
+        .collect();
+    std::fs::write(d.join("first.csv"), first.join("\n") + "\n").unwrap();
+    trainer_ok(d, &["campaign", "--plan", "first.csv", "--out", "a.csv"]);
+    let log = std::fs::read_to_string(d.join("a.drift.csv")).unwrap();
+    // Lost: the record's rows would lose the frame and baseline they were measured under.
+    std::fs::rename(d.join("a.drift.csv"), d.join("kept.csv")).unwrap();
+    let error = text(&trainer(d, &["campaign", "--plan", "plan.csv", "--out", "a.csv"]).stderr);
+    assert!(
+        error.contains("holds 3 configurations but its drift log"),
+        "{error}"
+    );
+    assert_eq!(data_lines(&d.join("a.csv")).len(), 3);
+    // Edited: a decision it does not know, named with its line.
+    std::fs::write(
+        d.join("a.drift.csv"),
+        log.replace(",baseline,", ",basline,"),
+    )
+    .unwrap();
+    let error = text(&trainer(d, &["campaign", "--plan", "plan.csv", "--out", "a.csv"]).stderr);
+    assert!(
+        error.contains("a.drift.csv:3") && error.contains("\"basline\" is not one of"),
+        "{error}"
+    );
+    // Shared: another record's log is refused.
+    std::fs::write(d.join("a.drift.csv"), &log).unwrap();
+    let output = trainer(
+        d,
+        &[
+            "campaign",
+            "--plan",
+            "first.csv",
+            "--out",
+            "b.csv",
+            "--drift-log",
+            "a.drift.csv",
+        ],
+    );
+    assert!(
+        text(&output.stderr).contains("not recorded by this campaign"),
+        "{}",
         text(&output.stderr)
     );
+    assert_eq!(std::fs::read_to_string(d.join("a.drift.csv")).unwrap(), log);
+    // Killed after the last row, before the end reference: run again, it takes it.
+    let cut: Vec<&str> = log.lines().collect();
+    assert!(cut.last().unwrap().starts_with("R") && cut.last().unwrap().contains(",end,"));
+    std::fs::write(
+        d.join("a.drift.csv"),
+        cut[..cut.len() - 1].join("\n") + "\n",
+    )
+    .unwrap();
+    let said = trainer_ok(d, &["campaign", "--plan", "first.csv", "--out", "a.csv"]);
+    assert!(!said.contains("nothing to do"), "{said}");
+    let events = drift_events(&d.join("a.drift.csv"));
+    assert_eq!(events.last().unwrap().0, "end", "{events:?}");
+    let said = trainer_ok(d, &["campaign", "--plan", "first.csv", "--out", "a.csv"]);
+    assert!(said.contains("nothing to do"), "{said}");
+    // A plan id that names a reference measurement.
+    std::fs::write(d.join("r.csv"), "id,x,y,z,a,b,c\nR1,0,0,280,0,0,0\n").unwrap();
+    let error = text(&trainer(d, &["campaign", "--plan", "r.csv", "--out", "r-out.csv"]).stderr);
+    assert!(error.contains("r.csv:2: configuration R1"), "{error}");
 }

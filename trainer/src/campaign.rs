@@ -91,6 +91,11 @@ pub struct CampaignOptions {
     pub settle: Duration,
 }
 
+/// The largest difference between the drives' commands and the nominal legs a campaign accepts,
+/// mm: more means a compensation is active, and the record would pair nominal legs with a
+/// machine that moved elsewhere.
+pub const COMPENSATION_OFF_MM: f64 = 1e-3;
+
 /// The fewest readings outliers are rejected among: with fewer the median distance is too
 /// unsteady (with three readings of pure Gaussian noise and a factor of 5, 3 % of points would
 /// lose a good reading; with four, 0.5 %; two are always equally far from their median).
@@ -355,7 +360,11 @@ impl Campaign<'_> {
             baseline: self.drift.as_ref().and_then(|d| d.baseline.clone()),
             number: self.drift.as_ref().map_or(1, |d| d.first_number),
             recorded: self.done.len(),
-            since_reference: Vec::new(),
+            since_reference: self
+                .drift
+                .as_ref()
+                .map(|d| d.suspects.clone())
+                .unwrap_or_default(),
             note: self.drift.as_ref().and_then(|d| d.note.clone()),
         };
         let left = self
@@ -423,7 +432,8 @@ impl Campaign<'_> {
                 )?;
             }
         }
-        if summary.measured > 0 {
+        let end_pending = self.drift.as_ref().is_some_and(|d| d.end_pending);
+        if summary.measured > 0 || end_pending {
             self.check_reference(ReferenceEvent::End, machine, instrument, log, &mut watch)?;
         }
         Ok(summary)
@@ -439,6 +449,16 @@ impl Campaign<'_> {
         pose_mm_deg: &[f64; 6],
     ) -> Result<(Arrival, Combined)> {
         let arrival = machine.go_to(id, &Pose::from_mm_deg(*pose_mm_deg))?;
+        let compensated = (0..LEGS)
+            .map(|i| (arrival.drives[i] - arrival.legs[i]).abs())
+            .fold(0.0, f64::max);
+        if compensated > COMPENSATION_OFF_MM {
+            return Err(Error::Machine(format!(
+                "configuration {id}: the drives are commanded {compensated:.4} mm away from the \
+                 nominal legs: compensation is active. A calibration measures the machine as it \
+                 is: switch it off (halcmd setp hexacomp.0.enable 0) and run again"
+            )));
+        }
         if !self.options.settle.is_zero() {
             std::thread::sleep(self.options.settle);
         }
@@ -875,6 +895,69 @@ mod tests {
             travel(&order),
             travel(&planned)
         );
+    }
+
+    /// A controller whose drives get a correction on top of the nominal legs.
+    struct Compensating(VirtualMachine);
+
+    impl Machine for Compensating {
+        fn go_to(&mut self, id: &str, pose: &Pose) -> Result<Arrival> {
+            let mut arrival = self.0.go_to(id, pose)?;
+            arrival.drives[2] += 0.01;
+            Ok(arrival)
+        }
+    }
+
+    #[test]
+    fn a_campaign_refuses_a_machine_whose_compensation_is_active() {
+        let g = Geometry::prototype();
+        let platform = VirtualPlatform::new(
+            &g,
+            &hexacomp_virtual::ErrorModel::variant(hexacomp_virtual::ErrorVariant::Paper),
+            18,
+            1,
+        )
+        .unwrap();
+        let plan = crate::plan::numbered_rows(&[g.home_pose()]);
+        let done = HashSet::new();
+        let campaign = Campaign {
+            geometry: &g,
+            plan: &plan,
+            order: &[0],
+            done: &done,
+            nothing_seen: Observation::Targets(vec![None; 3]),
+            options: CampaignOptions::default(),
+            into_record_frame: Vec::new(),
+            drift: None,
+        };
+        let mut instrument = VirtualInstrument {
+            platform: platform.clone(),
+            instrument: Pose::default(),
+            probe: false,
+            seed: 1,
+        };
+        let mut recorded = 0;
+        let error = campaign
+            .run(
+                &mut Compensating(VirtualMachine {
+                    platform,
+                    seed: 1,
+                    compensation: None,
+                }),
+                &mut instrument,
+                &mut |_, _| {
+                    recorded += 1;
+                    Ok(())
+                },
+                &mut |_| Ok(()),
+                &mut || {},
+            )
+            .unwrap_err();
+        assert!(
+            error.to_string().contains("compensation is active"),
+            "{error}"
+        );
+        assert_eq!(recorded, 0);
     }
 
     #[test]

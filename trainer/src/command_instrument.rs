@@ -89,18 +89,26 @@ impl CommandInstrument {
     }
 }
 
-/// Has the kernel kill the program `command` starts when this process dies (any death: Ctrl-C,
-/// SIGKILL, a crash), so that no instrument or machine bridge outlives the campaign.
-pub(crate) fn die_with_parent(command: &mut Command) {
-    // SAFETY: between fork and exec the closure only calls prctl(2), which is
+/// Has the kernel send `signal` to the program `command` starts when this process dies (any
+/// death: Ctrl-C, SIGKILL, a crash), so that no instrument or machine bridge outlives the
+/// campaign. A parent that died before the request took effect is caught too: the program then
+/// has another parent, and fails to start.
+pub(crate) fn die_with_parent(command: &mut Command, signal: libc::c_int) {
+    // SAFETY: getpid(2) is async-signal-safe; called before the fork, in the parent.
+    let parent = unsafe { libc::getpid() };
+    // SAFETY: between fork and exec the closure only calls prctl(2) and getppid(2), which are
     // async-signal-safe.
     unsafe {
-        command.pre_exec(|| {
-            if libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGKILL) == 0 {
-                Ok(())
-            } else {
-                Err(std::io::Error::last_os_error())
+        command.pre_exec(move || {
+            if libc::prctl(libc::PR_SET_PDEATHSIG, signal) != 0 {
+                return Err(std::io::Error::last_os_error());
             }
+            if libc::getppid() != parent {
+                return Err(std::io::Error::other(
+                    "the campaign ended before it started",
+                ));
+            }
+            Ok(())
         });
     }
 }
@@ -147,7 +155,7 @@ impl Instrument for CommandInstrument {
             .stdout(Stdio::piped())
             .stderr(Stdio::inherit());
         // Killed when the campaign dies (Ctrl-C, SIGKILL), so it does not keep the tracker busy.
-        die_with_parent(&mut command);
+        die_with_parent(&mut command, libc::SIGKILL);
         let mut child = command.spawn().map_err(|e| {
             ReadError::Broken(format!(
                 "cannot run {program}: {e} (is the path right, the file executable, with a \

@@ -168,8 +168,15 @@ pub struct DriftCheck {
     pub baseline: Option<Observation>,
     /// The number of this run's first measurement of the reference (`R1`, `R2`… in the log).
     pub first_number: usize,
-    /// A note for the log's first row of this run (a re-registration), if any.
+    /// A note for the log's first row of this run (a re-registration, rows kept under an
+    /// accepted drift), if any.
     pub note: Option<String>,
+    /// The configurations recorded since the last good measurement of the reference (a run
+    /// killed before its next one): named if this run's start finds drift.
+    pub suspects: Vec<String>,
+    /// The record's last configurations were never followed by an end measurement (a run
+    /// killed after its last row): measure it even when nothing is left to measure.
+    pub end_pending: bool,
 }
 
 /// One measurement of the reference, for the drift log.

@@ -13,7 +13,9 @@
 //!   position only): P1 rotated by ± 80 % of the workspace's tilt about x and y, and by ± 80 % of
 //!   the half yaw range about z (less where the stroke does not allow it).
 //! - A **cycle** visits P1, P5, P4, P3, P2 (ISO § 7.2.1), then the orientation and extra poses,
-//!   each approached from the same pose every cycle.
+//!   and the machine returns to P2 unmeasured (it also goes there before the first cycle), so
+//!   that every pose, P1 included, is approached from the same pose every cycle, P1 from P2 as
+//!   ISO's cycle P1 → P5 → P4 → P3 → P2 → P1 does ([`crate::verify::PoseTest::approach`]).
 //!
 //! The characteristics, per pose, of `n` attained poses `(x_j, y_j, z_j, a_j, b_j, c_j)` against
 //! the commanded `(x_c, …, c_c)` (mm and degrees, base frame):
@@ -209,6 +211,15 @@ pub fn cycle_poses(
     if options.orientation {
         poses.extend(orientation_poses(geometry, &iso[0].commanded)?);
     }
+    if let Some(outside) = poses
+        .iter()
+        .find(|p| !inverse_kinematics(geometry, &Pose::from_mm_deg(p.commanded)).all_in_stroke())
+    {
+        return Err(Error::InvalidSetting(format!(
+            "the test pose {} {:?} needs legs outside the stroke: check the geometry's workspace",
+            outside.name, outside.commanded
+        )));
+    }
     if options.extra > 0 {
         let mut sampler = WorkspaceSampler::new(geometry, options.seed, SamplerOptions::default())?;
         for k in 0..options.extra {
@@ -247,7 +258,7 @@ pub struct PoseCharacteristics {
 }
 
 /// `angle − reference` wrapped into (−180°, 180°].
-fn angle_difference(angle: f64, reference: f64) -> f64 {
+pub(crate) fn angle_difference(angle: f64, reference: f64) -> f64 {
     let d = (angle - reference).rem_euclid(360.0);
     if d > 180.0 { d - 360.0 } else { d }
 }

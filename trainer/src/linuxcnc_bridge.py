@@ -1,11 +1,13 @@
 """hexacomp-trainer's bridge to a running LinuxCNC, through LinuxCNC's own Python interface.
 
-Run by `hexacomp-trainer campaign --machine linuxcnc` (and `verify`) as
-`python3 -c SCRIPT DRIVE_PINS`. It checks that LinuxCNC runs, the machine is on and every joint
-homed, switches to world (teleop) coordinates and MDI, and then answers one JSON request per
-line on standard input with one JSON line on standard output:
+Run by `hexacomp-trainer campaign --machine linuxcnc` (and `verify`, `check`) as
+`python3 -c SCRIPT DRIVE_PINS PINS_GIVEN MOVE_TIMEOUT`. It checks that LinuxCNC runs, the machine
+is on and every joint homed, no tool length offset is active, switches to world (teleop)
+coordinates and MDI, and then answers one JSON request per line on standard input with one JSON
+line on standard output:
 
-  {"move": [x, y, z, a, b, c]}   mm and degrees: moves there by `G21 G90 G0`, waits until the
+  {"move": [x, y, z, a, b, c]}   mm and degrees, machine coordinates (work offsets do not
+                                  apply): moves there by `G21 G90 G53 G0`, waits until the
                                   motion is done and in position, then until the joints hold
                                   still; answers {"legs": [6 × mm], "drives": [6 × mm],
                                   "position": [x, y, z, a, b, c]} — the joint positions motion
@@ -17,10 +19,12 @@ line on standard input with one JSON line on standard output:
                                   the joints plus (drive pin − joint.#.motor-pos-cmd).
 
 Any failure answers {"error": "..."} (and a failure to start ends the bridge). At the end of
-its input it restores the program units it found (G20 when the interpreter was in inches).
+its input, or on SIGTERM (the campaign dying), it restores the units and distance mode it found
+(G20, G91) and leaves HAL.
 """
 import json
 import os
+import signal
 import sys
 import time
 
@@ -32,7 +36,7 @@ except ImportError as e:
           flush=True)
     sys.exit(1)
 
-DRIVE_PINS = sys.argv[1]
+DRIVE_PINS, PINS_GIVEN, MOVE_TIMEOUT = sys.argv[1], sys.argv[2] == "given", float(sys.argv[3])
 JOINTS = 6
 stat, command, errors = linuxcnc.stat(), linuxcnc.command(), linuxcnc.error_channel()
 
@@ -62,14 +66,18 @@ def wait_until(condition, seconds, what, interval=0.01):
 
 
 def drive_pins():
-    """The HAL pins of the drives' commands: DRIVE_PINS, or motion's motor commands
-    (joint.N.motor-pos-cmd) when the machine has no such pins."""
+    """The HAL pins of the drives' commands: DRIVE_PINS, or (for the default pattern only) motion's
+    motor commands joint.N.motor-pos-cmd when the machine has no such pins."""
+    pins = [DRIVE_PINS.replace("#", str(j)) for j in range(JOINTS)]
     try:
-        hal.get_value(DRIVE_PINS.replace("#", "0"))
-        pattern = DRIVE_PINS
-    except Exception:
-        pattern = "joint.#.motor-pos-cmd"
-    return [pattern.replace("#", str(j)) for j in range(JOINTS)]
+        for pin in pins:
+            hal.get_value(pin)
+        return pins
+    except Exception as e:
+        if PINS_GIVEN:
+            raise RuntimeError(f"the drive pins {pins[0]}… cannot be read ({e}): check "
+                               "--linuxcnc-drive-pins")
+        return [f"joint.{j}.motor-pos-cmd" for j in range(JOINTS)]
 
 
 def drive_lengths(joints, pins):
@@ -88,6 +96,9 @@ def start():
                            "it with the machine's configuration first")
     if stat.joints < JOINTS:
         raise RuntimeError(f"LinuxCNC has {stat.joints} joints, a hexapod six")
+    if any(stat.tool_offset):
+        raise RuntimeError("a tool length offset is active: cancel it (G49) so that the "
+                           "platform's frame is the one calibrated")
     if stat.task_state != linuxcnc.STATE_ON:
         raise RuntimeError("the machine is in E-stop or switched off: switch it on in LinuxCNC")
     unhomed = [str(j) for j in range(JOINTS) if not stat.homed[j]]
@@ -107,24 +118,29 @@ def start():
     # HAL pins are read through a component of this process.
     component = hal.component(f"hexacomp-trainer-{os.getpid()}")
     component.ready()
-    return stat.program_units, stat.linear_units, component, drive_pins()
+    # The modes to give back: inches (G20) and incremental distances (G91) are changed by the
+    # moves' G21 G90.
+    modes = " ".join(g for g, code in (("G20", 200), ("G91", 910)) if code in stat.gcodes)
+    return modes, stat.linear_units, component, drive_pins()
 
 
 def move(pose, units_per_mm, pins):
     words = " ".join(f"{axis}{value:.10f}" for axis, value in zip("XYZABC", pose))
     messages()
-    command.mdi(f"G21 G90 G0 {words}")
-    outcome = command.wait_complete(600)
+    command.mdi(f"G21 G90 G53 G0 {words}")
+    outcome = command.wait_complete(MOVE_TIMEOUT)
     if outcome != linuxcnc.RCS_DONE:
         said = "; ".join(messages())
-        raise RuntimeError(f"MDI G0 {words} did not complete ({outcome}){': ' + said if said else ''}")
+        why = f"not within {MOVE_TIMEOUT} s" if outcome == -1 else f"status {outcome}"
+        raise RuntimeError(f"MDI G53 G0 {words} did not complete ({why})"
+                           f"{': ' + said if said else ''}")
     target = [v * units_per_mm for v in pose[:3]] + list(pose[3:])
 
     def arrived():
         close = all(abs(stat.position[k] - target[k]) < 1e-7 for k in range(6))
         return close and stat.inpos and stat.queue == 0
 
-    wait_until(arrived, 60, f"reach {words}")
+    wait_until(arrived, MOVE_TIMEOUT, f"reach {words}")
     # The planner's last steps below the tolerance: read the joints once they hold still.
     readings = []
 
@@ -142,9 +158,14 @@ def move(pose, units_per_mm, pins):
     }
 
 
+def stop(_signal, _frame):
+    raise SystemExit(1)
+
+
 def main():
+    signal.signal(signal.SIGTERM, stop)
     try:
-        program_units, units_per_mm, component, pins = start()
+        modes, units_per_mm, component, pins = start()
     except Exception as e:
         answer({"error": str(e)})
         return 1
@@ -159,8 +180,8 @@ def main():
             except Exception as e:
                 answer({"error": str(e)})
     finally:
-        if program_units == 1:  # CANON_UNITS_INCHES
-            command.mdi("G20")
+        if modes:
+            command.mdi(modes)
             command.wait_complete(5)
         component.exit()
     return 0

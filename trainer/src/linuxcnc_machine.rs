@@ -30,8 +30,11 @@ pub struct LinuxCncOptions {
     /// The Python interpreter that has LinuxCNC's modules (Debian's `/usr/bin/python3`).
     pub python: String,
     /// The HAL pins of the drives' commands, `#` standing for the joint number (the hexacomp
-    /// component's `hexacomp.0.motor-out-#`); motion's motor commands when they do not exist.
+    /// component's `hexacomp.0.motor-out-#`).
     pub drive_pins: String,
+    /// Whether the user named `drive_pins`: then pins that cannot be read are an error; the
+    /// default falls back to motion's motor commands on a machine without the component.
+    pub drive_pins_given: bool,
     /// Longest time a move may take.
     pub move_timeout: Duration,
 }
@@ -79,10 +82,17 @@ impl LinuxCncMachine {
             .arg("-c")
             .arg(BRIDGE)
             .arg(&options.drive_pins)
+            .arg(if options.drive_pins_given {
+                "given"
+            } else {
+                "default"
+            })
+            .arg(options.move_timeout.as_secs_f64().to_string())
             .stdin(Stdio::piped())
             .stdout(Stdio::piped())
             .stderr(Stdio::inherit());
-        die_with_parent(&mut command);
+        // SIGTERM: the bridge gives LinuxCNC's modes back and leaves HAL before it ends.
+        die_with_parent(&mut command, libc::SIGTERM);
         let mut child = command.spawn().map_err(|e| {
             Error::Machine(format!(
                 "cannot run {} for LinuxCNC's Python interface: {e} (give --linuxcnc-python)",

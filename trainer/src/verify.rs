@@ -64,25 +64,49 @@ pub struct PoseTest<'a> {
     pub instrument_frame: Pose,
     /// How each attained pose is read.
     pub options: CampaignOptions,
+    /// The pose every cycle's first pose is approached from (ISO 9283 approaches P1 from P2):
+    /// visited unmeasured before the first cycle and at the end of every cycle that does not
+    /// end there.
+    pub approach: Option<TestPose>,
 }
 
 impl PoseTest<'_> {
     /// Runs the cycles (each visiting the poses in the same order): drives to each pose, reads
     /// it as `options` says, brings the combined reading into the base frame and fits the
-    /// attained pose. `progress()` is called after each pose. The machine's errors and an
-    /// instrument that cannot work stop the test.
+    /// attained pose, adding it to `run`. `progress()` is called after each pose. The machine's
+    /// errors and an instrument that cannot work stop the test; what was measured before stays
+    /// in `run`.
     pub fn run(
         &self,
         machine: &mut dyn Machine,
         instrument: &mut dyn Instrument,
+        run: &mut TestRun,
         progress: &mut dyn FnMut(),
-    ) -> Result<TestRun> {
+    ) -> Result<()> {
         let options = &self.options;
         if options.readings == 0 {
             return Err(Error::InvalidSetting("readings must be ≥ 1".into()));
         }
-        let mut run = TestRun::default();
+        let approach = |machine: &mut dyn Machine, cycle: usize| -> Result<()> {
+            match &self.approach {
+                Some(from) => machine
+                    .go_to(
+                        &format!("approach/{cycle}"),
+                        &Pose::from_mm_deg(from.commanded),
+                    )
+                    .map(|_| ()),
+                None => Ok(()),
+            }
+        };
+        approach(machine, 0)?;
+        let ends_at_approach = self
+            .approach
+            .as_ref()
+            .is_some_and(|a| self.poses.last().is_some_and(|p| p.name == a.name));
         for cycle in 1..=self.cycles {
+            if cycle > 1 && !ends_at_approach {
+                approach(machine, cycle - 1)?;
+            }
             for pose in self.poses {
                 let id = measurement_id(&pose.name, cycle);
                 let arrival = machine.go_to(&id, &Pose::from_mm_deg(pose.commanded))?;
@@ -115,7 +139,7 @@ impl PoseTest<'_> {
                 progress();
             }
         }
-        Ok(run)
+        Ok(())
     }
 }
 
@@ -137,4 +161,93 @@ pub fn characteristics_of(
                 .map_err(|e| Error::InsufficientData(format!("pose {}: {e}", pose.name)))
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::campaign::{Arrival, ReadError};
+    use hexacomp_core::observation::Observation;
+
+    /// A machine that goes where it is told and remembers where it went.
+    struct Logging(Vec<String>);
+
+    impl Machine for Logging {
+        fn go_to(&mut self, id: &str, _pose: &Pose) -> Result<Arrival> {
+            self.0.push(id.to_string());
+            Ok(Arrival {
+                legs: [0.0; 6],
+                drives: [0.0; 6],
+                reached: None,
+            })
+        }
+    }
+
+    /// An instrument that reports the commanded pose as a probe would.
+    struct Exact;
+
+    impl Instrument for Exact {
+        fn read(
+            &mut self,
+            _id: &str,
+            _reading: usize,
+            pose_mm_deg: &[f64; 6],
+            _arrival: &crate::campaign::Arrival,
+        ) -> std::result::Result<Observation, ReadError> {
+            Ok(Observation::Pose(*pose_mm_deg))
+        }
+    }
+
+    #[test]
+    fn every_pose_p1_first_is_approached_from_the_same_pose_in_every_cycle() {
+        let g = Geometry::prototype();
+        let cube = crate::iso9283::test_cube(&g).unwrap();
+        let options = crate::iso9283::TestPoseOptions {
+            orientation: true,
+            extra: 0,
+            seed: 1,
+        };
+        let poses = crate::iso9283::cycle_poses(&g, &cube, &options).unwrap();
+        let test = PoseTest {
+            geometry: &g,
+            poses: &poses,
+            cycles: 3,
+            instrument_frame: Pose::default(),
+            options: CampaignOptions {
+                readings: 1,
+                ..CampaignOptions::default()
+            },
+            approach: poses.iter().find(|p| p.name == "P2").cloned(),
+        };
+        let mut machine = Logging(Vec::new());
+        let mut run = TestRun::default();
+        test.run(&mut machine, &mut Exact, &mut run, &mut || {})
+            .unwrap();
+        let visited: Vec<String> = machine
+            .0
+            .iter()
+            .map(|id| id.split('/').next().unwrap().replace("approach", "P2"))
+            .collect();
+        for (k, pose) in visited.iter().enumerate().skip(1) {
+            let before = &visited[k - 1];
+            let expected = match pose.as_str() {
+                "P1" => "P2",
+                "P5" => "P1",
+                "O1" => "P2",
+                _ => continue,
+            };
+            assert_eq!(
+                before, expected,
+                "{pose} approached from {before}: {visited:?}"
+            );
+        }
+        assert_eq!(
+            visited[0], "P2",
+            "the machine goes to P2 before the first cycle"
+        );
+        assert_eq!(run.attained.len(), 3 * poses.len());
+        // The exact instrument: every attained pose is the commanded one.
+        let c = characteristics_of(&poses, &run.attained).unwrap();
+        assert!(c.iter().all(|c| c.ap_p_mm < 1e-9 && c.rp_l_mm < 1e-9));
+    }
 }

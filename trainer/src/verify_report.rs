@@ -5,7 +5,7 @@
 use std::fmt::Write;
 
 use crate::error::{Error, Result};
-use crate::iso9283::{PoseCharacteristics, TestCube};
+use crate::iso9283::{PoseCharacteristics, TestCube, TestPose};
 use crate::svg::{Chart, Series};
 use crate::verify::{Attained, Missed};
 
@@ -144,11 +144,12 @@ impl VerifyReport {
         Ok(report)
     }
 
-    /// Refuses `before` unless it tested the same poses (names, and commanded poses to 1e-6 mm
-    /// and degrees), so that the two can be set side by side.
-    pub fn check_comparable(&self, before: &VerifyReport, file: &str) -> Result<()> {
-        let same = self.poses.len() == before.poses.len()
-            && self.poses.iter().zip(&before.poses).all(|(a, b)| {
+    /// Refuses this report (read from `file`) as the run before a test of `poses` unless it
+    /// tested the same poses (names, and commanded poses to 1e-6 mm and degrees), so that the two
+    /// can be set side by side; checked before the test moves anything.
+    pub fn check_same_poses(&self, poses: &[TestPose], file: &str) -> Result<()> {
+        let same = self.poses.len() == poses.len()
+            && poses.iter().zip(&self.poses).all(|(a, b)| {
                 a.name == b.name
                     && a.commanded
                         .iter()
@@ -161,8 +162,12 @@ impl VerifyReport {
             Err(Error::InvalidSetting(format!(
                 "{file}: it tested other poses ({}) than this run ({}); give a run of the same \
                  geometry and pose options",
-                names(&before.poses),
-                names(&self.poses)
+                names(&self.poses),
+                poses
+                    .iter()
+                    .map(|p| p.name.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", ")
             )))
         }
     }
@@ -253,6 +258,26 @@ fn pose_chart(pose: &PoseReport, run: &str) -> String {
         ],
     }
     .to_svg()
+}
+
+/// How `after` compares with `before` (both errors, mm): "12.3× better", "1.4× worse" or "the
+/// same".
+pub fn improvement(before: f64, after: f64) -> String {
+    if before > after {
+        if after > 0.0 {
+            format!("{:.1}× better", before / after)
+        } else {
+            "better: no error left".into()
+        }
+    } else if after > before {
+        if before > 0.0 {
+            format!("{:.1}× worse", after / before)
+        } else {
+            "worse".into()
+        }
+    } else {
+        "the same".into()
+    }
 }
 
 /// Escapes text for HTML.
@@ -352,11 +377,11 @@ pub fn html(after: &VerifyReport, before: Option<&VerifyReport>) -> String {
     if let Some(before) = before {
         let _ = writeln!(
             page,
-            "<p>Worst AP_P: {} µm before, {} µm after ({:.1}× better); worst RP_l: {} µm \
-             before, {} µm after.</p>",
+            "<p>Worst AP_P: {} µm before, {} µm after ({}); worst RP_l: {} µm before, {} µm \
+             after.</p>",
             um(before.worst_ap_p_mm()),
             um(after.worst_ap_p_mm()),
-            before.worst_ap_p_mm() / after.worst_ap_p_mm(),
+            improvement(before.worst_ap_p_mm(), after.worst_ap_p_mm()),
             um(before.worst_rp_l_mm()),
             um(after.worst_rp_l_mm())
         );

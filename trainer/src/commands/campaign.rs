@@ -38,7 +38,8 @@ use super::drift_log::DriftLog;
 /// (register again and give --registration, or --accept-drift). --warm-up-limit holds the first
 /// configuration until the reference settles.
 ///
-/// Machines: virtual (the built-in virtual platform). Instruments: virtual (its tracker,
+/// Machines: virtual (the built-in virtual platform), linuxcnc (a running, homed LinuxCNC).
+/// Instruments: virtual (its tracker,
 /// standing at --instrument-pose, noise keyed on --seed and each configuration's id, so a resumed
 /// campaign records exactly what an uninterrupted one does), command (your program reads the
 /// tracker: see --instrument-command).
@@ -83,7 +84,23 @@ pub fn run(geometry: &Geometry, args: &CampaignArgs) -> anyhow::Result<()> {
     );
     check_plan(geometry, &plan)?;
     // Every setting is checked before the record is opened: a bad option leaves no file.
-    let rig = args.rig.build(geometry, None)?;
+    args.drift.check_options()?;
+    let drift_log = (!args.drift.no_reference).then(|| args.drift.log_path(&args.out));
+    if let Some(log) = &drift_log {
+        let mut others: Vec<&std::path::Path> = vec![&args.plan, &args.out];
+        others.extend(args.registration.as_deref());
+        hexacomp_formats::refuse_same_file(log, &others)?;
+        anyhow::ensure!(
+            log != &args.out,
+            "--drift-log {}: the record and its drift log must be two files",
+            log.display()
+        );
+    }
+    let mut rig = args.rig.build(geometry, None)?;
+    if args.drift.no_reference {
+        // A record measured without the reference cannot be continued with it, nor the reverse.
+        rig.settings.push_str("; no reference");
+    }
     let kind = if args.rig.probe() {
         JournalKind::Pose
     } else {
@@ -97,16 +114,7 @@ pub fn run(geometry: &Geometry, args: &CampaignArgs) -> anyhow::Result<()> {
     let mut journal = MeasurementsJournal::open(&args.out, kind, &rig.settings, &JOURNAL_COLUMNS)?;
     let recorded = read_measurements(&args.out)?;
     let done = check_recorded(&plan, &recorded)?;
-    if done.len() == plan.len() {
-        eprintln!(
-            "the campaign is finished: all {} configurations of {} are recorded in {}; nothing \
-             to do",
-            plan.len(),
-            plan.file,
-            args.out.display()
-        );
-        return Ok(());
-    }
+    let recorded_ids: Vec<String> = recorded.iter().map(|r| r.id.clone()).collect();
     let (mut drift_log, drift, into_record_frame) = if args.drift.no_reference {
         (None, None, Vec::new())
     } else {
@@ -117,9 +125,20 @@ pub fn run(geometry: &Geometry, args: &CampaignArgs) -> anyhow::Result<()> {
             kind,
             &rig.settings,
             registration.as_ref(),
+            &recorded_ids,
         )?;
         (Some(log), Some(check), frame)
     };
+    if done.len() == plan.len() && !drift.as_ref().is_some_and(|d| d.end_pending) {
+        eprintln!(
+            "the campaign is finished: all {} configurations of {} are recorded in {}; nothing \
+             to do",
+            plan.len(),
+            plan.file,
+            args.out.display()
+        );
+        return Ok(());
+    }
     let super::rig::Rig {
         mut machine,
         mut instrument,
@@ -266,6 +285,18 @@ fn check_plan(
 ) -> anyhow::Result<()> {
     let [min, max] = geometry.leg_range;
     for (index, row) in plan.iter().enumerate() {
+        let reference_like = row
+            .id
+            .strip_prefix('R')
+            .is_some_and(|n| !n.is_empty() && n.bytes().all(|b| b.is_ascii_digit()));
+        anyhow::ensure!(
+            !reference_like,
+            "{}:{}: configuration {}: ids R1, R2, … name the measurements of the reference \
+             configuration; rename it",
+            plan.file,
+            plan.line(index),
+            row.id
+        );
         if let Some((leg, length)) = super::leg_outside_stroke(geometry, &row.pose()) {
             anyhow::bail!(
                 "{}:{}: configuration {}: the pose needs leg {leg} at {} mm, outside the stroke \

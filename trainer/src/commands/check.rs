@@ -6,8 +6,8 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use hexacomp_core::Geometry;
-use hexacomp_trainer::check::{CheckResult, promised_mm, verified_poses};
-use hexacomp_trainer::verify::PoseTest;
+use hexacomp_trainer::check::{CheckResult, Verdict, promised, verified_poses};
+use hexacomp_trainer::verify::{PoseTest, TestRun};
 use hexacomp_trainer::verify_report::{VerifyReport, raw_csv};
 
 /// Check that the calibration still holds (monthly, or after a crash or a move of the machine).
@@ -16,8 +16,9 @@ use hexacomp_trainer::verify_report::{VerifyReport, raw_csv};
 /// P1–P5 and, if it had them, the orientation and extra poses), once each, with the compensation
 /// active (on the virtual machine: --model), and compares each position error |attained −
 /// commanded| with what that test proved: one attained position lies within AP_P + RP_l of the
-/// commanded one (the worst of each over the report's poses), times --tolerance. Prints one
-/// line: "still good" (exit status 0) or "retrain" with the figures (exit status 1).
+/// commanded one, an angle within |AP_a| + RP_a (the worst of each over the report's poses),
+/// times --tolerance. Prints one line: "still good" (exit status 0), or "retrain" with the
+/// figures, or "inconclusive" when a pose could not be measured (exit status 1).
 #[derive(Debug, clap::Args)]
 pub struct CheckArgs {
     #[command(flatten)]
@@ -87,8 +88,10 @@ pub fn run(geometry: &Geometry, args: &CheckArgs) -> anyhow::Result<()> {
         cycles: 1,
         instrument_frame,
         options,
+        approach: None,
     };
-    let run = test.run(machine.as_mut(), instrument.as_mut(), &mut || {})?;
+    let mut run = TestRun::default();
+    test.run(machine.as_mut(), instrument.as_mut(), &mut run, &mut || {})?;
     for missed in &run.missed {
         eprintln!(
             "{} was not measured ({}): left out",
@@ -98,31 +101,58 @@ pub fn run(geometry: &Geometry, args: &CheckArgs) -> anyhow::Result<()> {
     if let Some(out) = &args.out {
         super::write_bytes(out, raw_csv(&run.attained).as_bytes())?;
     }
-    let promised = promised_mm(&promise);
-    let result = CheckResult::new(&poses, &run.attained, promised * args.tolerance);
-    let Some((pose, worst)) = result.worst() else {
-        anyhow::bail!("no pose could be measured: check the instrument");
-    };
+    let allowed = promised(&promise, args.tolerance);
+    let result = CheckResult::new(&poses, &run.attained, &run.missed, allowed);
+    let position = result
+        .worst_position()
+        .map_or("no pose measured".to_string(), |(pose, e)| {
+            format!(
+                "the largest position error {e:.4} mm ({pose}; mean {:.4} mm over {} poses) of \
+                 {:.4} mm allowed",
+                result.mean_position_mm(),
+                result.errors.len(),
+                allowed.position_mm
+            )
+        });
+    let angle = result
+        .worst_angle_share()
+        .map_or(String::new(), |(pose, axis, share)| {
+            format!(
+                ", the largest angle error {:.0} % of the allowed ({pose}, {axis})",
+                100.0 * share
+            )
+        });
     let figures = format!(
-        "the largest position error {worst:.4} mm ({pose}; mean {:.4} mm over {} poses), the \
-         calibration was verified to {promised:.4} mm ({}: worst AP_P {:.4} + worst RP_l {:.4} \
-         mm){}",
-        result.mean_mm(),
-        result.errors_mm.len(),
+        "{position}{angle}; promised by {} (worst AP_P {:.4} + worst RP_l {:.4} mm{})",
         args.promise.display(),
         promise.worst_ap_p_mm(),
         promise.worst_rp_l_mm(),
         if args.tolerance == 1.0 {
             String::new()
         } else {
-            format!(", × {} allowed", args.tolerance)
+            format!(", × {}", args.tolerance)
         }
     );
-    if result.still_good() {
-        println!("still good: {figures}");
-        Ok(())
-    } else {
-        println!("retrain: {figures}");
-        anyhow::bail!("the calibration no longer holds: measure and calibrate again")
+    match result.verdict() {
+        Verdict::StillGood => {
+            println!("still good: {figures}");
+            Ok(())
+        }
+        Verdict::Retrain => {
+            println!("retrain: {figures}");
+            anyhow::bail!("the calibration no longer holds: measure and calibrate again")
+        }
+        Verdict::Inconclusive => {
+            let missed: Vec<String> = result
+                .missed
+                .iter()
+                .map(|(pose, why)| format!("{pose} ({why})"))
+                .collect();
+            println!(
+                "inconclusive: not measured: {}; {figures}",
+                missed.join(", ")
+            );
+            anyhow::bail!("the check is incomplete: check the instrument and run it again")
+        }
     }
 }

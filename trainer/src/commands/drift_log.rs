@@ -23,7 +23,10 @@ pub struct DriftArgs {
     drift_log: Option<PathBuf>,
     /// Measure no reference configuration and keep no drift log (an instrument that can only
     /// measure the plan's configurations, such as a replayed export).
-    #[arg(long, conflicts_with = "registration")]
+    #[arg(
+        long,
+        conflicts_with_all = ["registration", "drift_log", "accept_drift", "warm_up_limit"]
+    )]
     pub no_reference: bool,
     /// Configurations between two measurements of the reference, besides those at the start and
     /// the end of every run (0: only those).
@@ -57,8 +60,8 @@ impl DriftArgs {
             .unwrap_or_else(|| out.with_extension("drift.csv"))
     }
 
-    /// The options checked.
-    fn check_options(&self) -> anyhow::Result<Option<WarmUp>> {
+    /// The options checked (before anything is opened).
+    pub fn check_options(&self) -> anyhow::Result<Option<WarmUp>> {
         let positive = |name: &str, value: f64| {
             anyhow::ensure!(
                 value.is_finite() && value > 0.0,
@@ -143,9 +146,20 @@ fn record_frame(
     }
 }
 
+/// The decisions after which the reference was within the limit of its baseline (or became it).
+const GOOD: [&str; 3] = ["baseline", "ok", "accepted"];
+
 impl DriftLog {
-    /// Opens the log of the record `out` (same kind and settings), reads it, and sets up the
-    /// drift check of this run and the record's frame (`registration`: this run's, if any).
+    /// Opens the log of the record `out` (same kind, and `settings` with the record's name: a
+    /// log belongs to one record), reads it, and sets up the drift check of this run and the
+    /// record's frame (`registration`: this run's, if any). `recorded`: the ids the record
+    /// holds, in its order.
+    ///
+    /// Refused: a log that is missing or empty while the record holds rows (the frame and the
+    /// baseline they were measured under are lost), a log with measurements of the reference but
+    /// no baseline, and a campaign that stopped on drift while the configurations recorded since
+    /// the last good reference are still in the record (delete them, or keep them with
+    /// `--accept-drift`).
     pub fn open(
         args: &DriftArgs,
         out: &Path,
@@ -153,28 +167,74 @@ impl DriftLog {
         kind: JournalKind,
         settings: &str,
         registration: Option<&RegistrationFile>,
+        recorded: &[String],
     ) -> anyhow::Result<(Self, DriftCheck, Vec<Pose>)> {
         let warm_up = args.check_options()?;
         let path = args.log_path(out);
+        let record_name = out
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let journal = MeasurementsJournal::open(
+            &path,
+            kind,
+            &format!("{settings}; drift log of {record_name}"),
+            &DRIFT_COLUMNS,
+        )?;
+        let entries: Records<DriftEntry> = read_drift_log(&path)?;
+        let last_good = entries
+            .iter()
+            .rev()
+            .find(|e| GOOD.contains(&e.decision.as_str()));
+        let checked_references = entries.iter().any(|e| e.event != "warm-up");
         anyhow::ensure!(
-            path != out,
-            "--drift-log {}: the record and its drift log must be two files",
+            last_good.is_some() || !checked_references,
+            "{}: it measured the reference but holds no baseline (decision baseline or \
+             accepted): it was edited; restore it, or start a new record",
             path.display()
         );
-        let journal = MeasurementsJournal::open(&path, kind, settings, &DRIFT_COLUMNS)?;
-        let entries: Records<DriftEntry> = read_drift_log(&path)?;
+        let good_count = last_good.map_or(0, |e| e.configurations);
+        anyhow::ensure!(
+            recorded.is_empty() || last_good.is_some(),
+            "{}: the record {} holds {} configurations but its drift log has no measurement of \
+             the reference: the frame and the baseline they were measured under are lost \
+             (restore the log, or start a new record)",
+            path.display(),
+            out.display(),
+            recorded.len()
+        );
+        let suspects: Vec<String> = recorded.get(good_count..).unwrap_or_default().to_vec();
+        let stopped = entries.last().is_some_and(|e| e.decision == "stopped");
+        if stopped && !suspects.is_empty() && !args.accept_drift {
+            anyhow::bail!(
+                "{}: the campaign stopped on drift; the configurations recorded since the last \
+                 good measurement of the reference ({}) may hold it: delete their lines from {} \
+                 to measure them again, or run with --accept-drift to keep them",
+                path.display(),
+                suspects.join(", "),
+                out.display()
+            );
+        }
         let now = registration.map(|r| r.instrument_pose);
-        let (frame, note) = record_frame(
+        let (frame, mut note) = record_frame(
             entries.first().map(|e| e.instrument_pose).unwrap_or(now),
             entries.last().and_then(|e| e.instrument_pose),
             now,
             &path,
         )?;
+        if stopped && !suspects.is_empty() {
+            let kept = format!("kept {} measured under the drift", suspects.join(", "));
+            note = Some(note.map_or(kept.clone(), |n| format!("{n}; {kept}")));
+        }
         let baseline = entries
             .iter()
             .rev()
             .find(|e| matches!(e.decision.as_str(), "baseline" | "accepted"))
             .map(|e| e.reference.observed.clone());
+        let end_pending = !recorded.is_empty()
+            && !entries
+                .last()
+                .is_some_and(|e| e.event == "end" && e.configurations == recorded.len());
         let check = DriftCheck {
             pose_mm_deg: geometry.home,
             every: args.reference_every,
@@ -184,6 +244,8 @@ impl DriftLog {
             baseline,
             first_number: entries.len() + 1,
             note,
+            suspects: if stopped { Vec::new() } else { suspects },
+            end_pending,
         };
         Ok((
             Self {

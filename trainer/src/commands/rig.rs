@@ -23,9 +23,10 @@ pub struct RigArgs {
     #[arg(long, default_value = "/usr/bin/python3", value_name = "PROGRAM")]
     linuxcnc_python: String,
     /// With --machine linuxcnc: the HAL pins of the drives' commands, # for the joint number
-    /// (the hexacomp component's outputs); motion's motor commands where they do not exist.
-    #[arg(long, default_value = "hexacomp.0.motor-out-#", value_name = "PINS")]
-    linuxcnc_drive_pins: String,
+    /// (default: the hexacomp component's outputs hexacomp.0.motor-out-#, or motion's motor
+    /// commands on a machine without the component).
+    #[arg(long, value_name = "PINS")]
+    linuxcnc_drive_pins: Option<String>,
     /// Seconds a move may take before the machine counts as stuck.
     #[arg(long, default_value_t = 600.0, value_name = "SECONDS")]
     move_timeout: f64,
@@ -242,7 +243,11 @@ impl RigArgs {
                     geometry,
                     &LinuxCncOptions {
                         python: self.linuxcnc_python.clone(),
-                        drive_pins: self.linuxcnc_drive_pins.clone(),
+                        drive_pins: self
+                            .linuxcnc_drive_pins
+                            .clone()
+                            .unwrap_or_else(|| "hexacomp.0.motor-out-#".into()),
+                        drive_pins_given: self.linuxcnc_drive_pins.is_some(),
                         move_timeout: Self::seconds("move-timeout", self.move_timeout)?,
                     },
                 )?);

@@ -10,8 +10,8 @@ use hexacomp_core::Geometry;
 use hexacomp_trainer::iso9283::{TestPoseOptions, cycle_poses, test_cube};
 use hexacomp_trainer::registration::InstrumentMpe;
 use hexacomp_trainer::table::Table;
-use hexacomp_trainer::verify::{PoseTest, characteristics_of};
-use hexacomp_trainer::verify_report::{Conditions, VerifyReport, html, raw_csv};
+use hexacomp_trainer::verify::{PoseTest, TestRun, characteristics_of};
+use hexacomp_trainer::verify_report::{Conditions, VerifyReport, html, improvement, raw_csv};
 
 /// Test the machine's pose accuracy and repeatability as ISO 9283 defines them.
 ///
@@ -160,6 +160,9 @@ pub fn run(geometry: &Geometry, args: &VerifyArgs) -> anyhow::Result<()> {
             seed: args.rig.seed,
         },
     )?;
+    if let (Some(before), Some(path)) = (&before, &args.before) {
+        before.check_same_poses(&poses, &path.display().to_string())?;
+    }
     let cycles = usize::from(args.cycles);
 
     let super::rig::Rig {
@@ -200,17 +203,31 @@ pub fn run(geometry: &Geometry, args: &VerifyArgs) -> anyhow::Result<()> {
         cycles,
         instrument_frame,
         options,
+        approach: poses.iter().find(|p| p.name == "P2").cloned(),
     };
-    let run = test.run(machine.as_mut(), instrument.as_mut(), &mut || bar.inc(1));
+    let mut run = TestRun::default();
+    let outcome = test.run(machine.as_mut(), instrument.as_mut(), &mut run, &mut || {
+        bar.inc(1)
+    });
     bar.finish_and_clear();
-    let run = run?;
     for missed in &run.missed {
         eprintln!(
             "{} in cycle {} was not measured ({}): left out of its figures",
             missed.pose, missed.cycle, missed.why
         );
     }
-    let figures = characteristics_of(&poses, &run.attained)?;
+    // The attained poses are kept whatever happens next (a machine that stops, a pose with too
+    // few of them for its figures).
+    super::write_bytes(&args.out, raw_csv(&run.attained).as_bytes())?;
+    let kept = |e: anyhow::Error| {
+        e.context(format!(
+            "the {} attained poses measured are in {}",
+            run.attained.len(),
+            args.out.display()
+        ))
+    };
+    outcome.map_err(|e| kept(e.into()))?;
+    let figures = characteristics_of(&poses, &run.attained).map_err(|e| kept(e.into()))?;
     let report = VerifyReport::new(
         Conditions {
             rig: args.rig.description(),
@@ -234,11 +251,7 @@ pub fn run(geometry: &Geometry, args: &VerifyArgs) -> anyhow::Result<()> {
         &run.missed,
         humantime::format_rfc3339_seconds(SystemTime::now()).to_string(),
     );
-    if let (Some(before), Some(path)) = (&before, &args.before) {
-        report.check_comparable(before, &path.display().to_string())?;
-    }
     print_figures(&report, before.as_ref());
-    super::write_bytes(&args.out, raw_csv(&run.attained).as_bytes())?;
     super::write_bytes(&json_path, report.to_json().as_bytes())?;
     super::write_bytes(&report_path, html(&report, before.as_ref()).as_bytes())?;
     eprintln!(
@@ -274,11 +287,10 @@ fn print_figures(report: &VerifyReport, before: Option<&VerifyReport>) {
     println!("{table}");
     match before {
         Some(before) => println!(
-            "worst AP_P {:.2} µm (before {:.2} µm: {:.1}× better); worst RP_l {:.2} µm (before \
-             {:.2} µm)",
+            "worst AP_P {:.2} µm (before {:.2} µm: {}); worst RP_l {:.2} µm (before {:.2} µm)",
             report.worst_ap_p_mm() * 1000.0,
             before.worst_ap_p_mm() * 1000.0,
-            before.worst_ap_p_mm() / report.worst_ap_p_mm(),
+            improvement(before.worst_ap_p_mm(), report.worst_ap_p_mm()),
             report.worst_rp_l_mm() * 1000.0,
             before.worst_rp_l_mm() * 1000.0
         ),
