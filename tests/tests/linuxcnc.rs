@@ -852,3 +852,153 @@ fn a_campaign_through_linuxcnc_killed_and_resumed_calibrates_and_verify_shows_ap
         "{results}"
     );
 }
+
+/// The ini `text` with the joints' settings the export lists (`#   [JOINT_N] offset …: KEY = V,
+/// …`) put in their sections.
+fn with_moved_joints(text: &str, export: &str) -> String {
+    let mut settings: BTreeMap<(String, String), String> = BTreeMap::new();
+    for line in export.lines().filter(|l| l.starts_with("#   [JOINT_")) {
+        let section = line[line.find('[').unwrap() + 1..line.find(']').unwrap()].to_string();
+        let (_, list) = line.split_once(": ").unwrap();
+        for item in list.split(", ") {
+            let (key, value) = item.split_once(" = ").unwrap();
+            settings.insert((section.clone(), key.to_string()), value.to_string());
+        }
+    }
+    let mut section = String::new();
+    text.lines()
+        .map(|line| {
+            let trimmed = line.trim();
+            if let Some(name) = trimmed.strip_prefix('[').and_then(|l| l.strip_suffix(']')) {
+                section = name.to_string();
+            }
+            match trimmed.split_once('=') {
+                Some((key, _)) => settings
+                    .get(&(section.clone(), key.trim().to_string()))
+                    .map_or(line.to_string(), |v| format!("{} = {v}", key.trim())),
+                None => line.to_string(),
+            }
+        })
+        .collect::<Vec<_>>()
+        .join("\n")
+        + "\n"
+}
+
+#[test]
+fn an_exported_identified_geometry_gives_linuxcncs_inverse_and_forward_kinematics() {
+    if !linuxcnc_available("export") {
+        return;
+    }
+    let _guard = one_at_a_time();
+    let sim = SimConfig::prepare("export", fast_moves);
+    // An identified geometry: the configuration's joints moved by up to a millimetre, leg
+    // offsets as identify finds them.
+    let mut identified = sim.geometry.clone();
+    for leg in 0..6 {
+        let k = leg as f64;
+        identified.base_joints[leg] += glam::DVec3::new(0.3 * k - 0.7, -0.2 + 0.11 * k, 0.05 * k);
+        identified.platform_joints[leg] += glam::DVec3::new(-0.1 * k, 0.4 - 0.13 * k, 0.2);
+    }
+    identified.leg_offsets = [0.5, -0.25, 0.125, 0.0, 0.0625, -1.0];
+    identified.save(&sim.path("identified.toml")).unwrap();
+    std::fs::copy(binary("hexacomp-trainer"), sim.path("hexacomp-trainer")).unwrap();
+    let export = sim.run(
+        sim.path("hexacomp-trainer"),
+        &[
+            "--geometry",
+            "identified.toml",
+            "export",
+            "--linuxcnc",
+            "hexapod-hexacomp.ini",
+            "--out",
+            "identified.hal",
+        ],
+    );
+    assert!(export.status.success(), "{export:?}");
+    // Put it in as the export says: the HAL file's genhexkins lines, the joints' settings.
+    let hal = std::fs::read_to_string(sim.path("identified.hal")).unwrap();
+    std::fs::write(sim.path("kinematics.hal"), &hal).unwrap();
+    let ini = std::fs::read_to_string(sim.path("hexapod-hexacomp.ini")).unwrap();
+    // The joints' home offsets before: the encoder lengths at the home switches (inch).
+    let home_offsets: Vec<f64> = ini
+        .lines()
+        .filter_map(|l| l.trim().strip_prefix("HOME_OFFSET"))
+        .map(|v| v.trim_start_matches([' ', '=']).trim().parse().unwrap())
+        .collect();
+    assert_eq!(home_offsets.len(), 6);
+    let moved = with_moved_joints(&ini, &hal);
+    assert_ne!(moved, ini, "no joint settings moved");
+    std::fs::write(sim.path("hexapod-hexacomp.ini"), moved).unwrap();
+    // Compensation off: this test is about the kinematics.
+    let wiring = std::fs::read_to_string(sim.path("hexacomp.hal")).unwrap();
+    std::fs::write(
+        sim.path("hexacomp.hal"),
+        wiring.replace("setp hexacomp.0.enable 1", "setp hexacomp.0.enable 0"),
+    )
+    .unwrap();
+
+    let mut sampler =
+        WorkspaceSampler::new(&identified, 5, SamplerOptions::default()).expect("sampler");
+    let poses: Vec<[f64; 6]> = (0..20)
+        .map(|_| {
+            let pose = sampler.sample().expect("a workspace pose").to_mm_deg();
+            std::array::from_fn(|k| {
+                let value = if k < 3 {
+                    pose[k] / MM_PER_INCH
+                } else {
+                    pose[k]
+                };
+                (value * 1e6).round() / 1e6
+            })
+        })
+        .collect();
+    let results = sim.start_linuxcnc(json!({ "mdi": poses })).finish(SESSION);
+    // Inverse: LinuxCNC's joints are the real leg lengths, hexacomp's commanded ones plus the
+    // offsets; and the motors (their zero at the home switch, where the encoder read the home
+    // offset of before) are commanded hexacomp's commanded lengths.
+    let mut worst_inverse = 0.0f64;
+    for record in results["mdi"].as_array().expect("mdi results") {
+        let pose: [f64; 6] = serde_json::from_value(record["pose"].clone()).unwrap();
+        let joints: [f64; 6] = serde_json::from_value(record["joints"].clone()).unwrap();
+        let motors: [f64; 6] = serde_json::from_value(record["motors"].clone()).unwrap();
+        let legs = inverse_kinematics(&identified, &Pose::from_mm_deg(to_mm_deg(&pose))).lengths;
+        for leg in 0..6 {
+            let encoder = (motors[leg] + home_offsets[leg]) * MM_PER_INCH;
+            worst_inverse = worst_inverse.max((encoder - legs[leg]).abs());
+            let difference =
+                (joints[leg] * MM_PER_INCH - (legs[leg] + identified.leg_offsets[leg])).abs();
+            worst_inverse = worst_inverse.max(difference);
+        }
+    }
+    assert!(
+        worst_inverse < 1e-6,
+        "inverse kinematics differ by {worst_inverse} mm"
+    );
+    // Forward: the pose LinuxCNC's forward kinematics gave for the joints at home is the one
+    // hexacomp's gives for the same legs.
+    let joints: [f64; 6] = serde_json::from_value(results["homed_joints"].clone()).unwrap();
+    let homed: [f64; 6] = serde_json::from_value(results["homed_position"].clone()).unwrap();
+    let encoder: [f64; 6] =
+        std::array::from_fn(|leg| joints[leg] * MM_PER_INCH - identified.leg_offsets[leg]);
+    let forward = hexacomp_core::forward_kinematics(
+        &identified,
+        &encoder,
+        &identified.home_pose(),
+        &hexacomp_core::kinematics::ForwardOptions::default(),
+    )
+    .expect("forward kinematics")
+    .to_mm_deg();
+    let homed = to_mm_deg(&homed);
+    let worst_forward = (0..6)
+        .map(|k| (forward[k] - homed[k]).abs())
+        .fold(0.0, f64::max);
+    assert!(
+        worst_forward < 1e-6,
+        "forward kinematics: LinuxCNC {homed:?}, hexacomp {forward:?}"
+    );
+    eprintln!(
+        "exported geometry: inverse kinematics agree to {worst_inverse:.1e} mm over {} poses, \
+         forward to {worst_forward:.1e} (mm, degrees) at home",
+        poses.len()
+    );
+}

@@ -198,6 +198,95 @@ impl LinuxCncHexapod {
     }
 }
 
+/// The largest distance a joint of an exported geometry may lie from the configuration's, mm:
+/// farther, it is another machine's (an identification moves joints by millimetres at most).
+pub const MAX_EXPORT_SHIFT_MM: f64 = 25.0;
+
+/// The joint settings of the ini that a leg's zero offset moves (joint coordinates, machine
+/// units).
+const OFFSET_KEYS: [&str; 4] = ["HOME_OFFSET", "HOME", "MIN_LIMIT", "MAX_LIMIT"];
+
+/// The HAL lines that put `geometry` (an identified one, mm; `source` names it) into the LinuxCNC
+/// hexapod configuration `ini_path`: `setp genhexkins.base.N.x …` and `genhexkins.platform.N.…`
+/// in the configuration's units, to replace its own. genhexkins has no leg zero offsets: an
+/// offset `o_i` (real joint-to-joint length minus encoder length) moves the joint's
+/// `HOME_OFFSET`, `HOME`, `MIN_LIMIT` and `MAX_LIMIT` by `o_i`, which the text lists as comments
+/// with the new values for the ini. Refused when a joint lies more than
+/// [`MAX_EXPORT_SHIFT_MM`] from the configuration's (another machine).
+pub fn genhexkins_hal(ini_path: &Path, geometry: &Geometry, source: &str) -> Result<String> {
+    let current = LinuxCncHexapod::read(ini_path)?;
+    let ini = Ini::read(ini_path)?;
+    let mm = current.mm_per_unit;
+    let joints = [
+        ("base", &geometry.base_joints, &current.base_joints),
+        (
+            "platform",
+            &geometry.platform_joints,
+            &current.platform_joints,
+        ),
+    ];
+    for (part, new, old) in &joints {
+        for leg in 0..LEGS {
+            let shift = (new[leg] - old[leg] * mm).length();
+            if shift > MAX_EXPORT_SHIFT_MM {
+                return Err(config_error(
+                    ini_path,
+                    &format!(
+                        "{source}: its {part} joint {leg} lies {shift:.1} mm from this \
+                         configuration's: it is another machine's geometry"
+                    ),
+                ));
+            }
+        }
+    }
+    let unit = if mm == 1.0 {
+        "mm".to_string()
+    } else {
+        format!("machine units of {mm} mm")
+    };
+    let mut text = format!(
+        "# genhexkins geometry of {} from {source} (hexacomp-trainer export --linuxcnc), in {unit}:\n\
+         # base joints B_i in the base frame, platform joints A_i in the platform frame. Replace the\n\
+         # genhexkins setp lines of the configuration's HAL file with these.\n",
+        current.machine
+    );
+    for (part, new, _) in &joints {
+        for (leg, point) in new.iter().enumerate() {
+            for (axis, value) in ["x", "y", "z"].iter().zip(point.to_array()) {
+                text += &format!("setp genhexkins.{part}.{leg}.{axis} {}\n", value / mm);
+            }
+        }
+    }
+    if geometry.leg_offsets.iter().all(|o| *o == 0.0) {
+        text += "# No leg zero offsets: the joints' settings in the ini stay as they are.\n";
+        return Ok(text);
+    }
+    text += "# Leg zero offsets (real joint-to-joint length minus encoder length) are no genhexkins\n\
+             # parameter: set the joints' positions in the ini to these values (each moved by the\n\
+             # leg's offset), so that the joints hold real lengths:\n";
+    for (leg, offset) in geometry.leg_offsets.iter().enumerate() {
+        let section = format!("JOINT_{leg}");
+        let moved: Vec<String> = OFFSET_KEYS
+            .iter()
+            .filter_map(|key| {
+                let value = ini.first(&section, key)?;
+                let [old] = parse_numbers::<1>(value).ok()?;
+                Some(format!("{key} = {}", old + offset / mm))
+            })
+            .collect();
+        text += &format!(
+            "#   [{section}] offset {} {unit}: {}\n",
+            offset / mm,
+            if moved.is_empty() {
+                "no HOME_OFFSET, HOME, MIN_LIMIT or MAX_LIMIT in the ini".to_string()
+            } else {
+                moved.join(", ")
+            }
+        );
+    }
+    Ok(text)
+}
+
 /// The workspace assumed when none is given: a cylinder of radius a tenth of the mean base joint
 /// radius about the home position, as high as it is wide, tilt up to 10°, yaw ±10° (mm, degrees).
 pub fn default_workspace(base_joints: &[DVec3; LEGS], home: [f64; 6]) -> Workspace {
@@ -352,6 +441,50 @@ mod tests {
     fn read_edited(name: &str, edit: impl FnOnce(String) -> String) -> Result<LinuxCncHexapod> {
         let dir = edited(name, edit);
         LinuxCncHexapod::read(&dir.path().join("hexapod-hexacomp.ini"))
+    }
+
+    /// The example's geometry with its joints moved by up to a millimetre and leg offsets, as an
+    /// identification gives.
+    fn identified_example() -> Geometry {
+        let mut g = LinuxCncHexapod::read(&example_ini())
+            .unwrap()
+            .to_geometry(&ConversionOptions::default())
+            .unwrap();
+        for leg in 0..LEGS {
+            let k = leg as f64;
+            g.base_joints[leg] += DVec3::new(0.3 * k - 0.7, -0.2 + 0.11 * k, 0.05 * k);
+            g.platform_joints[leg] += DVec3::new(-0.1 * k, 0.4 - 0.13 * k, 0.2);
+        }
+        g.leg_offsets = [0.5, -0.25, 0.125, 0.0, 0.0625, -1.0];
+        g
+    }
+
+    #[test]
+    fn an_exported_geometry_reads_back_exactly_and_lists_the_joints_moved_by_the_offsets() {
+        let identified = identified_example();
+        let text = genhexkins_hal(&example_ini(), &identified, "identified.toml").unwrap();
+        let dir = edited("kinematics.hal", |_| text.clone());
+        let back = LinuxCncHexapod::read(&dir.path().join("hexapod-hexacomp.ini"))
+            .unwrap()
+            .to_geometry(&ConversionOptions::default())
+            .unwrap();
+        for leg in 0..LEGS {
+            assert!((back.base_joints[leg] - identified.base_joints[leg]).length() < 1e-9);
+            assert!((back.platform_joints[leg] - identified.platform_joints[leg]).length() < 1e-9);
+        }
+        // Leg 0: offset 0.5 mm = 0.5/25.4 in on the example's 29.7466 in home offset.
+        let moved = format!("HOME_OFFSET = {}", 29.7466 + 0.5 / 25.4);
+        let line = text.lines().find(|l| l.contains("[JOINT_0]")).unwrap();
+        assert!(
+            line.contains(&moved) && line.contains("MAX_LIMIT = "),
+            "{line}"
+        );
+        // Another machine's geometry is refused.
+        let error = genhexkins_hal(&example_ini(), &Geometry::prototype(), "p.toml").unwrap_err();
+        assert!(
+            error.to_string().contains("another machine's geometry"),
+            "{error}"
+        );
     }
 
     #[test]

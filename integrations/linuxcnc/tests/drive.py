@@ -6,7 +6,8 @@ E-stop, switches the machine on, homes, enables world (teleop) mode, then, as th
   "sampler": {"channel": N, "cfg": TYPES, "out": FILE}
                                            records every sample of the HAL sampler's FIFO N
                                            (full precision, one line of Python reprs each);
-  "mdi": [[x, y, z, a, b, c], ...]         moves to each pose by MDI G0 and records the joints;
+  "mdi": [[x, y, z, a, b, c], ...]         moves to each pose by MDI G0 and records the joints
+                                           and the motor commands;
   "program": FILE                          runs the G-code program to its end;
   "started": FILE                          is created once the program runs;
   "unhomed": {"ready": FILE, "go": FILE}    before homing: creates "ready" with the machine on
@@ -19,7 +20,8 @@ E-stop, switches the machine on, homes, enables world (teleop) mode, then, as th
                                            faults in S seconds with no service answering,
                                            creates "measured", waits for the test to create
                                            "restarted" and then for the component to connect;
-and writes "results" (JSON): homing, the recorded poses and joints, the program's outcome and
+and writes "results" (JSON): homing (the joints at home and the position the forward kinematics
+gave for them), the recorded poses and joints, the program's outcome and
 every message of LinuxCNC's error channel. Its own failures also end up in the results.
 """
 import json
@@ -100,6 +102,10 @@ def prepare_machine():
     command.wait_complete(5)
     command.mode(linuxcnc.MODE_MDI)
     command.wait_complete(5)
+    # Where the forward kinematics put the platform for the joints at home.
+    RESULTS["homed_joints"] = steady_joints(10, "home")
+    stat.poll()
+    RESULTS["homed_position"] = list(stat.position[:6])
 
 
 def move_to_poses(poses):
@@ -121,6 +127,7 @@ def move_to_poses(poses):
             "pose": pose,
             "position": list(stat.position[:6]),
             "joints": joints,
+            "motors": [hal.get_value(f"joint.{j}.motor-pos-cmd") for j in range(6)],
         })
 
 

@@ -6,6 +6,7 @@ pub mod check;
 pub mod deploy;
 pub mod drift_log;
 pub mod evaluate;
+pub mod export;
 pub mod geometry;
 pub mod identify;
 pub mod inspect;
