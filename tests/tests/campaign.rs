@@ -725,3 +725,79 @@ fn a_drift_log_lost_edited_or_shared_is_refused_and_a_missing_end_reference_is_t
     let error = text(&trainer(d, &["campaign", "--plan", "r.csv", "--out", "r-out.csv"]).stderr);
     assert!(error.contains("r.csv:2: configuration R1"), "{error}");
 }
+
+/// Runs the trainer in `dir` with `input` on its standard input; its output.
+fn trainer_typing(dir: &Path, args: &[&str], input: &str) -> std::process::Output {
+    let mut child = Command::new(binary("hexacomp-trainer"))
+        .args(args)
+        .current_dir(dir)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    child
+        .stdin
+        .take()
+        .unwrap()
+        .write_all(input.as_bytes())
+        .unwrap();
+    child.wait_with_output().unwrap()
+}
+
+#[test]
+fn an_operator_confirms_the_moves_and_types_the_readings_and_the_end_of_input_stops_the_campaign() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(
+        d.join("plan.csv"),
+        "id,x,y,z,a,b,c\nA,0,0,280,0,0,0\nB,10,0,290,1,0,0\n",
+    )
+    .unwrap();
+    let args = [
+        "campaign",
+        "--plan",
+        "plan.csv",
+        "--out",
+        "m.csv",
+        "--machine",
+        "manual",
+        "--instrument",
+        "manual",
+        "--readings",
+        "2",
+        "--no-reference",
+    ];
+    // A: confirmed, two readings (P2 not seen in both). B: confirmed, a line that is not a
+    // reading (retried), then the input ends: the campaign stops, A stays recorded.
+    let output = trainer_typing(d, &args, "\n1,2,3,,,,7,8,9\n1,2,3.5,,,,7,8,9.5\n\n1,2,3\n");
+    let said = text(&output.stderr);
+    assert!(!output.status.success(), "{said}");
+    assert!(
+        said.contains("move to configuration A: x y z a b c = 0.0000"),
+        "{said}"
+    );
+    assert!(said.contains("has 3 cells, expected 9"), "{said}");
+    assert!(said.contains("the input ended"), "{said}");
+    let rows = read_measurements(&d.join("m.csv")).unwrap();
+    assert_eq!(rows.len(), 1);
+    assert_eq!(
+        rows[0].observed,
+        hexacomp_core::observation::Observation::Targets(vec![
+            Some(glam::DVec3::new(1.0, 2.0, 3.25)),
+            None,
+            Some(glam::DVec3::new(7.0, 8.0, 9.25)),
+        ])
+    );
+    // Run again: only B is asked for; "stop" at the move ends the campaign without a row.
+    let output = trainer_typing(d, &args, "stop\n");
+    assert!(
+        text(&output.stderr).contains("stopped by the operator"),
+        "{}",
+        text(&output.stderr)
+    );
+    assert_eq!(data_lines(&d.join("m.csv")).len(), 1);
+    let output = trainer_typing(d, &args, "\n4,5,6,7,8,9,10,11,12\n4,5,6,7,8,9,10,11,12\n");
+    assert!(output.status.success(), "{}", text(&output.stderr));
+    assert_eq!(read_measurements(&d.join("m.csv")).unwrap().len(), 2);
+}

@@ -35,58 +35,62 @@ pub struct CommandInstrument {
     pub timeout: Duration,
 }
 
-impl CommandInstrument {
-    /// Parses the program's line into an observation.
-    fn parse(&self, line: &str) -> Result<Observation, String> {
-        let cells: Vec<&str> = line.split(',').map(str::trim).collect();
-        let expected = if self.probe { 6 } else { 3 * self.targets };
-        if cells.len() != expected {
-            return Err(format!(
-                "the line {line:?} has {} cells, expected {expected} ({})",
-                cells.len(),
-                if self.probe {
-                    "a pose x,y,z,a,b,c".to_string()
-                } else {
-                    format!("{} targets × x,y,z", self.targets)
-                }
-            ));
-        }
-        let number = |text: &str| -> Result<Option<f64>, String> {
-            if text.is_empty() {
-                return Ok(None);
+/// Parses an instrument's line (a program's or an operator's): `targets` points `p1x..pNz` in the
+/// instrument's frame (three empty cells for a target not seen), or with `probe` a pose
+/// `x,y,z,a,b,c` (mm, degrees); numbers beyond [`MAX_COORDINATE_MM`] are refused.
+pub(crate) fn parse_reading(
+    line: &str,
+    targets: usize,
+    probe: bool,
+) -> Result<Observation, String> {
+    let cells: Vec<&str> = line.split(',').map(str::trim).collect();
+    let expected = if probe { 6 } else { 3 * targets };
+    if cells.len() != expected {
+        return Err(format!(
+            "the line {line:?} has {} cells, expected {expected} ({})",
+            cells.len(),
+            if probe {
+                "a pose x,y,z,a,b,c".to_string()
+            } else {
+                format!("{targets} targets × x,y,z")
             }
-            text.parse::<f64>()
-                .ok()
-                .filter(|v| v.is_finite() && v.abs() <= MAX_COORDINATE_MM)
-                .map(Some)
-                .ok_or_else(|| {
-                    format!(
-                        "{text:?} in the line {line:?} is not a number of at most \
-                         {MAX_COORDINATE_MM:e} in size"
-                    )
-                })
-        };
-        let values: Vec<Option<f64>> = cells.iter().map(|c| number(c)).collect::<Result<_, _>>()?;
-        if self.probe {
-            let pose: Option<Vec<f64>> = values.into_iter().collect();
-            let pose = pose.ok_or_else(|| format!("the pose line {line:?} has empty cells"))?;
-            return Ok(Observation::Pose(std::array::from_fn(|k| pose[k])));
-        }
-        let targets = values
-            .chunks(3)
-            .enumerate()
-            .map(|(j, xyz)| match (xyz[0], xyz[1], xyz[2]) {
-                (Some(x), Some(y), Some(z)) => Ok(Some(DVec3::new(x, y, z))),
-                (None, None, None) => Ok(None),
-                _ => Err(format!(
-                    "target {} of the line {line:?} is partly empty: a target is measured whole \
-                     or left empty",
-                    j + 1
-                )),
-            })
-            .collect::<Result<Vec<_>, _>>()?;
-        Ok(Observation::Targets(targets))
+        ));
     }
+    let number = |text: &str| -> Result<Option<f64>, String> {
+        if text.is_empty() {
+            return Ok(None);
+        }
+        text.parse::<f64>()
+            .ok()
+            .filter(|v| v.is_finite() && v.abs() <= MAX_COORDINATE_MM)
+            .map(Some)
+            .ok_or_else(|| {
+                format!(
+                    "{text:?} in the line {line:?} is not a number of at most \
+                         {MAX_COORDINATE_MM:e} in size"
+                )
+            })
+    };
+    let values: Vec<Option<f64>> = cells.iter().map(|c| number(c)).collect::<Result<_, _>>()?;
+    if probe {
+        let pose: Option<Vec<f64>> = values.into_iter().collect();
+        let pose = pose.ok_or_else(|| format!("the pose line {line:?} has empty cells"))?;
+        return Ok(Observation::Pose(std::array::from_fn(|k| pose[k])));
+    }
+    let targets = values
+        .chunks(3)
+        .enumerate()
+        .map(|(j, xyz)| match (xyz[0], xyz[1], xyz[2]) {
+            (Some(x), Some(y), Some(z)) => Ok(Some(DVec3::new(x, y, z))),
+            (None, None, None) => Ok(None),
+            _ => Err(format!(
+                "target {} of the line {line:?} is partly empty: a target is measured whole \
+                     or left empty",
+                j + 1
+            )),
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    Ok(Observation::Targets(targets))
 }
 
 /// Has the kernel send `signal` to the program `command` starts when this process dies (any
@@ -214,6 +218,6 @@ impl Instrument for CommandInstrument {
         let line = std::str::from_utf8(first)
             .map_err(|_| ReadError::Failed(format!("{program}'s first line is not UTF-8 text")))?
             .trim_end_matches('\r');
-        self.parse(line).map_err(ReadError::Failed)
+        parse_reading(line, self.targets, self.probe).map_err(ReadError::Failed)
     }
 }

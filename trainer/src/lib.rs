@@ -4,9 +4,10 @@
 //!
 //! - [`plan`]: measuring configurations spread over the task workspace (the paper's Fig. 8);
 //! - [`acquire`]: measuring a plan on the virtual platform;
-//! - [`campaign`], [`command_instrument`], [`drift`]: a measuring campaign — the machine driven
-//!   through the plan, several readings per configuration, recorded as it goes and resumable,
-//!   its reference configuration watched for drift;
+//! - [`campaign`], [`command_instrument`], [`manual`], [`drift`]: a measuring campaign — the
+//!   machine driven through the plan, several readings per configuration (a program's or an
+//!   operator's), recorded as it goes and resumable, its reference configuration watched for
+//!   drift;
 //! - [`corrections`]: the robust Levenberg–Marquardt joint-correction solver (Fig. 2; Eq. 5,
 //!   Eq. 6, Eq. 7, Eq. 8, Eq. 9);
 //! - [`screening`]: gross-error screening — which configurations are excluded, and when an input
@@ -41,6 +42,7 @@ pub mod identify;
 pub mod iso9283;
 pub mod linuxcnc;
 pub mod linuxcnc_machine;
+pub mod manual;
 pub mod pipeline;
 pub mod plan;
 pub mod registration;

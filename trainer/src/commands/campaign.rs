@@ -38,11 +38,11 @@ use super::drift_log::DriftLog;
 /// (register again and give --registration, or --accept-drift). --warm-up-limit holds the first
 /// configuration until the reference settles.
 ///
-/// Machines: virtual (the built-in virtual platform), linuxcnc (a running, homed LinuxCNC).
-/// Instruments: virtual (its tracker,
+/// Machines: virtual (the built-in virtual platform), linuxcnc (a running, homed LinuxCNC),
+/// manual (the operator confirms each pose with Enter). Instruments: virtual (its tracker,
 /// standing at --instrument-pose, noise keyed on --seed and each configuration's id, so a resumed
 /// campaign records exactly what an uninterrupted one does), command (your program reads the
-/// tracker: see --instrument-command).
+/// tracker: see --instrument-command), manual (the operator types or pastes each reading).
 #[derive(Debug, clap::Args)]
 pub struct CampaignArgs {
     /// Poses CSV to measure (`hexacomp-trainer plan`).
@@ -163,7 +163,12 @@ pub fn run(geometry: &Geometry, args: &CampaignArgs) -> anyhow::Result<()> {
         done.len(),
         args.out.display()
     );
-    let bar = indicatif::ProgressBar::new(left as u64).with_style(
+    let bar = if args.rig.interactive() {
+        indicatif::ProgressBar::hidden()
+    } else {
+        indicatif::ProgressBar::new(left as u64)
+    }
+    .with_style(
         indicatif::ProgressStyle::with_template(
             "{bar:40} {pos}/{len} configurations ({elapsed}, about {eta} left)",
         )

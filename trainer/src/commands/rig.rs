@@ -10,6 +10,7 @@ use hexacomp_trainer::campaign::{
 };
 use hexacomp_trainer::command_instrument::CommandInstrument;
 use hexacomp_trainer::linuxcnc_machine::{LinuxCncMachine, LinuxCncOptions};
+use hexacomp_trainer::manual::{ManualInstrument, ManualMachine};
 use hexacomp_virtual::{DEFAULT_MACHINE_SEED, ErrorModel, ErrorVariant, VirtualPlatform};
 
 /// The machine, the instrument and how each pose is read.
@@ -89,6 +90,9 @@ enum MachineArg {
     /// G0 moves. With --instrument virtual the virtual platform stands in for its hardware,
     /// moved to what LinuxCNC commands the drives.
     Linuxcnc,
+    /// Moved by the operator or another controller: each pose is shown, Enter on standard
+    /// input confirms it.
+    Manual,
 }
 
 /// The instruments a campaign can read.
@@ -98,6 +102,8 @@ enum InstrumentArg {
     Virtual,
     /// A user's program (--instrument-command).
     Command,
+    /// The operator types or pastes each reading on standard input.
+    Manual,
 }
 
 /// A machine and an instrument, built and checked.
@@ -156,6 +162,12 @@ impl RigArgs {
                 .is_some_and(|p| p.iter().any(|v| *v != 0.0))
     }
 
+    /// Whether the operator answers on standard input (a manual machine or instrument): then no
+    /// progress bar is drawn over the prompts.
+    pub fn interactive(&self) -> bool {
+        self.machine == MachineArg::Manual || self.instrument == InstrumentArg::Manual
+    }
+
     /// A short description of the machine and the instrument for reports.
     pub fn description(&self) -> String {
         match self.instrument {
@@ -172,6 +184,11 @@ impl RigArgs {
                 self.instrument_command.as_deref().unwrap_or_default(),
                 if self.probe { " (probe)" } else { "" }
             ),
+            InstrumentArg::Manual => format!(
+                "{:?} machine, instrument read by the operator{}",
+                self.machine,
+                if self.probe { " (probe)" } else { "" }
+            ),
         }
     }
 
@@ -183,6 +200,7 @@ impl RigArgs {
         let instrument = match self.instrument {
             InstrumentArg::Virtual => "virtual instrument".to_string(),
             InstrumentArg::Command => format!("command {program:?}"),
+            InstrumentArg::Manual => "manual instrument".to_string(),
         };
         format!(
             "machine {:?} (seed {}, machine seed {}, {} errors); {instrument}{}; geometry {}",
@@ -221,7 +239,7 @@ impl RigArgs {
                 anyhow::ensure!(!words.is_empty(), "--instrument-command is empty");
                 words
             }
-            InstrumentArg::Virtual => Vec::new(),
+            InstrumentArg::Virtual | InstrumentArg::Manual => Vec::new(),
         };
         let instrument_pose = super::instrument_pose(self.instrument_pose.as_deref())?;
         let model = ErrorModel::variant(self.error_variant);
@@ -257,8 +275,22 @@ impl RigArgs {
                         platform: platform.clone(),
                         seed: self.seed,
                     }),
-                    InstrumentArg::Command => controller,
+                    InstrumentArg::Command | InstrumentArg::Manual => controller,
                 }
+            }
+            MachineArg::Manual => {
+                anyhow::ensure!(
+                    compensation.is_none(),
+                    "--model applies to the virtual machine"
+                );
+                anyhow::ensure!(
+                    self.instrument != InstrumentArg::Virtual,
+                    "the virtual instrument measures the virtual machine or LinuxCNC with the \
+                     virtual platform as its hardware, not a machine moved by hand"
+                );
+                Box::new(ManualMachine {
+                    geometry: geometry.clone(),
+                })
             }
         };
         let instrument: Box<dyn Instrument> = match self.instrument {
@@ -273,6 +305,10 @@ impl RigArgs {
                 targets: geometry.targets.len(),
                 probe: self.probe,
                 timeout,
+            }),
+            InstrumentArg::Manual => Box::new(ManualInstrument {
+                targets: geometry.targets.len(),
+                probe: self.probe,
             }),
         };
         Ok(Rig {

@@ -1,0 +1,102 @@
+//! The operator as machine and instrument: the campaign shows each pose on standard error and
+//! waits for the operator (or another controller) to confirm it on standard input; the operator
+//! types or pastes each reading as the instrument's software shows it.
+//!
+//! Units: mm and degrees; readings in the instrument's frame.
+
+use std::io::BufRead;
+
+use hexacomp_core::observation::Observation;
+use hexacomp_core::{Geometry, Pose, inverse_kinematics};
+
+use crate::campaign::{Arrival, Instrument, Machine, ReadError};
+use crate::command_instrument::parse_reading;
+use crate::error::{Error, Result};
+
+/// One line of standard input without its line end; `None` at the end of the input.
+fn read_line() -> std::io::Result<Option<String>> {
+    let mut line = String::new();
+    let read = std::io::stdin().lock().read_line(&mut line)?;
+    Ok((read > 0).then(|| line.trim_end_matches(['\n', '\r']).to_string()))
+}
+
+/// A machine moved by hand or by another controller: each pose is shown with its nominal legs,
+/// and an empty line (Enter) confirms the machine is there and settled; `stop` stops the campaign.
+#[derive(Debug, Clone)]
+pub struct ManualMachine {
+    /// The geometry whose inverse kinematics give the legs shown and recorded.
+    pub geometry: Geometry,
+}
+
+impl Machine for ManualMachine {
+    fn go_to(&mut self, id: &str, pose: &Pose) -> Result<Arrival> {
+        let legs = inverse_kinematics(&self.geometry, pose).lengths;
+        let shown = pose.to_mm_deg().map(|v| format!("{v:.4}")).join(" ");
+        let lengths = legs.map(|q| format!("{q:.4}")).join(" ");
+        eprintln!(
+            "move to configuration {id}: x y z a b c = {shown} (legs {lengths} mm), then press \
+             Enter (stop: end the campaign)"
+        );
+        match read_line() {
+            Ok(Some(line)) if line.trim().is_empty() => Ok(Arrival {
+                legs,
+                drives: legs,
+                reached: None,
+            }),
+            Ok(Some(line)) if line.trim() == "stop" => Err(Error::Machine(
+                "stopped by the operator; run again to continue".into(),
+            )),
+            Ok(Some(line)) => Err(Error::Machine(format!(
+                "configuration {id}: {line:?} is no confirmation (Enter confirms, stop ends)"
+            ))),
+            Ok(None) => Err(Error::Machine(format!(
+                "configuration {id}: the input ended before the move was confirmed"
+            ))),
+            Err(e) => Err(Error::Machine(format!("reading the confirmation: {e}"))),
+        }
+    }
+}
+
+/// An instrument read by the operator: each reading is typed or pasted as one CSV line, the
+/// targets `p1x..pNz` in the instrument's frame (three empty cells for a target not seen) or,
+/// as a probe, the pose `x,y,z,a,b,c`. An empty line is a failed reading (retried); a line that
+/// does not parse is a failed reading named with its cause.
+#[derive(Debug, Clone, Copy)]
+pub struct ManualInstrument {
+    /// How many targets the geometry names.
+    pub targets: usize,
+    /// The operator reads a pose instead of targets.
+    pub probe: bool,
+}
+
+impl Instrument for ManualInstrument {
+    fn read(
+        &mut self,
+        id: &str,
+        reading: usize,
+        _pose_mm_deg: &[f64; 6],
+        _arrival: &Arrival,
+    ) -> std::result::Result<Observation, ReadError> {
+        let what = if self.probe {
+            "the pose x,y,z,a,b,c (mm, degrees)".to_string()
+        } else {
+            format!("the targets p1x..p{}z (mm)", self.targets)
+        };
+        eprintln!(
+            "configuration {id}, reading {}: type or paste {what} and press Enter",
+            reading + 1
+        );
+        match read_line() {
+            Ok(Some(line)) if line.trim().is_empty() => {
+                Err(ReadError::Failed("no reading given".into()))
+            }
+            Ok(Some(line)) => parse_reading(line.trim(), self.targets, self.probe).map_err(|why| {
+                // The operator sees at once why the line was not taken (it is asked again).
+                eprintln!("not a reading: {why}");
+                ReadError::Failed(why)
+            }),
+            Ok(None) => Err(ReadError::Broken("the input ended".into())),
+            Err(e) => Err(ReadError::Broken(format!("reading the input: {e}"))),
+        }
+    }
+}
