@@ -52,6 +52,28 @@ pub const DRIFT_COLUMNS: [&str; 15] = [
     "note",
 ];
 
+/// The columns of a campaign's readings log after the measured ones (docs/formats.md): the
+/// configuration, the reading's and the attempt's numbers (from 1), whether the reading was kept
+/// (`1`, `0` for an outlier, empty for a failed attempt), why an attempt failed, the
+/// instrument's pose of the run's registration (mm, degrees; empty without one), the air and
+/// machine temperatures (°C, empty when not read) and the time (RFC 3339 UTC).
+pub const READINGS_COLUMNS: [&str; 14] = [
+    "configuration",
+    "reading",
+    "attempt",
+    "kept",
+    "failure",
+    "ix",
+    "iy",
+    "iz",
+    "ia",
+    "ib",
+    "ic",
+    "air_c",
+    "machine_c",
+    "measured_at",
+];
+
 /// A measurements file open for appending, with its columns after the measured ones.
 #[derive(Debug)]
 pub struct MeasurementsJournal {

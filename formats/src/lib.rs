@@ -32,7 +32,9 @@ use hexacomp_core::records::{JointCorrection, NamedCompensation, NamedLegs, Name
 
 pub use error::{Error, Result};
 pub use fiducials::{FIDUCIAL_COLUMNS, read_fiducials, write_fiducials};
-pub use journal::{DRIFT_COLUMNS, JOURNAL_COLUMNS, JournalKind, MeasurementsJournal};
+pub use journal::{
+    DRIFT_COLUMNS, JOURNAL_COLUMNS, JournalKind, MeasurementsJournal, READINGS_COLUMNS,
+};
 pub use lines::MAX_LINE_BYTES;
 pub use measurements::{
     DRIFT_DECISIONS, DRIFT_EVENTS, DriftEntry, MEASURED_POSE_COLUMNS, read_drift_log,

@@ -801,3 +801,118 @@ fn an_operator_confirms_the_moves_and_types_the_readings_and_the_end_of_input_st
     assert!(output.status.success(), "{}", text(&output.stderr));
     assert_eq!(read_measurements(&d.join("m.csv")).unwrap().len(), 2);
 }
+
+#[test]
+fn the_readings_log_holds_every_attempt_its_outcome_and_the_temperatures_and_gives_the_record() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(
+        d.join("plan.csv"),
+        "id,x,y,z,a,b,c\nA,0,0,280,0,0,0\nB,10,0,290,1,0,0\n",
+    )
+    .unwrap();
+    // Reading 2's first attempt fails; reading 3 was knocked (p1x 0.5 mm off); the others
+    // scatter by a micrometre per reading.
+    script(
+        d,
+        "tracker.sh",
+        "if [ \"$8\" = 2 ] && [ ! -e \"$1.failed\" ]; then touch \"$1.failed\"; exit 1; fi\n\
+         x=$(echo \"$8\" | awk '{ print ($1 == 3) ? 1.5 : 1 + $1 / 1000 }')\n\
+         echo \"$x,2,3,4,5,6,7,8,9\"",
+    );
+    script(d, "temperatures.sh", "echo 20.5,");
+    let tracker = d.join("tracker.sh").display().to_string();
+    let temperatures = d.join("temperatures.sh").display().to_string();
+    trainer_ok(
+        d,
+        &[
+            "campaign",
+            "--plan",
+            "plan.csv",
+            "--out",
+            "m.csv",
+            "--instrument",
+            "command",
+            "--instrument-command",
+            &tracker,
+            "--readings",
+            "5",
+            "--temperatures-command",
+            &temperatures,
+        ],
+    );
+    let log = std::fs::read_to_string(d.join("m.readings.csv")).unwrap();
+    let header: Vec<&str> = log.lines().next().unwrap().split(',').collect();
+    let column = |name: &str| header.iter().position(|c| *c == name).unwrap();
+    let mut reader = csv::ReaderBuilder::new()
+        .comment(Some(b'#'))
+        .from_reader(log.as_bytes());
+    let rows: Vec<csv::StringRecord> = reader.records().map(|r| r.unwrap()).collect();
+    let of_a: Vec<&csv::StringRecord> = rows
+        .iter()
+        .filter(|r| &r[column("configuration")] == "A")
+        .collect();
+    // Five readings, one of them tried twice: six attempts.
+    let attempts: Vec<(String, String, String)> = of_a
+        .iter()
+        .map(|r| {
+            (
+                r[column("id")].to_string(),
+                r[column("kept")].to_string(),
+                r[column("failure")].to_string(),
+            )
+        })
+        .collect();
+    let ids: Vec<&str> = attempts.iter().map(|(id, _, _)| id.as_str()).collect();
+    assert_eq!(ids, ["A/1.1", "A/2.1", "A/2.2", "A/3.1", "A/4.1", "A/5.1"]);
+    assert!(
+        attempts[1].1.is_empty() && attempts[1].2.contains("exited with"),
+        "{attempts:?}"
+    );
+    assert_eq!(
+        attempts[3].1, "0",
+        "the knocked reading is an outlier: {attempts:?}"
+    );
+    assert!(attempts.iter().filter(|(_, kept, _)| kept == "1").count() == 4);
+    assert!(
+        of_a.iter()
+            .all(|r| &r[column("air_c")] == "20.5" && r[column("machine_c")].is_empty())
+    );
+    // The record's p1x is the mean of the kept readings in the log.
+    let kept_mean = of_a
+        .iter()
+        .filter(|r| &r[column("kept")] == "1")
+        .map(|r| r[column("p1x")].parse::<f64>().unwrap())
+        .sum::<f64>()
+        / 4.0;
+    let record = read_measurements(&d.join("m.csv")).unwrap();
+    let a = record.iter().find(|r| r.id == "A").unwrap();
+    let hexacomp_core::observation::Observation::Targets(points) = &a.observed else {
+        panic!("targets")
+    };
+    assert!(
+        (points[0].unwrap().x - kept_mean).abs() < 1e-12,
+        "{points:?} vs {kept_mean}"
+    );
+
+    // A temperature program that fails: said, the cells left empty, the campaign goes on.
+    script(d, "broken.sh", "exit 3");
+    let output = trainer(
+        d,
+        &[
+            "campaign",
+            "--plan",
+            "plan.csv",
+            "--out",
+            "n.csv",
+            "--temperatures-command",
+            &d.join("broken.sh").display().to_string(),
+        ],
+    );
+    assert!(output.status.success(), "{}", text(&output.stderr));
+    assert!(
+        text(&output.stderr).contains("temperatures not read"),
+        "{}",
+        text(&output.stderr)
+    );
+}

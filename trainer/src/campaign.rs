@@ -128,6 +128,34 @@ pub struct Combined {
     pub spread_mm: f64,
     /// Readings lost (every attempt at them failed), and the last failure's reason.
     pub lost: (usize, Option<String>),
+    /// Whether each reading that succeeded (in the order taken) was kept (not an outlier).
+    pub kept_readings: Vec<bool>,
+    /// Every attempt at a reading, as the instrument answered it (its frame).
+    pub attempts: Vec<Attempt>,
+}
+
+/// One attempt at a reading.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Attempt {
+    /// The reading's number, from 1.
+    pub reading: usize,
+    /// The attempt's number for that reading, from 1.
+    pub attempt: usize,
+    /// What the instrument reported (its frame), or why it failed.
+    pub outcome: std::result::Result<Observation, String>,
+}
+
+/// The readings of one configuration.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Readings {
+    /// The readings that succeeded, in the order taken.
+    pub observations: Vec<Observation>,
+    /// Every attempt.
+    pub attempts: Vec<Attempt>,
+    /// Readings lost (every attempt failed).
+    pub lost: usize,
+    /// The last failure's reason, if any.
+    pub failure: Option<String>,
 }
 
 /// The median of `values` (not empty).
@@ -254,6 +282,8 @@ pub fn combine(readings: &[Observation], outlier_factor: f64) -> Combined {
         rejected,
         spread_mm,
         lost: (0, None),
+        kept_readings: rejected_reading.iter().map(|r| !r).collect(),
+        attempts: Vec::new(),
     }
 }
 
@@ -462,20 +492,22 @@ impl Campaign<'_> {
         if !self.options.settle.is_zero() {
             std::thread::sleep(self.options.settle);
         }
-        let (readings, lost, failure) =
-            read_configuration(instrument, &self.options, id, pose_mm_deg, &arrival)?;
-        let mut combined = if readings.is_empty() {
+        let readings = read_configuration(instrument, &self.options, id, pose_mm_deg, &arrival)?;
+        let mut combined = if readings.observations.is_empty() {
             Combined {
                 observed: self.nothing_seen.clone(),
                 kept: 0,
                 rejected: 0,
                 spread_mm: 0.0,
                 lost: (0, None),
+                kept_readings: Vec::new(),
+                attempts: Vec::new(),
             }
         } else {
-            combine(&readings, self.options.outlier_factor)
+            combine(&readings.observations, self.options.outlier_factor)
         };
-        combined.lost = (lost, failure);
+        combined.lost = (readings.lost, readings.failure);
+        combined.attempts = readings.attempts;
         combined.observed = self
             .into_record_frame
             .iter()
@@ -630,42 +662,51 @@ impl Campaign<'_> {
     }
 }
 
-/// The readings of configuration `id` that succeeded (each reading retried up to
-/// `options.retries` times, `options.dwell` apart), how many were lost, and the last failure's
-/// reason; an instrument that cannot work is an error.
+/// The readings of configuration `id` (each reading retried up to `options.retries` times,
+/// `options.dwell` apart): those that succeeded, every attempt, how many were lost and the last
+/// failure's reason; an instrument that cannot work is an error.
 pub fn read_configuration(
     instrument: &mut dyn Instrument,
     options: &CampaignOptions,
     id: &str,
     pose_mm_deg: &[f64; 6],
     arrival: &Arrival,
-) -> Result<(Vec<Observation>, usize, Option<String>)> {
-    let mut readings = Vec::new();
-    let mut failure = None;
-    let mut lost = 0;
+) -> Result<Readings> {
+    let mut readings = Readings::default();
     for reading in 0..options.readings {
         if reading > 0 && !options.dwell.is_zero() {
             std::thread::sleep(options.dwell);
         }
         let mut read = false;
-        for _attempt in 0..=options.retries {
-            match instrument.read(id, reading, pose_mm_deg, arrival) {
+        for attempt in 0..=options.retries {
+            let outcome = match instrument.read(id, reading, pose_mm_deg, arrival) {
                 Ok(observation) => {
-                    readings.push(observation);
+                    readings.observations.push(observation.clone());
                     read = true;
-                    break;
+                    Ok(observation)
                 }
-                Err(ReadError::Failed(why)) => failure = Some(why),
+                Err(ReadError::Failed(why)) => {
+                    readings.failure = Some(why.clone());
+                    Err(why)
+                }
                 Err(ReadError::Broken(why)) => {
                     return Err(Error::Instrument(format!(
                         "{why}; measuring stops before configuration {id}"
                     )));
                 }
+            };
+            readings.attempts.push(Attempt {
+                reading: reading + 1,
+                attempt: attempt + 1,
+                outcome,
+            });
+            if read {
+                break;
             }
         }
-        lost += usize::from(!read);
+        readings.lost += usize::from(!read);
     }
-    Ok((readings, lost, failure))
+    Ok(readings)
 }
 
 /// A stable 64-bit key of `seed`, a configuration id and a number (FNV-1a): the virtual

@@ -142,82 +142,97 @@ impl Instrument for CommandInstrument {
         pose_mm_deg: &[f64; 6],
         _arrival: &Arrival,
     ) -> Result<Observation, ReadError> {
-        let (program, fixed) = self
-            .program
-            .split_first()
-            .ok_or_else(|| ReadError::Broken("no instrument program given".into()))?;
-        let mut command = Command::new(program);
-        // Its own process group: on a timeout the program and whatever it started are killed
-        // together (a child left behind would hold our standard error open).
-        command
-            .process_group(0)
-            .args(fixed)
-            .arg(id)
-            .args(pose_mm_deg.map(|v| v.to_string()))
-            .arg((reading + 1).to_string())
-            .stdin(Stdio::null())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::inherit());
-        // Killed when the campaign dies (Ctrl-C, SIGKILL), so it does not keep the tracker busy.
-        die_with_parent(&mut command, libc::SIGKILL);
-        let mut child = command.spawn().map_err(|e| {
-            ReadError::Broken(format!(
-                "cannot run {program}: {e} (is the path right, the file executable, with a \
-                 #! line?)"
-            ))
-        })?;
-        let stdout = child.stdout.take().expect("stdout piped");
-        let (sender, receiver) = std::sync::mpsc::channel();
-        std::thread::spawn(move || {
-            let mut bytes = Vec::new();
-            let mut limited = stdout.take(MAX_OUTPUT_BYTES);
-            let result = limited.read_to_end(&mut bytes).map(|_| bytes);
-            // Whatever is printed beyond the limit is read and dropped.
-            let _ = std::io::copy(&mut limited.into_inner(), &mut std::io::sink());
-            let _ = sender.send(result);
-        });
-        let deadline = Instant::now() + self.timeout;
-        let timeout = self.timeout;
-        let timed_out = |child: &mut Child| {
-            kill_group(child);
-            let _ = child.wait();
-            ReadError::Failed(format!(
-                "{program} did not answer within {timeout:?} (killed with what it started)"
-            ))
-        };
-        let status = loop {
-            match child.try_wait() {
-                Ok(Some(status)) => break status,
-                Ok(None) if Instant::now() < deadline => {
-                    std::thread::sleep(Duration::from_millis(5));
-                }
-                Ok(None) => return Err(timed_out(&mut child)),
-                Err(e) => {
-                    kill_group(&child);
-                    let _ = child.wait();
-                    return Err(ReadError::Failed(format!("waiting for {program}: {e}")));
-                }
-            }
-        };
-        // A program that exited but left something holding its output open gets the rest of
-        // the time, then its group is killed.
-        let left = deadline.saturating_duration_since(Instant::now());
-        let bytes = match receiver.recv_timeout(left) {
-            Ok(result) => {
-                result.map_err(|e| ReadError::Failed(format!("reading {program}'s output: {e}")))?
-            }
-            Err(_) => return Err(timed_out(&mut child)),
-        };
-        if !status.success() {
-            return Err(ReadError::Failed(format!("{program} exited with {status}")));
-        }
-        if bytes.is_empty() {
-            return Err(ReadError::Failed(format!("{program} printed no line")));
-        }
-        let first = bytes.split(|b| *b == b'\n').next().unwrap_or_default();
-        let line = std::str::from_utf8(first)
-            .map_err(|_| ReadError::Failed(format!("{program}'s first line is not UTF-8 text")))?
-            .trim_end_matches('\r');
-        parse_reading(line, self.targets, self.probe).map_err(ReadError::Failed)
+        let arguments: Vec<String> = std::iter::once(id.to_string())
+            .chain(pose_mm_deg.map(|v| v.to_string()))
+            .chain([(reading + 1).to_string()])
+            .collect();
+        let line = first_line(&self.program, &arguments, self.timeout)?;
+        parse_reading(&line, self.targets, self.probe).map_err(ReadError::Failed)
     }
+}
+
+/// Runs `program` (the program and its fixed arguments) with `arguments` and returns the first
+/// line it prints, within `timeout`. The program runs in its own process group, killed whole on
+/// a timeout, and is killed when this process dies; at most 1 MiB of its output is read; its
+/// standard error is shown. A program that cannot be started is [`ReadError::Broken`]; a
+/// timeout, an exit status other than 0, no line or a line that is not text is
+/// [`ReadError::Failed`].
+pub fn first_line(
+    program: &[String],
+    arguments: &[String],
+    timeout: Duration,
+) -> Result<String, ReadError> {
+    let (program, fixed) = program
+        .split_first()
+        .ok_or_else(|| ReadError::Broken("no program given".into()))?;
+    let mut command = Command::new(program);
+    // Its own process group: on a timeout the program and whatever it started are killed
+    // together (a child left behind would hold our standard error open).
+    command
+        .process_group(0)
+        .args(fixed)
+        .args(arguments)
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit());
+    // Killed when the campaign dies (Ctrl-C, SIGKILL), so it does not keep the tracker busy.
+    die_with_parent(&mut command, libc::SIGKILL);
+    let mut child = command.spawn().map_err(|e| {
+        ReadError::Broken(format!(
+            "cannot run {program}: {e} (is the path right, the file executable, with a \
+                 #! line?)"
+        ))
+    })?;
+    let stdout = child.stdout.take().expect("stdout piped");
+    let (sender, receiver) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let mut bytes = Vec::new();
+        let mut limited = stdout.take(MAX_OUTPUT_BYTES);
+        let result = limited.read_to_end(&mut bytes).map(|_| bytes);
+        // Whatever is printed beyond the limit is read and dropped.
+        let _ = std::io::copy(&mut limited.into_inner(), &mut std::io::sink());
+        let _ = sender.send(result);
+    });
+    let deadline = Instant::now() + timeout;
+    let timed_out = |child: &mut Child| {
+        kill_group(child);
+        let _ = child.wait();
+        ReadError::Failed(format!(
+            "{program} did not answer within {timeout:?} (killed with what it started)"
+        ))
+    };
+    let status = loop {
+        match child.try_wait() {
+            Ok(Some(status)) => break status,
+            Ok(None) if Instant::now() < deadline => {
+                std::thread::sleep(Duration::from_millis(5));
+            }
+            Ok(None) => return Err(timed_out(&mut child)),
+            Err(e) => {
+                kill_group(&child);
+                let _ = child.wait();
+                return Err(ReadError::Failed(format!("waiting for {program}: {e}")));
+            }
+        }
+    };
+    // A program that exited but left something holding its output open gets the rest of
+    // the time, then its group is killed.
+    let left = deadline.saturating_duration_since(Instant::now());
+    let bytes = match receiver.recv_timeout(left) {
+        Ok(result) => {
+            result.map_err(|e| ReadError::Failed(format!("reading {program}'s output: {e}")))?
+        }
+        Err(_) => return Err(timed_out(&mut child)),
+    };
+    if !status.success() {
+        return Err(ReadError::Failed(format!("{program} exited with {status}")));
+    }
+    if bytes.is_empty() {
+        return Err(ReadError::Failed(format!("{program} printed no line")));
+    }
+    let first = bytes.split(|b| *b == b'\n').next().unwrap_or_default();
+    let line = std::str::from_utf8(first)
+        .map_err(|_| ReadError::Failed(format!("{program}'s first line is not UTF-8 text")))?
+        .trim_end_matches('\r');
+    Ok(line.to_string())
 }

@@ -113,18 +113,19 @@ impl PoseTest<'_> {
                 if !options.settle.is_zero() {
                     std::thread::sleep(options.settle);
                 }
-                let (readings, _lost, failure) =
+                let readings =
                     read_configuration(instrument, options, &id, &pose.commanded, &arrival)?;
                 let missed = |why: String| Missed {
                     cycle,
                     pose: pose.name.clone(),
                     why,
                 };
-                if readings.is_empty() {
-                    run.missed
-                        .push(missed(failure.unwrap_or_else(|| "no reading".into())));
+                if readings.observations.is_empty() {
+                    run.missed.push(missed(
+                        readings.failure.unwrap_or_else(|| "no reading".into()),
+                    ));
                 } else {
-                    let observed = combine(&readings, options.outlier_factor)
+                    let observed = combine(&readings.observations, options.outlier_factor)
                         .observed
                         .in_frame(&self.instrument_frame);
                     match observed.undetermined(self.geometry) {

@@ -16,6 +16,7 @@ use hexacomp_trainer::campaign::{Campaign, tour};
 use hexacomp_trainer::drift::Decision;
 
 use super::drift_log::DriftLog;
+use super::readings_log::{self, ReadingsLog, Temperatures, read_temperatures};
 
 /// Drive the machine through a plan and measure every configuration, recording each one (flushed
 /// to disk) before the next move.
@@ -56,11 +57,19 @@ pub struct CampaignArgs {
     /// the tracker moved and was registered again, readings are brought into that frame.
     #[arg(long, value_name = "FILE")]
     registration: Option<PathBuf>,
+    /// A program that reads the air and machine temperatures (°C): run (as a shell splits the
+    /// words) once per configuration, it prints one line `AIR,MACHINE` (either cell may be empty),
+    /// logged with the readings. When it fails the temperatures are left empty and it is said.
+    #[arg(long, value_name = "PROGRAM")]
+    temperatures_command: Option<String>,
     #[command(flatten)]
     rig: super::rig::RigArgs,
     #[command(flatten)]
     drift: super::drift_log::DriftArgs,
 }
+
+/// The longest a temperature program may take, per configuration.
+const TEMPERATURES_TIMEOUT: Duration = Duration::from_secs(30);
 
 impl CampaignArgs {
     /// The files this command reads and writes.
@@ -86,16 +95,32 @@ pub fn run(geometry: &Geometry, args: &CampaignArgs) -> anyhow::Result<()> {
     // Every setting is checked before the record is opened: a bad option leaves no file.
     args.drift.check_options()?;
     let drift_log = (!args.drift.no_reference).then(|| args.drift.log_path(&args.out));
+    let readings_log = readings_log::log_path(&args.out);
+    let mut others: Vec<&std::path::Path> = vec![&args.plan, &args.out];
+    others.extend(args.registration.as_deref());
+    hexacomp_formats::refuse_same_file(&readings_log, &others)?;
     if let Some(log) = &drift_log {
-        let mut others: Vec<&std::path::Path> = vec![&args.plan, &args.out];
-        others.extend(args.registration.as_deref());
         hexacomp_formats::refuse_same_file(log, &others)?;
+        hexacomp_formats::refuse_same_file(log, &[&readings_log])?;
         anyhow::ensure!(
-            log != &args.out,
-            "--drift-log {}: the record and its drift log must be two files",
+            log != &args.out && log != &readings_log,
+            "--drift-log {}: the record, its readings log and its drift log must be three files",
             log.display()
         );
     }
+    let temperatures_program = args
+        .temperatures_command
+        .as_deref()
+        .map(|text| {
+            shlex::split(text)
+                .filter(|words| !words.is_empty())
+                .ok_or_else(|| {
+                    anyhow::anyhow!(
+                        "--temperatures-command {text:?}: no program, or unbalanced quotes"
+                    )
+                })
+        })
+        .transpose()?;
     let mut rig = args.rig.build(geometry, None)?;
     if args.drift.no_reference {
         // A record measured without the reference cannot be continued with it, nor the reverse.
@@ -115,6 +140,17 @@ pub fn run(geometry: &Geometry, args: &CampaignArgs) -> anyhow::Result<()> {
     let recorded = read_measurements(&args.out)?;
     let done = check_recorded(&plan, &recorded)?;
     let recorded_ids: Vec<String> = recorded.iter().map(|r| r.id.clone()).collect();
+    let nothing_seen = match kind {
+        JournalKind::Targets(count) => Observation::Targets(vec![None; count]),
+        JournalKind::Pose => Observation::PoseMissed,
+    };
+    let mut readings_log = ReadingsLog::open(
+        &args.out,
+        kind,
+        &rig.settings,
+        registration.as_ref().map(|r| r.instrument_pose),
+        nothing_seen.clone(),
+    )?;
     let (mut drift_log, drift, into_record_frame) = if args.drift.no_reference {
         (None, None, Vec::new())
     } else {
@@ -179,10 +215,7 @@ pub fn run(geometry: &Geometry, args: &CampaignArgs) -> anyhow::Result<()> {
         plan: &plan,
         order: &order,
         done: &done,
-        nothing_seen: match kind {
-            JournalKind::Targets(count) => Observation::Targets(vec![None; count]),
-            JournalKind::Pose => Observation::PoseMissed,
-        },
+        nothing_seen,
         options,
         into_record_frame,
         drift,
@@ -205,6 +238,30 @@ pub fn run(geometry: &Geometry, args: &CampaignArgs) -> anyhow::Result<()> {
                 }),
                 _ => {}
             }
+            let temperatures = match &temperatures_program {
+                Some(program) => {
+                    read_temperatures(program, TEMPERATURES_TIMEOUT).unwrap_or_else(|why| {
+                        bar.suspend(|| {
+                            eprintln!(
+                                "configuration {}: temperatures not read ({why}); logged empty",
+                                row.id
+                            );
+                        });
+                        Temperatures::default()
+                    })
+                }
+                None => Temperatures::default(),
+            };
+            readings_log
+                .append(&row, combined, temperatures)
+                .map_err(|e| {
+                    hexacomp_trainer::Error::InsufficientData(format!(
+                        "{}: cannot log the readings of configuration {}: {e} (the rows before \
+                         it are on disk; run again to continue)",
+                        readings_log.path().display(),
+                        row.id
+                    ))
+                })?;
             let measured_at = humantime::format_rfc3339_seconds(SystemTime::now()).to_string();
             journal
                 .append(

@@ -13,6 +13,7 @@ pub mod inspect;
 pub mod measurements_input;
 pub mod plan;
 pub mod predict;
+pub mod readings_log;
 pub mod register;
 pub mod rig;
 pub mod simulate;

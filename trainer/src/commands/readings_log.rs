@@ -1,0 +1,142 @@
+//! A campaign's readings log: every attempt at every reading of every configuration as the
+//! instrument reported it (its frame), whether it was kept, the registration it was measured
+//! under and, when a program reads them, the air and machine temperatures — beside the record,
+//! which holds the combined readings solve reads.
+
+use std::path::{Path, PathBuf};
+use std::time::{Duration, SystemTime};
+
+use hexacomp_core::observation::Observation;
+use hexacomp_core::records::MeasuredConfiguration;
+use hexacomp_formats::{JournalKind, MeasurementsJournal, READINGS_COLUMNS};
+use hexacomp_trainer::campaign::Combined;
+use hexacomp_trainer::command_instrument::first_line;
+
+/// The readings log's path for the record `out`.
+pub fn log_path(out: &Path) -> PathBuf {
+    out.with_extension("readings.csv")
+}
+
+/// Temperatures at one configuration, °C.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Temperatures {
+    /// The air's.
+    pub air_c: Option<f64>,
+    /// The machine's.
+    pub machine_c: Option<f64>,
+}
+
+/// Runs the user's temperature program (`PROGRAM ARGS…`, one line `AIR,MACHINE` in °C, either
+/// cell may be empty) with `timeout`; why not, when it fails or prints something else.
+pub fn read_temperatures(program: &[String], timeout: Duration) -> Result<Temperatures, String> {
+    let line = first_line(program, &[], timeout).map_err(|e| match e {
+        hexacomp_trainer::campaign::ReadError::Failed(why)
+        | hexacomp_trainer::campaign::ReadError::Broken(why) => why,
+    })?;
+    let cells: Vec<&str> = line.split(',').map(str::trim).collect();
+    let [air, machine] = cells.as_slice() else {
+        return Err(format!("{line:?} is not AIR,MACHINE (°C)"));
+    };
+    let celsius = |cell: &str| -> Result<Option<f64>, String> {
+        if cell.is_empty() {
+            return Ok(None);
+        }
+        cell.parse::<f64>()
+            .ok()
+            .filter(|t| t.is_finite() && (-100.0..=200.0).contains(t))
+            .map(Some)
+            .ok_or_else(|| format!("{cell:?} in {line:?} is not a temperature in °C"))
+    };
+    Ok(Temperatures {
+        air_c: celsius(air)?,
+        machine_c: celsius(machine)?,
+    })
+}
+
+/// The readings log, open and locked.
+pub struct ReadingsLog {
+    journal: MeasurementsJournal,
+    path: PathBuf,
+    registration: Option<[f64; 6]>,
+    nothing_seen: Observation,
+}
+
+impl ReadingsLog {
+    /// Opens the log of the record `out` (its kind; `settings` the record's, with its name added:
+    /// a log belongs to one record); `registration`: the instrument's pose of this run's.
+    pub fn open(
+        out: &Path,
+        kind: JournalKind,
+        settings: &str,
+        registration: Option<[f64; 6]>,
+        nothing_seen: Observation,
+    ) -> hexacomp_formats::Result<Self> {
+        let path = log_path(out);
+        let record = out
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let journal = MeasurementsJournal::open(
+            &path,
+            kind,
+            &format!("{settings}; readings of {record}"),
+            &READINGS_COLUMNS,
+        )?;
+        Ok(Self {
+            journal,
+            path,
+            registration,
+            nothing_seen,
+        })
+    }
+
+    /// The log's path.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Appends every attempt of the configuration `row` (its commanded pose and legs; `combined`
+    /// says which readings were kept), each line on disk when this returns.
+    pub fn append(
+        &mut self,
+        row: &MeasuredConfiguration,
+        combined: &Combined,
+        temperatures: Temperatures,
+    ) -> std::io::Result<()> {
+        let number = |v: Option<f64>| v.map_or(String::new(), |v| v.to_string());
+        let measured_at = humantime::format_rfc3339_seconds(SystemTime::now()).to_string();
+        let mut successes = 0;
+        for attempt in &combined.attempts {
+            let (observed, kept, failure) = match &attempt.outcome {
+                Ok(observation) => {
+                    let kept = combined.kept_readings.get(successes).copied();
+                    successes += 1;
+                    let kept = kept.map_or(String::new(), |k| u8::from(k).to_string());
+                    (observation.clone(), kept, String::new())
+                }
+                Err(why) => (self.nothing_seen.clone(), String::new(), why.clone()),
+            };
+            let mut cells = vec![
+                row.id.clone(),
+                attempt.reading.to_string(),
+                attempt.attempt.to_string(),
+                kept,
+                failure,
+            ];
+            cells.extend((0..6).map(|k| number(self.registration.map(|p| p[k]))));
+            cells.push(number(temperatures.air_c));
+            cells.push(number(temperatures.machine_c));
+            cells.push(measured_at.clone());
+            self.journal.append(
+                &MeasuredConfiguration {
+                    id: format!("{}/{}.{}", row.id, attempt.reading, attempt.attempt),
+                    pose_mm_deg: row.pose_mm_deg,
+                    legs: row.legs,
+                    observed,
+                },
+                &cells,
+            )?;
+        }
+        Ok(())
+    }
+}
