@@ -651,6 +651,35 @@ fn accepted_drift_is_logged_and_a_warm_up_that_does_not_settle_records_nothing()
     assert_eq!(data_lines(&d.join("t.csv")).len(), 6);
     let events = drift_events(&d.join("t.drift.csv"));
     assert_eq!(events.last().unwrap().0, "end", "{events:?}");
+
+    // Stopped at the end reference, nothing left to measure: --accept-drift still decides and
+    // logs it (the start reference measured), it is not "nothing to do".
+    let end_only = [
+        "campaign",
+        "--plan",
+        "plan.csv",
+        "--out",
+        "e.csv",
+        "--drift-limit",
+        "0.001",
+        "--reference-every",
+        "0",
+    ];
+    let output = trainer(d, &end_only);
+    assert!(!output.status.success());
+    assert_eq!(
+        drift_events(&d.join("e.drift.csv")).last().unwrap().1,
+        "stopped"
+    );
+    let said = text(&trainer(d, &[&end_only[..], &["--accept-drift"]].concat()).stderr);
+    assert!(!said.contains("nothing to do"), "{said}");
+    let last = drift_events(&d.join("e.drift.csv")).pop().unwrap();
+    assert!(
+        last.0 == "start" && last.1 == "accepted" && last.2.starts_with("kept "),
+        "{last:?}: {said}"
+    );
+    let said = trainer_ok(d, &end_only);
+    assert!(said.contains("nothing to do"), "{said}");
 }
 
 #[test]
@@ -767,10 +796,17 @@ fn an_operator_confirms_the_moves_and_types_the_readings_and_the_end_of_input_st
         "--readings",
         "2",
         "--no-reference",
+        "--retries",
+        "0",
     ];
-    // A: confirmed, two readings (P2 not seen in both). B: confirmed, a line that is not a
-    // reading (retried), then the input ends: the campaign stops, A stays recorded.
-    let output = trainer_typing(d, &args, "\n1,2,3,,,,7,8,9\n1,2,3.5,,,,7,8,9.5\n\n1,2,3\n");
+    // A: confirmed; a typing mistake asked again at no cost (no retries left), then two readings
+    // (P2 not seen in both). B: a line that is no confirmation asked again, confirmed, then
+    // "stop" at the reading: the campaign ends, A stays recorded, B is no gap.
+    let output = trainer_typing(
+        d,
+        &args,
+        "\n1,2,3\n1,2,3,,,,7,8,9\n1,2,3.5,,,,7,8,9.5\n4,5,6\n\nstop\n",
+    );
     let said = text(&output.stderr);
     assert!(!output.status.success(), "{said}");
     assert!(
@@ -778,7 +814,9 @@ fn an_operator_confirms_the_moves_and_types_the_readings_and_the_end_of_input_st
         "{said}"
     );
     assert!(said.contains("has 3 cells, expected 9"), "{said}");
-    assert!(said.contains("the input ended"), "{said}");
+    assert!(said.contains("\"4,5,6\" is no confirmation"), "{said}");
+    assert!(said.contains("stopped by the operator"), "{said}");
+    assert_eq!(data_lines(&d.join("m.csv")).len(), 1, "{said}");
     let rows = read_measurements(&d.join("m.csv")).unwrap();
     assert_eq!(rows.len(), 1);
     assert_eq!(

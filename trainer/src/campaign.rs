@@ -402,7 +402,8 @@ impl Campaign<'_> {
             .iter()
             .filter(|&&k| !self.done.contains(&self.plan[k].id))
             .count();
-        if left > 0 {
+        let start_pending = self.drift.as_ref().is_some_and(|d| d.start_pending);
+        if left > 0 || start_pending {
             self.warm_up(machine, instrument, log, &mut watch)?;
             self.check_reference(ReferenceEvent::Start, machine, instrument, log, &mut watch)?;
         }
@@ -623,6 +624,20 @@ impl Campaign<'_> {
             (Some(_), Some(_)) => Decision::Ok,
             (Some(_), None) => Decision::Stopped,
         };
+        let mut note = watch.note.take().unwrap_or_default();
+        if decision == Decision::Accepted && !watch.since_reference.is_empty() {
+            // Rows recorded before this drift was found (a run killed before its next
+            // reference) are kept with it: said in the log.
+            let kept = format!(
+                "kept {} measured before this drift was found",
+                watch.since_reference.join(", ")
+            );
+            note = if note.is_empty() {
+                kept
+            } else {
+                format!("{note}; {kept}")
+            };
+        }
         log(&ReferenceMeasurement {
             id: id.clone(),
             legs: arrival.legs,
@@ -631,7 +646,7 @@ impl Campaign<'_> {
             configurations: watch.recorded,
             deviation: moved,
             decision,
-            note: watch.note.take().unwrap_or_default(),
+            note,
         })?;
         if decision == Decision::Stopped {
             let what = moved.map_or_else(

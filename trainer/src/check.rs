@@ -157,20 +157,19 @@ impl CheckResult {
         self.errors.iter().map(|e| e.position_mm).sum::<f64>() / self.errors.len() as f64
     }
 
-    /// The answer: inconclusive when a pose was not measured, still good when every position and
-    /// angle error is within what is allowed, retrain otherwise.
+    /// The answer: retrain when a measured pose is beyond what is allowed (whatever was not
+    /// measured); otherwise inconclusive when a pose was not measured, still good when all were.
     pub fn verdict(&self) -> Verdict {
-        if !self.missed.is_empty() || self.errors.is_empty() {
-            return Verdict::Inconclusive;
-        }
         let positions = self
             .worst_position()
-            .is_some_and(|(_, e)| e <= self.allowed.position_mm);
+            .is_none_or(|(_, e)| e <= self.allowed.position_mm);
         let angles = self.worst_angle_share().is_none_or(|(_, _, s)| s <= 1.0);
-        if positions && angles {
-            Verdict::StillGood
-        } else {
+        if !(positions && angles) {
             Verdict::Retrain
+        } else if !self.missed.is_empty() || self.errors.is_empty() {
+            Verdict::Inconclusive
+        } else {
+            Verdict::StillGood
         }
     }
 }
@@ -233,6 +232,11 @@ mod tests {
         assert_eq!(
             CheckResult::new(&poses, &good[..1], &missed, allowed).verdict(),
             Verdict::Inconclusive
+        );
+        // A problem found decides, whatever was not measured.
+        assert_eq!(
+            CheckResult::new(&poses, &far[..1], &missed, allowed).verdict(),
+            Verdict::Retrain
         );
     }
 }

@@ -174,9 +174,13 @@ pub struct DriftCheck {
     /// The configurations recorded since the last good measurement of the reference (a run
     /// killed before its next one): named if this run's start finds drift.
     pub suspects: Vec<String>,
-    /// The record's last configurations were never followed by an end measurement (a run
-    /// killed after its last row): measure it even when nothing is left to measure.
+    /// The record holds rows measured after the last measurement of the reference (a run killed
+    /// after its last row, before its end measurement): measure it even when nothing is left to
+    /// measure.
     pub end_pending: bool,
+    /// The rows a stop on drift found suspect are kept (`accept`): measure the start reference
+    /// (and log the decision) even when nothing is left to measure.
+    pub start_pending: bool,
 }
 
 /// One measurement of the reference, for the drift log.

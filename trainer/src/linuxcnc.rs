@@ -49,14 +49,8 @@ impl LinuxCncHexapod {
     /// directory; `LIB:` files and Tcl files are LinuxCNC's own and hold no hexapod geometry).
     pub fn read(ini_path: &Path) -> Result<Self> {
         let ini = Ini::read(ini_path)?;
-        let dir = ini_path.parent().unwrap_or(Path::new("."));
         let mut parameters = BTreeMap::new();
-        for entry in ini.all("HAL", "HALFILE") {
-            let file = entry.split_whitespace().next().unwrap_or_default();
-            if file.starts_with("LIB:") || !file.ends_with(".hal") {
-                continue;
-            }
-            let path = dir.join(file);
+        for path in hal_files_of(ini_path, &ini) {
             let text = read_text(&path)?;
             collect_setp(&text, &ini, &mut parameters).map_err(|m| config_error(&path, &m))?;
         }
@@ -196,6 +190,24 @@ impl LinuxCncHexapod {
         geometry.validate()?;
         Ok(geometry)
     }
+}
+
+/// The configuration's own HAL files the ini's `[HAL]HALFILE` entries name (relative to the
+/// ini's directory; `LIB:` files and Tcl files are LinuxCNC's own and hold no hexapod geometry).
+fn hal_files_of(ini_path: &Path, ini: &Ini) -> Vec<PathBuf> {
+    let dir = ini_path.parent().unwrap_or(Path::new("."));
+    ini.all("HAL", "HALFILE")
+        .filter_map(|entry| {
+            let file = entry.split_whitespace().next().unwrap_or_default();
+            (!file.starts_with("LIB:") && file.ends_with(".hal")).then(|| dir.join(file))
+        })
+        .collect()
+}
+
+/// The HAL files of the LinuxCNC configuration `ini_path` (those its `[HAL]HALFILE` entries
+/// name), so that a command writing beside them can refuse to replace one.
+pub fn hal_files(ini_path: &Path) -> Result<Vec<PathBuf>> {
+    Ok(hal_files_of(ini_path, &Ini::read(ini_path)?))
 }
 
 /// The largest distance a joint of an exported geometry may lie from the configuration's, mm:

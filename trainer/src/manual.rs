@@ -37,30 +37,41 @@ impl Machine for ManualMachine {
             "move to configuration {id}: x y z a b c = {shown} (legs {lengths} mm), then press \
              Enter (stop: end the campaign)"
         );
-        match read_line() {
-            Ok(Some(line)) if line.trim().is_empty() => Ok(Arrival {
-                legs,
-                drives: legs,
-                reached: None,
-            }),
-            Ok(Some(line)) if line.trim() == "stop" => Err(Error::Machine(
-                "stopped by the operator; run again to continue".into(),
-            )),
-            Ok(Some(line)) => Err(Error::Machine(format!(
-                "configuration {id}: {line:?} is no confirmation (Enter confirms, stop ends)"
-            ))),
-            Ok(None) => Err(Error::Machine(format!(
-                "configuration {id}: the input ended before the move was confirmed"
-            ))),
-            Err(e) => Err(Error::Machine(format!("reading the confirmation: {e}"))),
+        loop {
+            match read_line() {
+                Ok(Some(line)) if line.trim().is_empty() => {
+                    return Ok(Arrival {
+                        legs,
+                        drives: legs,
+                        reached: None,
+                    });
+                }
+                Ok(Some(line)) if line.trim() == "stop" => {
+                    return Err(Error::Machine(
+                        "stopped by the operator; run again to continue".into(),
+                    ));
+                }
+                // Asked again: a line typed here (a reading pasted too early) confirms nothing.
+                Ok(Some(line)) => eprintln!(
+                    "{line:?} is no confirmation: press Enter once the machine stands at \
+                     configuration {id} (stop: end the campaign)"
+                ),
+                Ok(None) => {
+                    return Err(Error::Machine(format!(
+                        "configuration {id}: the input ended before the move was confirmed"
+                    )));
+                }
+                Err(e) => return Err(Error::Machine(format!("reading the confirmation: {e}"))),
+            }
         }
     }
 }
 
 /// An instrument read by the operator: each reading is typed or pasted as one CSV line, the
 /// targets `p1x..pNz` in the instrument's frame (three empty cells for a target not seen) or,
-/// as a probe, the pose `x,y,z,a,b,c`. An empty line is a failed reading (retried); a line that
-/// does not parse is a failed reading named with its cause.
+/// as a probe, the pose `x,y,z,a,b,c`. A line that does not parse is named with its cause and
+/// asked again; an empty line is a failed reading (retried, then lost); `stop` or the end of the
+/// input ends the campaign.
 #[derive(Debug, Clone, Copy)]
 pub struct ManualInstrument {
     /// How many targets the geometry names.
@@ -82,21 +93,27 @@ impl Instrument for ManualInstrument {
         } else {
             format!("the targets p1x..p{}z (mm)", self.targets)
         };
-        eprintln!(
-            "configuration {id}, reading {}: type or paste {what} and press Enter",
-            reading + 1
-        );
-        match read_line() {
-            Ok(Some(line)) if line.trim().is_empty() => {
-                Err(ReadError::Failed("no reading given".into()))
+        loop {
+            eprintln!(
+                "configuration {id}, reading {}: type or paste {what} and press Enter (empty: \
+                 no reading; stop: end the campaign)",
+                reading + 1
+            );
+            match read_line() {
+                Ok(Some(line)) if line.trim().is_empty() => {
+                    return Err(ReadError::Failed("no reading given".into()));
+                }
+                Ok(Some(line)) if line.trim() == "stop" => {
+                    return Err(ReadError::Broken("stopped by the operator".into()));
+                }
+                Ok(Some(line)) => match parse_reading(line.trim(), self.targets, self.probe) {
+                    Ok(observation) => return Ok(observation),
+                    // Asked again: a typing mistake costs no attempt.
+                    Err(why) => eprintln!("not a reading: {why}"),
+                },
+                Ok(None) => return Err(ReadError::Broken("the input ended".into())),
+                Err(e) => return Err(ReadError::Broken(format!("reading the input: {e}"))),
             }
-            Ok(Some(line)) => parse_reading(line.trim(), self.targets, self.probe).map_err(|why| {
-                // The operator sees at once why the line was not taken (it is asked again).
-                eprintln!("not a reading: {why}");
-                ReadError::Failed(why)
-            }),
-            Ok(None) => Err(ReadError::Broken("the input ended".into())),
-            Err(e) => Err(ReadError::Broken(format!("reading the input: {e}"))),
         }
     }
 }

@@ -165,7 +165,11 @@ pub fn run(geometry: &Geometry, args: &CampaignArgs) -> anyhow::Result<()> {
         )?;
         (Some(log), Some(check), frame)
     };
-    if done.len() == plan.len() && !drift.as_ref().is_some_and(|d| d.end_pending) {
+    if done.len() == plan.len()
+        && !drift
+            .as_ref()
+            .is_some_and(|d| d.end_pending || d.start_pending)
+    {
         eprintln!(
             "the campaign is finished: all {} configurations of {} are recorded in {}; nothing \
              to do",

@@ -88,7 +88,8 @@ pub fn run(geometry: &Geometry, args: &CheckArgs) -> anyhow::Result<()> {
         cycles: 1,
         instrument_frame,
         options,
-        approach: None,
+        // Approached as verify did: P1 from P2.
+        approach: poses.iter().find(|p| p.name == "P2").cloned(),
     };
     let mut run = TestRun::default();
     test.run(machine.as_mut(), instrument.as_mut(), &mut run, &mut || {})?;

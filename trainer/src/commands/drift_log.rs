@@ -204,7 +204,12 @@ impl DriftLog {
             recorded.len()
         );
         let suspects: Vec<String> = recorded.get(good_count..).unwrap_or_default().to_vec();
-        let stopped = entries.last().is_some_and(|e| e.decision == "stopped");
+        // A stop after the last good measurement, even if a later run died in its warm-up.
+        let stopped = entries
+            .iter()
+            .rev()
+            .take_while(|e| !GOOD.contains(&e.decision.as_str()))
+            .any(|e| e.decision == "stopped");
         if stopped && !suspects.is_empty() && !args.accept_drift {
             anyhow::bail!(
                 "{}: the campaign stopped on drift; the configurations recorded since the last \
@@ -231,10 +236,11 @@ impl DriftLog {
             .rev()
             .find(|e| matches!(e.decision.as_str(), "baseline" | "accepted"))
             .map(|e| e.reference.observed.clone());
-        let end_pending = !recorded.is_empty()
-            && !entries
-                .last()
-                .is_some_and(|e| e.event == "end" && e.configurations == recorded.len());
+        // Rows recorded after the last measurement of the reference: a run killed after its last
+        // row, before its end measurement.
+        let end_pending = entries
+            .last()
+            .is_some_and(|e| e.configurations < recorded.len());
         let check = DriftCheck {
             pose_mm_deg: geometry.home,
             every: args.reference_every,
@@ -244,6 +250,7 @@ impl DriftLog {
             baseline,
             first_number: entries.len() + 1,
             note,
+            start_pending: stopped && !suspects.is_empty(),
             suspects: if stopped { Vec::new() } else { suspects },
             end_pending,
         };

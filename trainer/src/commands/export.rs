@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 
 use hexacomp_core::Geometry;
-use hexacomp_trainer::linuxcnc::genhexkins_hal;
+use hexacomp_trainer::linuxcnc::{genhexkins_hal, hal_files};
 
 /// Export the geometry in use (--geometry: the one `identify` wrote) for LinuxCNC's hexapod
 /// kinematics, for users who want the geometric part of the calibration in the kinematics itself.
@@ -42,6 +42,10 @@ pub fn run(
         || format!("the built-in geometry {}", geometry.name),
         |p| p.display().to_string(),
     );
+    // The configuration's own HAL files hold more than the geometry: never replaced.
+    let hal_files = hal_files(&args.linuxcnc)?;
+    let hal_paths: Vec<&std::path::Path> = hal_files.iter().map(PathBuf::as_path).collect();
+    hexacomp_formats::refuse_same_file(&args.out, &hal_paths)?;
     let text = genhexkins_hal(&args.linuxcnc, geometry, &source)?;
     super::write_bytes(&args.out, text.as_bytes())?;
     eprintln!(

@@ -191,7 +191,12 @@ pub fn run(geometry: &Geometry, args: &VerifyArgs) -> anyhow::Result<()> {
             String::new()
         }
     );
-    let bar = indicatif::ProgressBar::new(measurements as u64).with_style(
+    let bar = if args.rig.interactive() {
+        indicatif::ProgressBar::hidden()
+    } else {
+        indicatif::ProgressBar::new(measurements as u64)
+    }
+    .with_style(
         indicatif::ProgressStyle::with_template(
             "{bar:40} {pos}/{len} attained poses ({elapsed}, about {eta} left)",
         )
@@ -217,8 +222,10 @@ pub fn run(geometry: &Geometry, args: &VerifyArgs) -> anyhow::Result<()> {
         );
     }
     // The attained poses are kept whatever happens next (a machine that stops, a pose with too
-    // few of them for its figures).
-    super::write_bytes(&args.out, raw_csv(&run.attained).as_bytes())?;
+    // few of them for its figures); with none, an earlier run's file is left as it is.
+    if !run.attained.is_empty() {
+        super::write_bytes(&args.out, raw_csv(&run.attained).as_bytes())?;
+    }
     let kept = |e: anyhow::Error| {
         e.context(format!(
             "the {} attained poses measured are in {}",
