@@ -189,6 +189,24 @@ impl MeasurementsJournal {
         })
     }
 
+    /// Opens the log at `path` that belongs to the campaign record `record` (a drift log, a
+    /// readings log): as [`MeasurementsJournal::open`], its settings line `settings; WHAT of
+    /// RECORD` (`what` names the log), so that a log of another record is refused.
+    pub fn open_log_of(
+        record: &Path,
+        path: &Path,
+        what: &str,
+        kind: JournalKind,
+        settings: &str,
+        extra: &'static [&'static str],
+    ) -> Result<Self> {
+        let name = record
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        Self::open(path, kind, &format!("{settings}; {what} of {name}"), extra)
+    }
+
     /// Appends `row` with the cells of the journal's extra columns as one line, on disk when
     /// this returns.
     pub fn append(&mut self, row: &MeasuredConfiguration, extra: &[String]) -> std::io::Result<()> {

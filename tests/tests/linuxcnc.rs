@@ -67,6 +67,19 @@ fn applied_correction(sample: &Sample) -> [f64; 6] {
     std::array::from_fn(|j| sample.motor_out[j] - sample.motor_in[j])
 }
 
+/// A pose in machine units (inch, degrees), rounded to the 1e-6 the MDI text carries exactly.
+fn in_machine_units(pose: &Pose) -> [f64; 6] {
+    let pose = pose.to_mm_deg();
+    std::array::from_fn(|k| {
+        let value = if k < 3 {
+            pose[k] / MM_PER_INCH
+        } else {
+            pose[k]
+        };
+        (value * 1e6).round() / 1e6
+    })
+}
+
 /// A pose in machine units (inch, degrees) in hexacomp's (mm, degrees).
 fn to_mm_deg(pose: &[f64; 6]) -> [f64; 6] {
     std::array::from_fn(|k| {
@@ -256,20 +269,11 @@ fn linuxcnc_joints_equal_hexacomp_inverse_kinematics_for_mdi_poses() {
             (sim.model.training_range[i][0]..=sim.model.training_range[i][1]).contains(&legs[i])
         })
     };
-    let poses: Vec<[f64; 6]> = std::iter::repeat_with(|| {
-        let pose = sampler.sample().expect("a workspace pose").to_mm_deg();
-        std::array::from_fn(|k| {
-            let value = if k < 3 {
-                pose[k] / MM_PER_INCH
-            } else {
-                pose[k]
-            };
-            (value * 1e6).round() / 1e6
-        })
-    })
-    .filter(trained)
-    .take(300)
-    .collect();
+    let poses: Vec<[f64; 6]> =
+        std::iter::repeat_with(|| in_machine_units(&sampler.sample().expect("a workspace pose")))
+            .filter(trained)
+            .take(300)
+            .collect();
     let _service = sim.start_service("service.log");
     let results = sim.start_linuxcnc(json!({ "mdi": poses })).finish(SESSION);
 
@@ -940,17 +944,7 @@ fn an_exported_identified_geometry_gives_linuxcncs_inverse_and_forward_kinematic
     let mut sampler =
         WorkspaceSampler::new(&identified, 5, SamplerOptions::default()).expect("sampler");
     let poses: Vec<[f64; 6]> = (0..20)
-        .map(|_| {
-            let pose = sampler.sample().expect("a workspace pose").to_mm_deg();
-            std::array::from_fn(|k| {
-                let value = if k < 3 {
-                    pose[k] / MM_PER_INCH
-                } else {
-                    pose[k]
-                };
-                (value * 1e6).round() / 1e6
-            })
-        })
+        .map(|_| in_machine_units(&sampler.sample().expect("a workspace pose")))
         .collect();
     let results = sim.start_linuxcnc(json!({ "mdi": poses })).finish(SESSION);
     // Inverse: LinuxCNC's joints are the real leg lengths, hexacomp's commanded ones plus the

@@ -171,14 +171,12 @@ impl DriftLog {
     ) -> anyhow::Result<(Self, DriftCheck, Vec<Pose>)> {
         let warm_up = args.check_options()?;
         let path = args.log_path(out);
-        let record_name = out
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default();
-        let journal = MeasurementsJournal::open(
+        let journal = MeasurementsJournal::open_log_of(
+            out,
             &path,
+            "drift log",
             kind,
-            &format!("{settings}; drift log of {record_name}"),
+            settings,
             &DRIFT_COLUMNS,
         )?;
         let entries: Records<DriftEntry> = read_drift_log(&path)?;

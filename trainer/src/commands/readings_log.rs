@@ -72,14 +72,12 @@ impl ReadingsLog {
         nothing_seen: Observation,
     ) -> hexacomp_formats::Result<Self> {
         let path = log_path(out);
-        let record = out
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default();
-        let journal = MeasurementsJournal::open(
+        let journal = MeasurementsJournal::open_log_of(
+            out,
             &path,
+            "readings",
             kind,
-            &format!("{settings}; readings of {record}"),
+            settings,
             &READINGS_COLUMNS,
         )?;
         Ok(Self {
