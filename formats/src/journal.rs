@@ -74,6 +74,35 @@ pub const READINGS_COLUMNS: [&str; 14] = [
     "measured_at",
 ];
 
+/// The cells of column `column` of every row of the journal at `path`, in its order (comment
+/// lines skipped); an error names the file when it cannot be read or has no such column.
+pub fn journal_column(path: &Path, column: &str) -> Result<Vec<String>> {
+    let fail = |message: String| Error::Format {
+        file: path.display().to_string(),
+        line: 0,
+        column: Some(column.to_string()),
+        message,
+    };
+    let mut reader = csv::ReaderBuilder::new()
+        .comment(Some(b'#'))
+        .from_path(path)
+        .map_err(|e| fail(e.to_string()))?;
+    let index = reader
+        .headers()
+        .map_err(|e| fail(e.to_string()))?
+        .iter()
+        .position(|name| name == column)
+        .ok_or_else(|| fail("no such column".into()))?;
+    reader
+        .records()
+        .map(|record| {
+            record
+                .map(|r| r.get(index).unwrap_or_default().to_string())
+                .map_err(|e| fail(e.to_string()))
+        })
+        .collect()
+}
+
 /// A measurements file open for appending, with its columns after the measured ones.
 #[derive(Debug)]
 pub struct MeasurementsJournal {

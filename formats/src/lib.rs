@@ -34,6 +34,7 @@ pub use error::{Error, Result};
 pub use fiducials::{FIDUCIAL_COLUMNS, read_fiducials, write_fiducials};
 pub use journal::{
     DRIFT_COLUMNS, JOURNAL_COLUMNS, JournalKind, MeasurementsJournal, READINGS_COLUMNS,
+    journal_column,
 };
 pub use lines::MAX_LINE_BYTES;
 pub use measurements::{

@@ -954,3 +954,41 @@ fn the_readings_log_holds_every_attempt_its_outcome_and_the_temperatures_and_giv
         text(&output.stderr)
     );
 }
+
+#[test]
+fn a_resumed_campaign_estimates_the_time_left_from_the_configurations_recorded() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    trainer_ok(d, &["plan", "--count", "6", "--out", "plan.csv"]);
+    let plan = std::fs::read_to_string(d.join("plan.csv")).unwrap();
+    let first: Vec<&str> = plan.lines().take(4).collect();
+    std::fs::write(d.join("first.csv"), first.join("\n") + "\n").unwrap();
+    trainer_ok(d, &["campaign", "--plan", "first.csv", "--out", "m.csv"]);
+    // The three rows as a slow machine records them: 40 s apart, then a pause of two hours
+    // (another day's run) that does not count.
+    let record = std::fs::read_to_string(d.join("m.csv")).unwrap();
+    let times = [
+        "2026-01-01T08:00:00Z",
+        "2026-01-01T08:00:40Z",
+        "2026-01-01T10:00:00Z",
+    ];
+    let mut rows = 0;
+    let edited: Vec<String> = record
+        .lines()
+        .map(|line| {
+            if line.starts_with('#') || line.starts_with("id,") {
+                return line.to_string();
+            }
+            rows += 1;
+            let (cells, _) = line.rsplit_once(',').unwrap();
+            format!("{cells},{}", times[rows - 1])
+        })
+        .collect();
+    std::fs::write(d.join("m.csv"), edited.join("\n") + "\n").unwrap();
+    let said = trainer_ok(d, &["campaign", "--plan", "plan.csv", "--out", "m.csv"]);
+    assert!(
+        said.contains("3 of 6 configurations to measure, about 2m ")
+            && said.contains("(40s per configuration, the median of 1 recorded in a row)"),
+        "{said}"
+    );
+}

@@ -187,18 +187,25 @@ pub fn run(geometry: &Geometry, args: &CampaignArgs) -> anyhow::Result<()> {
     } = rig;
     let order = tour(geometry, &plan, &geometry.home_pose());
     let left = plan.len() - done.len();
-    let dwelling = options.dwell.as_secs_f64() * (options.readings - 1) as f64;
+    let dwelling =
+        options.dwell.as_secs_f64() * (options.readings - 1) as f64 + options.settle.as_secs_f64();
+    let duration = |seconds: f64| humantime::format_duration(Duration::from_secs(seconds as u64));
+    let estimate = match seconds_per_configuration(&args.out)? {
+        Some((seconds, pairs)) => format!(
+            ", about {} ({} per configuration, the median of {pairs} recorded in a row)",
+            duration(left as f64 * seconds),
+            duration(seconds)
+        ),
+        None if dwelling > 0.0 => format!(
+            ", at least {} of dwelling and settling (the progress bar estimates the rest)",
+            duration(left as f64 * dwelling)
+        ),
+        None => String::new(),
+    };
     eprintln!(
-        "{left} of {} configurations to measure{} ({} readings each, {} already recorded in {})",
+        "{left} of {} configurations to measure{estimate} ({} readings each, {} already recorded \
+         in {})",
         plan.len(),
-        if dwelling > 0.0 {
-            format!(
-                ", about {} of dwelling alone",
-                humantime::format_duration(Duration::from_secs((left as f64 * dwelling) as u64))
-            )
-        } else {
-            String::new()
-        },
         options.readings,
         done.len(),
         args.out.display()
@@ -341,6 +348,27 @@ pub fn run(geometry: &Geometry, args: &CampaignArgs) -> anyhow::Result<()> {
         args.out.display()
     );
     Ok(())
+}
+
+/// The median time between two configurations recorded one after the other in `record` (pairs
+/// more than an hour apart are a new run, not counted) and how many pairs it rests on; `None`
+/// with fewer than two rows.
+fn seconds_per_configuration(record: &std::path::Path) -> anyhow::Result<Option<(f64, usize)>> {
+    let times: Vec<SystemTime> = hexacomp_formats::journal_column(record, "measured_at")?
+        .iter()
+        .filter_map(|text| humantime::parse_rfc3339(text).ok())
+        .collect();
+    let mut gaps: Vec<f64> = times
+        .windows(2)
+        .filter_map(|w| w[1].duration_since(w[0]).ok())
+        .map(|d| d.as_secs_f64())
+        .filter(|s| *s <= 3600.0)
+        .collect();
+    if gaps.is_empty() {
+        return Ok(None);
+    }
+    gaps.sort_by(f64::total_cmp);
+    Ok(Some((gaps[gaps.len() / 2], gaps.len())))
 }
 
 /// Refuses a plan with a pose the machine cannot take (legs outside the stroke), naming its
