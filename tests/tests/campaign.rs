@@ -56,27 +56,22 @@ fn rows_without_time(path: &Path) -> Vec<String> {
     rows
 }
 
-#[test]
-fn a_campaign_killed_and_run_again_records_what_an_uninterrupted_one_does() {
-    let dir = tempfile::tempdir().unwrap();
-    let d = dir.path();
-    trainer_ok(d, &["plan", "--count", "20", "--out", "plan.csv"]);
-    trainer_ok(d, &["campaign", "--plan", "plan.csv", "--out", "whole.csv"]);
-
-    // The same campaign, slowed down by a dwell between readings, killed once three
-    // configurations are on disk.
+/// Starts the campaign of `plan.csv` in `dir` into `out`, slowed by `dwell` seconds between
+/// readings, and returns it once `rows` configurations are on disk (waiting for the rows, not a
+/// duration; it must not end before, and must record within a minute).
+fn campaign_recording(dir: &Path, out: &str, dwell: &str, rows: usize) -> std::process::Child {
     let mut child = Command::new(binary("hexacomp-trainer"))
         .args(["campaign", "--plan"])
-        .arg(d.join("plan.csv"))
+        .arg(dir.join("plan.csv"))
         .arg("--out")
-        .arg(d.join("killed.csv"))
-        .args(["--dwell", "0.2"])
+        .arg(dir.join(out))
+        .args(["--dwell", dwell])
         .stdout(Stdio::null())
         .stderr(Stdio::null())
         .spawn()
         .unwrap();
     let start = Instant::now();
-    while data_lines(&d.join("killed.csv")).len() < 3 {
+    while data_lines(&dir.join(out)).len() < rows {
         assert!(
             start.elapsed() < Duration::from_secs(60),
             "no rows recorded"
@@ -87,6 +82,19 @@ fn a_campaign_killed_and_run_again_records_what_an_uninterrupted_one_does() {
         );
         std::thread::sleep(Duration::from_millis(2));
     }
+    child
+}
+
+#[test]
+fn a_campaign_killed_and_run_again_records_what_an_uninterrupted_one_does() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    trainer_ok(d, &["plan", "--count", "20", "--out", "plan.csv"]);
+    trainer_ok(d, &["campaign", "--plan", "plan.csv", "--out", "whole.csv"]);
+
+    // The same campaign, slowed down by a dwell between readings, killed once three
+    // configurations are on disk.
+    let mut child = campaign_recording(d, "killed.csv", "0.2", 3);
     signal_child(&child, libc::SIGKILL);
     child.wait().unwrap();
     let at_kill = data_lines(&d.join("killed.csv")).len();
@@ -347,24 +355,7 @@ fn two_campaigns_on_one_file_other_settings_and_foreign_files_are_refused_and_le
     let d = dir.path();
     trainer_ok(d, &["plan", "--count", "8", "--out", "plan.csv"]);
     // A second campaign while the first records.
-    let mut first = Command::new(binary("hexacomp-trainer"))
-        .args(["campaign", "--plan"])
-        .arg(d.join("plan.csv"))
-        .arg("--out")
-        .arg(d.join("m.csv"))
-        .args(["--dwell", "0.3"])
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
-    let start = Instant::now();
-    while data_lines(&d.join("m.csv")).is_empty() {
-        assert!(
-            start.elapsed() < Duration::from_secs(60),
-            "no rows recorded"
-        );
-        std::thread::sleep(Duration::from_millis(2));
-    }
+    let mut first = campaign_recording(d, "m.csv", "0.3", 1);
     let output = trainer(d, &["campaign", "--plan", "plan.csv", "--out", "m.csv"]);
     assert!(!output.status.success());
     assert!(

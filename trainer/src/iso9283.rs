@@ -232,6 +232,12 @@ pub fn cycle_poses(
     Ok(poses)
 }
 
+/// The pose every cycle's first pose is approached from: P2, as in ISO's cycle
+/// P1 → P5 → P4 → P3 → P2 → P1 (none when `poses` has no P2).
+pub fn approach_pose(poses: &[TestPose]) -> Option<TestPose> {
+    poses.iter().find(|p| p.name == "P2").cloned()
+}
+
 /// One pose's ISO 9283 characteristics (mm and degrees).
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct PoseCharacteristics {

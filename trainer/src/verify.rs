@@ -218,7 +218,7 @@ mod tests {
                 readings: 1,
                 ..CampaignOptions::default()
             },
-            approach: poses.iter().find(|p| p.name == "P2").cloned(),
+            approach: crate::iso9283::approach_pose(&poses),
         };
         let mut machine = Logging(Vec::new());
         let mut run = TestRun::default();

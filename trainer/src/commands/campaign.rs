@@ -210,17 +210,7 @@ pub fn run(geometry: &Geometry, args: &CampaignArgs) -> anyhow::Result<()> {
         done.len(),
         args.out.display()
     );
-    let bar = if args.rig.interactive() {
-        indicatif::ProgressBar::hidden()
-    } else {
-        indicatif::ProgressBar::new(left as u64)
-    }
-    .with_style(
-        indicatif::ProgressStyle::with_template(
-            "{bar:40} {pos}/{len} configurations ({elapsed}, about {eta} left)",
-        )
-        .expect("a valid template"),
-    );
+    let bar = args.rig.progress_bar(left, "configurations");
     let campaign = Campaign {
         geometry,
         plan: &plan,

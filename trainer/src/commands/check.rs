@@ -7,6 +7,7 @@ use std::path::PathBuf;
 use anyhow::Context;
 use hexacomp_core::Geometry;
 use hexacomp_trainer::check::{CheckResult, Verdict, promised, verified_poses};
+use hexacomp_trainer::iso9283::approach_pose;
 use hexacomp_trainer::verify::{PoseTest, TestRun};
 use hexacomp_trainer::verify_report::{VerifyReport, raw_csv};
 
@@ -89,7 +90,7 @@ pub fn run(geometry: &Geometry, args: &CheckArgs) -> anyhow::Result<()> {
         instrument_frame,
         options,
         // Approached as verify did: P1 from P2.
-        approach: poses.iter().find(|p| p.name == "P2").cloned(),
+        approach: approach_pose(&poses),
     };
     let mut run = TestRun::default();
     test.run(machine.as_mut(), instrument.as_mut(), &mut run, &mut || {})?;

@@ -13,6 +13,8 @@ use hexacomp_formats::{
 };
 use hexacomp_trainer::drift::{DriftCheck, ReferenceMeasurement, WarmUp};
 
+use super::{optional_cell, registration_cells};
+
 /// How the campaign watches for drift.
 #[derive(Debug, clap::Args)]
 pub struct DriftArgs {
@@ -271,18 +273,17 @@ impl DriftLog {
 
     /// Appends a measurement of the reference, on disk when this returns.
     pub fn append(&mut self, m: &ReferenceMeasurement) -> std::io::Result<()> {
-        let number = |v: Option<f64>| v.map_or(String::new(), |v| v.to_string());
         let d = m.deviation;
         let mut cells = vec![
             m.event.name().to_string(),
             m.configurations.to_string(),
-            number(d.map(|d| d.largest_mm)),
-            number(d.map(|d| d.shift.x)),
-            number(d.map(|d| d.shift.y)),
-            number(d.map(|d| d.shift.z)),
+            optional_cell(d.map(|d| d.largest_mm)),
+            optional_cell(d.map(|d| d.shift.x)),
+            optional_cell(d.map(|d| d.shift.y)),
+            optional_cell(d.map(|d| d.shift.z)),
             m.decision.name().to_string(),
         ];
-        cells.extend((0..6).map(|k| number(self.registration.map(|p| p[k]))));
+        cells.extend(registration_cells(self.registration));
         cells.push(humantime::format_rfc3339_seconds(SystemTime::now()).to_string());
         cells.push(m.note.clone());
         self.journal.append(

@@ -52,6 +52,17 @@ pub fn leg_outside_stroke(
     (1..).zip(legs).find(|(_, l)| !(min..=max).contains(l))
 }
 
+/// A number as a campaign log writes it (every digit), or an empty cell for none.
+pub fn optional_cell(value: Option<f64>) -> String {
+    value.map_or(String::new(), |v| v.to_string())
+}
+
+/// The cells `ix..ic` of a campaign log: the instrument's pose of the run's registration (mm,
+/// degrees), or six empty cells without one.
+pub fn registration_cells(pose: Option<[f64; 6]>) -> impl Iterator<Item = String> {
+    (0..6).map(move |k| optional_cell(pose.map(|p| p[k])))
+}
+
 /// Writes `bytes` to the file at `path`, whole or not at all ([`hexacomp_formats::write_file`]).
 pub fn write_bytes(path: &Path, bytes: &[u8]) -> hexacomp_formats::Result<()> {
     hexacomp_formats::write_file(path, |file| file.write_all(bytes))

@@ -12,6 +12,8 @@ use hexacomp_formats::{JournalKind, MeasurementsJournal, READINGS_COLUMNS};
 use hexacomp_trainer::campaign::Combined;
 use hexacomp_trainer::command_instrument::first_line;
 
+use super::{optional_cell, registration_cells};
+
 /// The readings log's path for the record `out`.
 pub fn log_path(out: &Path) -> PathBuf {
     out.with_extension("readings.csv")
@@ -101,7 +103,6 @@ impl ReadingsLog {
         combined: &Combined,
         temperatures: Temperatures,
     ) -> std::io::Result<()> {
-        let number = |v: Option<f64>| v.map_or(String::new(), |v| v.to_string());
         let measured_at = humantime::format_rfc3339_seconds(SystemTime::now()).to_string();
         let mut successes = 0;
         for attempt in &combined.attempts {
@@ -121,9 +122,9 @@ impl ReadingsLog {
                 kept,
                 failure,
             ];
-            cells.extend((0..6).map(|k| number(self.registration.map(|p| p[k]))));
-            cells.push(number(temperatures.air_c));
-            cells.push(number(temperatures.machine_c));
+            cells.extend(registration_cells(self.registration));
+            cells.push(optional_cell(temperatures.air_c));
+            cells.push(optional_cell(temperatures.machine_c));
             cells.push(measured_at.clone());
             self.journal.append(
                 &MeasuredConfiguration {

@@ -164,8 +164,24 @@ impl RigArgs {
 
     /// Whether the operator answers on standard input (a manual machine or instrument): then no
     /// progress bar is drawn over the prompts.
-    pub fn interactive(&self) -> bool {
+    fn interactive(&self) -> bool {
         self.machine == MachineArg::Manual || self.instrument == InstrumentArg::Manual
+    }
+
+    /// The progress bar of `len` steps called `unit` (`configurations`, `attained poses`), with
+    /// the time left; hidden when the operator answers prompts.
+    pub fn progress_bar(&self, len: usize, unit: &str) -> indicatif::ProgressBar {
+        let bar = if self.interactive() {
+            indicatif::ProgressBar::hidden()
+        } else {
+            indicatif::ProgressBar::new(len as u64)
+        };
+        bar.with_style(
+            indicatif::ProgressStyle::with_template(&format!(
+                "{{bar:40}} {{pos}}/{{len}} {unit} ({{elapsed}}, about {{eta}} left)"
+            ))
+            .expect("a valid template"),
+        )
     }
 
     /// A short description of the machine and the instrument for reports.

@@ -7,7 +7,7 @@ use std::time::{Duration, SystemTime};
 
 use anyhow::Context;
 use hexacomp_core::Geometry;
-use hexacomp_trainer::iso9283::{TestPoseOptions, cycle_poses, test_cube};
+use hexacomp_trainer::iso9283::{TestPoseOptions, approach_pose, cycle_poses, test_cube};
 use hexacomp_trainer::registration::InstrumentMpe;
 use hexacomp_trainer::table::Table;
 use hexacomp_trainer::verify::{PoseTest, TestRun, characteristics_of};
@@ -191,24 +191,14 @@ pub fn run(geometry: &Geometry, args: &VerifyArgs) -> anyhow::Result<()> {
             String::new()
         }
     );
-    let bar = if args.rig.interactive() {
-        indicatif::ProgressBar::hidden()
-    } else {
-        indicatif::ProgressBar::new(measurements as u64)
-    }
-    .with_style(
-        indicatif::ProgressStyle::with_template(
-            "{bar:40} {pos}/{len} attained poses ({elapsed}, about {eta} left)",
-        )
-        .expect("a valid template"),
-    );
+    let bar = args.rig.progress_bar(measurements, "attained poses");
     let test = PoseTest {
         geometry,
         poses: &poses,
         cycles,
         instrument_frame,
         options,
-        approach: poses.iter().find(|p| p.name == "P2").cloned(),
+        approach: approach_pose(&poses),
     };
     let mut run = TestRun::default();
     let outcome = test.run(machine.as_mut(), instrument.as_mut(), &mut run, &mut || {
