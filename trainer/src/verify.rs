@@ -171,11 +171,11 @@ mod tests {
     use hexacomp_core::observation::Observation;
 
     /// A machine that goes where it is told and remembers where it went.
-    struct Logging(Vec<String>);
+    struct Logging(Vec<Pose>);
 
     impl Machine for Logging {
-        fn go_to(&mut self, id: &str, _pose: &Pose) -> Result<Arrival> {
-            self.0.push(id.to_string());
+        fn go_to(&mut self, _id: &str, pose: &Pose) -> Result<Arrival> {
+            self.0.push(*pose);
             Ok(Arrival {
                 legs: [0.0; 6],
                 drives: [0.0; 6],
@@ -224,10 +224,20 @@ mod tests {
         let mut run = TestRun::default();
         test.run(&mut machine, &mut Exact, &mut run, &mut || {})
             .unwrap();
+        // Where the machine went, named by the test pose it is (approach moves included).
         let visited: Vec<String> = machine
             .0
             .iter()
-            .map(|id| id.split('/').next().unwrap().replace("approach", "P2"))
+            .map(|at| {
+                let at = at.to_mm_deg();
+                let pose = poses.iter().find(|p| {
+                    p.commanded
+                        .iter()
+                        .zip(&at)
+                        .all(|(c, a)| (c - a).abs() < 1e-9)
+                });
+                pose.expect("a test pose").name.clone()
+            })
             .collect();
         for (k, pose) in visited.iter().enumerate().skip(1) {
             let before = &visited[k - 1];
