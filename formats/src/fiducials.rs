@@ -34,12 +34,29 @@ pub fn read_fiducials(path: &Path) -> Result<Records<NamedPoint>> {
 
 /// Writes a fiducials file: `name,x,y,z` (weights are not written).
 pub fn write_fiducials<W: Write>(writer: W, points: &[NamedPoint]) -> std::io::Result<()> {
+    write_fiducials_with(writer, points, &[], &[])
+}
+
+/// Writes a fiducials file `name,x,y,z` with more columns after them: `columns` named, and
+/// `cells[k]` the cells of point `k` (read_fiducials reads the file as any other, `weight`
+/// included when it is one of them).
+pub fn write_fiducials_with<W: Write>(
+    writer: W,
+    points: &[NamedPoint],
+    columns: &[&str],
+    cells: &[Vec<String>],
+) -> std::io::Result<()> {
+    let head: Vec<&str> = ["name", "x", "y", "z"]
+        .into_iter()
+        .chain(columns.iter().copied())
+        .collect();
     write_rows(
         writer,
-        &["name", "x", "y", "z"],
-        points.iter().map(|p| {
+        &head,
+        points.iter().enumerate().map(|(k, p)| {
             std::iter::once(p.name.clone())
                 .chain(p.position.to_array().iter().map(|v| v.to_string()))
+                .chain(cells.get(k).into_iter().flatten().cloned())
                 .collect()
         }),
     )

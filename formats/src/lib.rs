@@ -31,7 +31,7 @@ use hexacomp_core::geometry::LEGS;
 use hexacomp_core::records::{JointCorrection, NamedCompensation, NamedLegs, NamedPose};
 
 pub use error::{Error, Result};
-pub use fiducials::{FIDUCIAL_COLUMNS, read_fiducials, write_fiducials};
+pub use fiducials::{FIDUCIAL_COLUMNS, read_fiducials, write_fiducials, write_fiducials_with};
 pub use journal::{
     DRIFT_COLUMNS, JOURNAL_COLUMNS, JournalKind, MeasurementsJournal, READINGS_COLUMNS,
     journal_column,

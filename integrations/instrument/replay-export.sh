@@ -18,6 +18,12 @@
 # status 0. Any other status, no line, or a line of the wrong width is a failed reading: the
 # campaign retries it, then records the configuration as a gap.
 #
+# Under a --registration the campaign also asks for the fiducials at its end, as
+#   replay-export.sh EXPORT --fiducial NAME X Y Z READING
+# (the fiducial's nominal position in the base frame, mm), and reads the point x,y,z it prints
+# (the instrument's frame, mm). An export holds no fiducials: this script then exits non-zero
+# (its arguments are too few), which is a failed reading.
+#
 # EXPORT is a CSV file `id,reading,p1x,...`, one line per reading, header first.
 set -eu
 export_file=$1

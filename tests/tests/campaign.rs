@@ -977,9 +977,273 @@ fn a_resumed_campaign_estimates_the_time_left_from_the_configurations_recorded()
         .collect();
     std::fs::write(d.join("m.csv"), edited.join("\n") + "\n").unwrap();
     let said = trainer_ok(d, &["campaign", "--plan", "plan.csv", "--out", "m.csv"]);
+    // Three configurations and two measurements of the reference (start, end), 40 s each.
     assert!(
-        said.contains("3 of 6 configurations to measure, about 2m ")
-            && said.contains("(40s per configuration, the median of 1 recorded in a row)"),
+        said.contains("3 of 6 configurations to measure, about 3m 20s ")
+            && said.contains(
+                "(40s per configuration, the median of 1 recorded in a row, and as much per \
+                 measurement of the reference: 2)"
+            ),
         "{said}"
+    );
+    // A new campaign: what its settling and dwelling take at least, references included (six
+    // configurations, the reference at the start, after the third and at the end).
+    let mut child = Command::new(binary("hexacomp-trainer"))
+        .current_dir(d)
+        .args(["campaign", "--plan", "plan.csv", "--out", "new.csv"])
+        .args(["--settle", "100", "--dwell", "10", "--readings", "2"])
+        .args(["--reference-every", "3"])
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut first = String::new();
+    std::io::BufRead::read_line(
+        &mut std::io::BufReader::new(child.stderr.take().unwrap()),
+        &mut first,
+    )
+    .unwrap();
+    child.kill().unwrap();
+    child.wait().unwrap();
+    assert!(
+        first.contains(
+            "6 of 6 configurations to measure, at least 16m 30s of settling and dwelling for \
+             them and 3 measurements of the reference"
+        ),
+        "{first}"
+    );
+}
+
+/// Registers the virtual tracker standing at `at` as `out`, its fiducials read with 2 µm of
+/// noise.
+fn register_tracker_precisely(d: &Path, at: &str, out: &str) {
+    let fiducials = format!("{out}.fiducials.csv");
+    trainer_ok(
+        d,
+        &[
+            "simulate",
+            "--plan",
+            "plan.csv",
+            "--out",
+            "unused.csv",
+            "--instrument-pose",
+            at,
+            "--fiducials-out",
+            &fiducials,
+            "--fiducial-noise",
+            "0.002",
+        ],
+    );
+    trainer_ok(d, &["register", "--measured", &fiducials, "--out", out]);
+}
+
+/// The movements (`moved_mm`) of a fiducials file a campaign wrote.
+fn fiducial_movements(path: &Path) -> Vec<f64> {
+    let mut reader = csv::Reader::from_path(path).unwrap();
+    let column = reader
+        .headers()
+        .unwrap()
+        .iter()
+        .position(|c| c == "moved_mm")
+        .unwrap();
+    reader
+        .records()
+        .map(|r| r.unwrap()[column].parse().unwrap())
+        .collect()
+}
+
+#[test]
+fn the_fiducials_measured_at_the_end_refuse_a_registration_the_tracker_no_longer_stands_at() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let at = "2500,-1500,-800,0.3,-0.2,135";
+    // Registered there, then bumped 0.2 mm along the base's x before the campaign began: the
+    // references agree with each other all campaign long, only the fiducials can tell.
+    let bumped = "2500.2,-1500,-800,0.3,-0.2,135";
+    trainer_ok(d, &["plan", "--count", "6", "--out", "plan.csv"]);
+    register_tracker_precisely(d, at, "a.toml");
+    let under_a = ["--registration", "a.toml"];
+
+    let stderr = trainer_ok(d, &campaign("plan.csv", "good.csv", at, &under_a));
+    assert!(stderr.contains("the registration holds"), "{stderr}");
+    let moved = fiducial_movements(&d.join("good.fiducials.csv"));
+    assert!(
+        moved.len() >= 3 && moved.iter().all(|m| *m < 0.03),
+        "{moved:?}"
+    );
+    let again = trainer_ok(d, &campaign("plan.csv", "good.csv", at, &under_a));
+    assert!(
+        again.contains("nothing to do") && again.contains("the registration holds"),
+        "{again}"
+    );
+
+    let output = trainer(d, &campaign("plan.csv", "c.csv", bumped, &under_a));
+    let error = text(&output.stderr);
+    assert!(!output.status.success(), "{error}");
+    assert!(
+        error.contains("moved together")
+            && error.contains("register --measured")
+            && error.contains("c.fiducials.csv"),
+        "{error}"
+    );
+    assert_eq!(data_lines(&d.join("c.csv")).len(), 6, "every row is kept");
+    let moved = fiducial_movements(&d.join("c.fiducials.csv"));
+    assert!(
+        moved.iter().all(|m| (m - 0.2).abs() < 0.03),
+        "each fiducial moved the bump: {moved:?}"
+    );
+    // Run again, the decision stands.
+    let output = trainer(d, &campaign("plan.csv", "c.csv", bumped, &under_a));
+    assert!(!output.status.success());
+    assert!(text(&output.stderr).contains("moved together"));
+    // Registered from the fiducials measured at the end, it stands where the bump put it, and
+    // the campaign's end agrees with it.
+    trainer_ok(
+        d,
+        &[
+            "register",
+            "--measured",
+            "c.fiducials.csv",
+            "--out",
+            "c.toml",
+        ],
+    );
+    // At the platform (300 mm above the base's origin) the new registration places a point the
+    // tracker reads where it is, within what the fiducials' noise allows; the old one 0.2 mm off.
+    let platform_point = glam::DVec3::new(0.0, 0.0, 300.0);
+    let stands = hexacomp_core::Pose::from_mm_deg([2500.2, -1500.0, -800.0, 0.3, -0.2, 135.0]);
+    let seen = stands.inverse().transform_point(platform_point);
+    let placed_by = |file: &str| {
+        let r = hexacomp_formats::read_registration(&d.join(file)).unwrap();
+        r.instrument_pose()
+            .transform_point(seen)
+            .distance(platform_point)
+    };
+    assert!(placed_by("c.toml") < 0.02, "{}", placed_by("c.toml"));
+    assert!(
+        (placed_by("a.toml") - 0.2).abs() < 0.02,
+        "{}",
+        placed_by("a.toml")
+    );
+    let holds = trainer_ok(
+        d,
+        &campaign("plan.csv", "c.csv", bumped, &["--registration", "c.toml"]),
+    );
+    assert!(holds.contains("the registration holds"), "{holds}");
+}
+
+/// The raw lines of a readings log by configuration and reading (`A/2.1` → ("A", 2)): the
+/// targets as the instrument reported them.
+fn raw_readings(path: &Path) -> std::collections::HashMap<(String, usize), String> {
+    let mut reader = csv::ReaderBuilder::new()
+        .comment(Some(b'#'))
+        .from_path(path)
+        .unwrap();
+    let header = reader.headers().unwrap().clone();
+    let targets: Vec<usize> = header
+        .iter()
+        .enumerate()
+        .filter(|(_, c)| c.starts_with('p') && c.len() == 3)
+        .map(|(k, _)| k)
+        .collect();
+    reader
+        .records()
+        .map(|r| {
+            let r = r.unwrap();
+            let (configuration, number) = r[0].split_once('/').unwrap();
+            let reading: usize = number.split_once('.').unwrap().0.parse().unwrap();
+            let line: Vec<&str> = targets.iter().map(|k| &r[*k]).collect();
+            ((configuration.to_string(), reading), line.join(","))
+        })
+        .collect()
+}
+
+#[test]
+fn a_campaign_reads_the_lines_a_trackers_software_appends_and_skips_those_from_before_the_move() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    trainer_ok(d, &["plan", "--count", "4", "--out", "plan.csv"]);
+    let common = ["--no-reference", "--readings", "3"];
+    trainer_ok(
+        d,
+        &[
+            &["campaign", "--plan", "plan.csv", "--out", "v.csv"][..],
+            &common,
+        ]
+        .concat(),
+    );
+    let raw = raw_readings(&d.join("v.readings.csv"));
+    assert_eq!(raw.len(), 12);
+    // The tracker's software: a line from an earlier session already in its file.
+    let export = d.join("export.txt");
+    std::fs::write(&export, "9,9,9,9,9,9,9,9,9\n").unwrap();
+    let mut child = Command::new(binary("hexacomp-trainer"))
+        .current_dir(d)
+        .args(["campaign", "--plan", "plan.csv", "--out", "f.csv"])
+        .args(["--instrument", "file", "--instrument-file", "export.txt"])
+        .args(["--command-timeout", "60"])
+        .args(common)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let stderr = std::io::BufReader::new(child.stderr.take().unwrap());
+    let mut asked = std::collections::HashMap::<(String, usize), usize>::new();
+    let mut shown = Vec::new();
+    for line in std::io::BufRead::lines(stderr) {
+        let line = line.unwrap();
+        shown.push(line.clone());
+        let Some(rest) = line.strip_prefix("configuration ") else {
+            continue;
+        };
+        let Some((id, rest)) = rest.split_once(", reading ") else {
+            continue;
+        };
+        let Some((number, _)) = rest.split_once(": measure") else {
+            continue;
+        };
+        let key = (id.to_string(), number.parse::<usize>().unwrap());
+        let times = asked.entry(key.clone()).or_default();
+        *times += 1;
+        let mut append = String::new();
+        // The first configuration's second reading: first a line that is no reading.
+        if key.1 == 2 && *times == 1 && asked.len() == 2 {
+            append.push_str("target not found\n");
+        } else {
+            append.push_str(&raw[&key]);
+            append.push('\n');
+            // After a configuration's last reading the software measures once more, before
+            // the machine moved on: that line belongs to no reading.
+            if key.1 == 3 {
+                append.push_str(&raw[&key]);
+                append.push('\n');
+            }
+        }
+        std::fs::OpenOptions::new()
+            .append(true)
+            .open(&export)
+            .unwrap()
+            .write_all(append.as_bytes())
+            .unwrap();
+    }
+    let status = child.wait().unwrap();
+    let shown = shown.join("\n");
+    assert!(status.success(), "{shown}");
+    let log = std::fs::read_to_string(d.join("f.readings.csv")).unwrap();
+    assert!(
+        log.contains("export.txt:3: the line \"\"target not found\"\" has 1 cells"),
+        "the line that is no reading is a failed attempt, named by its place: {log}"
+    );
+    assert_eq!(
+        shown
+            .matches("skipped 1 line appended before configuration")
+            .count(),
+        3,
+        "{shown}"
+    );
+    assert_eq!(
+        rows_without_time(&d.join("f.csv")),
+        rows_without_time(&d.join("v.csv")),
+        "the followed readings give the virtual instrument's record"
     );
 }

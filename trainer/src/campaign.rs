@@ -18,9 +18,9 @@ use hexacomp_core::compensator::{PointStatus, compensate_legs};
 use hexacomp_core::model::Model;
 use hexacomp_core::observation::Observation;
 use hexacomp_core::pose::{rotation_from_vector, rotation_vector};
-use hexacomp_core::records::{MeasuredConfiguration, NamedPose};
+use hexacomp_core::records::{MeasuredConfiguration, NamedPoint, NamedPose};
 use hexacomp_core::{Geometry, LEGS, Pose, inverse_kinematics};
-use hexacomp_virtual::VirtualPlatform;
+use hexacomp_virtual::{VirtualPlatform, measure_fiducials};
 
 use crate::acquire::as_instrument_reports;
 use crate::drift::{Decision, DriftCheck, ReferenceEvent, ReferenceMeasurement, deviation};
@@ -68,6 +68,16 @@ pub trait Instrument {
         pose_mm_deg: &[f64; 6],
         arrival: &Arrival,
     ) -> std::result::Result<Observation, ReadError>;
+
+    /// Reading number `reading` (0-based) of the fiducial `name`, a fixed point on the machine's
+    /// base whose nominal position is `nominal_mm` (base frame, mm): where the instrument sees
+    /// it, in its frame, mm. A probe's instrument measures it as a point too.
+    fn read_fiducial(
+        &mut self,
+        name: &str,
+        reading: usize,
+        nominal_mm: DVec3,
+    ) -> std::result::Result<DVec3, ReadError>;
 }
 
 /// How each configuration is measured.
@@ -134,28 +144,39 @@ pub struct Combined {
     pub attempts: Vec<Attempt>,
 }
 
-/// One attempt at a reading.
+/// One attempt at a reading (of a configuration, or of a fiducial's point).
 #[derive(Debug, Clone, PartialEq)]
-pub struct Attempt {
+pub struct Attempt<T = Observation> {
     /// The reading's number, from 1.
     pub reading: usize,
     /// The attempt's number for that reading, from 1.
     pub attempt: usize,
     /// What the instrument reported (its frame), or why it failed.
-    pub outcome: std::result::Result<Observation, String>,
+    pub outcome: std::result::Result<T, String>,
 }
 
-/// The readings of one configuration.
-#[derive(Debug, Clone, Default, PartialEq)]
-pub struct Readings {
+/// The readings of one configuration (or of one fiducial's point).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Readings<T = Observation> {
     /// The readings that succeeded, in the order taken.
-    pub observations: Vec<Observation>,
+    pub observations: Vec<T>,
     /// Every attempt.
-    pub attempts: Vec<Attempt>,
+    pub attempts: Vec<Attempt<T>>,
     /// Readings lost (every attempt failed).
     pub lost: usize,
     /// The last failure's reason, if any.
     pub failure: Option<String>,
+}
+
+impl<T> Default for Readings<T> {
+    fn default() -> Self {
+        Self {
+            observations: Vec::new(),
+            attempts: Vec::new(),
+            lost: 0,
+            failure: None,
+        }
+    }
 }
 
 /// The median of `values` (not empty).
@@ -180,9 +201,9 @@ fn outliers(points: &[DVec3], outlier_factor: f64, floor: f64) -> Vec<bool> {
     distances.iter().map(|d| *d > limit).collect()
 }
 
-/// The readings of one point combined: outliers rejected against the coordinate-wise median,
+/// The readings of one point combined (not empty): outliers rejected against the coordinate-wise median,
 /// the mean of the rest, their RMS distance from it, and which readings were kept.
-fn combine_points(points: &[DVec3], outlier_factor: f64) -> (DVec3, f64, Vec<bool>) {
+pub fn combine_points(points: &[DVec3], outlier_factor: f64) -> (DVec3, f64, Vec<bool>) {
     let kept: Vec<bool> = outliers(points, outlier_factor, 1e-3)
         .iter()
         .map(|o| !o)
@@ -687,18 +708,32 @@ pub fn read_configuration(
     pose_mm_deg: &[f64; 6],
     arrival: &Arrival,
 ) -> Result<Readings> {
+    read_repeatedly(options, &format!("configuration {id}"), |reading| {
+        instrument.read(id, reading, pose_mm_deg, arrival)
+    })
+}
+
+/// `options.readings` readings of `what` by `read` (given the reading's number from 0), each
+/// retried up to `options.retries` times, `options.dwell` apart: those that succeeded, every
+/// attempt, how many were lost and the last failure's reason; an instrument that cannot work
+/// ([`ReadError::Broken`]) is an error.
+pub fn read_repeatedly<T: Clone>(
+    options: &CampaignOptions,
+    what: &str,
+    mut read: impl FnMut(usize) -> std::result::Result<T, ReadError>,
+) -> Result<Readings<T>> {
     let mut readings = Readings::default();
     for reading in 0..options.readings {
         if reading > 0 && !options.dwell.is_zero() {
             std::thread::sleep(options.dwell);
         }
-        let mut read = false;
+        let mut read_one = false;
         for attempt in 0..=options.retries {
-            let outcome = match instrument.read(id, reading, pose_mm_deg, arrival) {
-                Ok(observation) => {
-                    readings.observations.push(observation.clone());
-                    read = true;
-                    Ok(observation)
+            let outcome = match read(reading) {
+                Ok(value) => {
+                    readings.observations.push(value.clone());
+                    read_one = true;
+                    Ok(value)
                 }
                 Err(ReadError::Failed(why)) => {
                     readings.failure = Some(why.clone());
@@ -706,7 +741,7 @@ pub fn read_configuration(
                 }
                 Err(ReadError::Broken(why)) => {
                     return Err(Error::Instrument(format!(
-                        "{why}; measuring stops before configuration {id}"
+                        "{why}; measuring stops before {what}"
                     )));
                 }
             };
@@ -715,11 +750,11 @@ pub fn read_configuration(
                 attempt: attempt + 1,
                 outcome,
             });
-            if read {
+            if read_one {
                 break;
             }
         }
-        readings.lost += usize::from(!read);
+        readings.lost += usize::from(!read_one);
     }
     Ok(readings)
 }
@@ -854,6 +889,28 @@ impl Instrument for VirtualInstrument {
             self.probe,
         )
         .map_err(|e| ReadError::Failed(e.to_string()))
+    }
+
+    /// The fiducial seen from where the instrument stands, with the device's noise (keyed on
+    /// the seed, the fiducial's name and the reading's number).
+    fn read_fiducial(
+        &mut self,
+        name: &str,
+        reading: usize,
+        nominal_mm: DVec3,
+    ) -> std::result::Result<DVec3, ReadError> {
+        let point = NamedPoint {
+            name: name.to_string(),
+            position: nominal_mm,
+            weight: 1.0,
+        };
+        // Each reading is the mean of the device's own readings, as for the targets.
+        let device = self.platform.machine().model().device;
+        let sigma_mm = device.sigma_mm / (device.readings.max(1) as f64).sqrt();
+        let key = noise_key(self.seed, &format!("fiducial {name}"), reading as u64);
+        measure_fiducials(&[point], &self.instrument, sigma_mm, key)
+            .map(|seen| seen[0].position)
+            .map_err(|e| ReadError::Broken(e.to_string()))
     }
 }
 

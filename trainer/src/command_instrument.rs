@@ -6,7 +6,10 @@
 //! degrees, `R = Rz(C)·Ry(B)·Rx(A)`) and the reading's number from 1 — and prints one line on
 //! standard output: the measured target points `p1x,p1y,p1z,…,pNx,pNy,pNz` in the instrument's
 //! frame (mm; a target not seen as three empty cells), or the platform's pose `x,y,z,a,b,c` from
-//! a 6-DoF probe. Exit status 0; anything else, no line, a line of another width, a cell that is
+//! a 6-DoF probe. At the end of a campaign under a registration, each fiducial is read as
+//! `PROGRAM [ARGS…] --fiducial NAME X Y Z READING` (its nominal position in the base frame, mm),
+//! and the program prints the point `x,y,z` it measured there (the instrument's frame, mm).
+//! Exit status 0; anything else, no line, a line of another width, a cell that is
 //! not a number (or beyond 1e9 mm), or no answer within the timeout is a failed reading (retried
 //! by the campaign); a program that cannot be started stops the campaign. Lines after the first
 //! are ignored, standard error is shown. The program runs in its own process group, killed whole
@@ -148,6 +151,34 @@ impl Instrument for CommandInstrument {
             .collect();
         let line = first_line(&self.program, &arguments, self.timeout)?;
         parse_reading(&line, self.targets, self.probe).map_err(ReadError::Failed)
+    }
+
+    fn read_fiducial(
+        &mut self,
+        name: &str,
+        reading: usize,
+        nominal_mm: DVec3,
+    ) -> Result<DVec3, ReadError> {
+        let arguments: Vec<String> = ["--fiducial".to_string(), name.to_string()]
+            .into_iter()
+            .chain(nominal_mm.to_array().map(|v| v.to_string()))
+            .chain([(reading + 1).to_string()])
+            .collect();
+        let line = first_line(&self.program, &arguments, self.timeout)?;
+        parse_point(&line).map_err(ReadError::Failed)
+    }
+}
+
+/// Parses a fiducial's reading `x,y,z` (mm, the instrument's frame).
+pub(crate) fn parse_point(line: &str) -> Result<DVec3, String> {
+    match parse_reading(line, 1, false)? {
+        Observation::Targets(points) => match points.as_slice() {
+            [Some(point)] => Ok(*point),
+            _ => Err(format!(
+                "the line {line:?} is empty: the fiducial was not seen"
+            )),
+        },
+        _ => Err(format!("the line {line:?} holds no point x,y,z")),
     }
 }
 

@@ -43,25 +43,36 @@ pub fn deviation(
                 .map(|(_, q)| *p - *q)
         })
         .collect();
-    if moves.is_empty() {
-        return None;
-    }
-    let shift = moves.iter().copied().sum::<DVec3>() / moves.len() as f64;
-    Some(Deviation {
-        largest_mm: moves.iter().map(|m| m.length()).fold(0.0, f64::max),
-        shift,
-        uneven_mm: moves
-            .iter()
-            .map(|m| (*m - shift).length())
-            .fold(0.0, f64::max),
-    })
+    Deviation::of_moves(&moves)
 }
 
 impl Deviation {
+    /// The deviation of points that moved by `moves` (mm); `None` without any.
+    pub fn of_moves(moves: &[DVec3]) -> Option<Self> {
+        if moves.is_empty() {
+            return None;
+        }
+        let shift = moves.iter().copied().sum::<DVec3>() / moves.len() as f64;
+        Some(Self {
+            largest_mm: moves.iter().map(|m| m.length()).fold(0.0, f64::max),
+            shift,
+            uneven_mm: moves
+                .iter()
+                .map(|m| (*m - shift).length())
+                .fold(0.0, f64::max),
+        })
+    }
+
+    /// Whether the points moved together (the largest distance of a point's movement from the
+    /// mean movement is at most 30 % of the largest movement).
+    pub fn together(&self) -> bool {
+        self.uneven_mm <= 0.3 * self.largest_mm
+    }
+
     /// What the movement looks like and what to do about it, for the message that stops a
     /// campaign (`limit_mm`: the threshold it exceeded).
     pub fn explain(&self, limit_mm: f64) -> String {
-        let shape = if self.uneven_mm <= 0.3 * self.largest_mm {
+        let shape = if self.together() {
             format!(
                 "the targets moved together by ({:.4}, {:.4}, {:.4}) mm: the tracker or the whole \
                  machine moved (a bumped tracker, the floor, thermal growth of the base)",

@@ -4,10 +4,11 @@
 //!
 //! - [`plan`]: measuring configurations spread over the task workspace (the paper's Fig. 8);
 //! - [`acquire`]: measuring a plan on the virtual platform;
-//! - [`campaign`], [`command_instrument`], [`manual`], [`drift`]: a measuring campaign — the
-//!   machine driven through the plan, several readings per configuration (a program's or an
-//!   operator's), recorded as it goes and resumable, its reference configuration watched for
-//!   drift;
+//! - [`campaign`], [`command_instrument`], [`manual`], [`followed_file`], [`drift`],
+//!   [`fiducial_check`]: a measuring campaign — the machine driven through the plan, several
+//!   readings per configuration (a program's, an operator's, or lines a tracker's software
+//!   appends to a file), recorded as it goes and resumable, its reference configuration watched
+//!   for drift, the registration's fiducials measured again at its end;
 //! - [`corrections`]: the robust Levenberg–Marquardt joint-correction solver (Fig. 2; Eq. 5,
 //!   Eq. 6, Eq. 7, Eq. 8, Eq. 9);
 //! - [`screening`]: gross-error screening — which configurations are excluded, and when an input
@@ -38,6 +39,8 @@ pub mod corrections;
 pub mod drift;
 pub mod error;
 pub mod evaluate;
+pub mod fiducial_check;
+pub mod followed_file;
 pub mod identify;
 pub mod iso9283;
 pub mod linuxcnc;

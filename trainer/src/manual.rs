@@ -6,11 +6,13 @@
 
 use std::io::BufRead;
 
+use glam::DVec3;
+
 use hexacomp_core::observation::Observation;
 use hexacomp_core::{Geometry, Pose, inverse_kinematics};
 
 use crate::campaign::{Arrival, Instrument, Machine, ReadError};
-use crate::command_instrument::parse_reading;
+use crate::command_instrument::{parse_point, parse_reading};
 use crate::error::{Error, Result};
 
 /// One line of standard input without its line end; `None` at the end of the input.
@@ -67,6 +69,33 @@ impl Machine for ManualMachine {
     }
 }
 
+/// Asks the operator for a reading with `prompt` until a line `parse` accepts: a line it refuses
+/// is named with its cause and asked again at no cost; an empty line is a failed reading;
+/// `stop` or the end of the input stops the campaign.
+fn ask_reading<T>(
+    prompt: &str,
+    parse: impl Fn(&str) -> std::result::Result<T, String>,
+) -> std::result::Result<T, ReadError> {
+    loop {
+        eprintln!("{prompt}");
+        match read_line() {
+            Ok(Some(line)) if line.trim().is_empty() => {
+                return Err(ReadError::Failed("no reading given".into()));
+            }
+            Ok(Some(line)) if line.trim() == "stop" => {
+                return Err(ReadError::Broken("stopped by the operator".into()));
+            }
+            Ok(Some(line)) => match parse(line.trim()) {
+                Ok(value) => return Ok(value),
+                // Asked again: a typing mistake costs no attempt.
+                Err(why) => eprintln!("not a reading: {why}"),
+            },
+            Ok(None) => return Err(ReadError::Broken("the input ended".into())),
+            Err(e) => return Err(ReadError::Broken(format!("reading the input: {e}"))),
+        }
+    }
+}
+
 /// An instrument read by the operator: each reading is typed or pasted as one CSV line, the
 /// targets `p1x..pNz` in the instrument's frame (three empty cells for a target not seen) or,
 /// as a probe, the pose `x,y,z,a,b,c`. A line that does not parse is named with its cause and
@@ -93,27 +122,28 @@ impl Instrument for ManualInstrument {
         } else {
             format!("the targets p1x..p{}z (mm)", self.targets)
         };
-        loop {
-            eprintln!(
-                "configuration {id}, reading {}: type or paste {what} and press Enter (empty: \
-                 no reading; stop: end the campaign)",
-                reading + 1
-            );
-            match read_line() {
-                Ok(Some(line)) if line.trim().is_empty() => {
-                    return Err(ReadError::Failed("no reading given".into()));
-                }
-                Ok(Some(line)) if line.trim() == "stop" => {
-                    return Err(ReadError::Broken("stopped by the operator".into()));
-                }
-                Ok(Some(line)) => match parse_reading(line.trim(), self.targets, self.probe) {
-                    Ok(observation) => return Ok(observation),
-                    // Asked again: a typing mistake costs no attempt.
-                    Err(why) => eprintln!("not a reading: {why}"),
-                },
-                Ok(None) => return Err(ReadError::Broken("the input ended".into())),
-                Err(e) => return Err(ReadError::Broken(format!("reading the input: {e}"))),
-            }
-        }
+        let prompt = format!(
+            "configuration {id}, reading {}: type or paste {what} and press Enter (empty: no \
+             reading; stop: end the campaign)",
+            reading + 1
+        );
+        let (targets, probe) = (self.targets, self.probe);
+        ask_reading(&prompt, |line| parse_reading(line, targets, probe))
+    }
+
+    fn read_fiducial(
+        &mut self,
+        name: &str,
+        reading: usize,
+        nominal_mm: DVec3,
+    ) -> std::result::Result<DVec3, ReadError> {
+        let [x, y, z] = nominal_mm.to_array().map(|v| format!("{v:.3}"));
+        let prompt = format!(
+            "fiducial {name} (nominal {x} {y} {z} mm on the base), reading {}: type or paste the \
+             point x,y,z (mm, the instrument's frame) and press Enter (empty: no reading; stop: \
+             end the campaign)",
+            reading + 1
+        );
+        ask_reading(&prompt, parse_point)
     }
 }

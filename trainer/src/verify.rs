@@ -197,6 +197,15 @@ mod tests {
         ) -> std::result::Result<Observation, ReadError> {
             Ok(Observation::Pose(*pose_mm_deg))
         }
+
+        fn read_fiducial(
+            &mut self,
+            _name: &str,
+            _reading: usize,
+            nominal_mm: glam::DVec3,
+        ) -> std::result::Result<glam::DVec3, ReadError> {
+            Ok(nominal_mm)
+        }
     }
 
     #[test]

@@ -16,6 +16,7 @@ use hexacomp_trainer::campaign::{Campaign, tour};
 use hexacomp_trainer::drift::Decision;
 
 use super::drift_log::DriftLog;
+use super::end_fiducials;
 use super::readings_log::{self, ReadingsLog, Temperatures, read_temperatures};
 
 /// Drive the machine through a plan and measure every configuration, recording each one (flushed
@@ -37,13 +38,17 @@ use super::readings_log::{self, ReadingsLog, Temperatures, read_temperatures};
 /// every --reference-every configurations and at the end, into the drift log; a target moving
 /// more than --drift-limit from its baseline stops the campaign with what moved and what to do
 /// (register again and give --registration, or --accept-drift). --warm-up-limit holds the first
-/// configuration until the reference settles.
+/// configuration until the reference settles. Under a --registration, its fiducials are
+/// measured again once every configuration is recorded (into --out with `.fiducials.csv` in
+/// place of its extension): one that moved more than --drift-limit since the registration
+/// means the registration does not hold, and the campaign ends with an error saying what to do.
 ///
 /// Machines: virtual (the built-in virtual platform), linuxcnc (a running, homed LinuxCNC),
 /// manual (the operator confirms each pose with Enter). Instruments: virtual (its tracker,
 /// standing at --instrument-pose, noise keyed on --seed and each configuration's id, so a resumed
 /// campaign records exactly what an uninterrupted one does), command (your program reads the
-/// tracker: see --instrument-command), manual (the operator types or pastes each reading).
+/// tracker: see --instrument-command), manual (the operator types or pastes each reading), file
+/// (the lines the tracker's software appends to --instrument-file).
 #[derive(Debug, clap::Args)]
 pub struct CampaignArgs {
     /// Poses CSV to measure (`hexacomp-trainer plan`).
@@ -78,6 +83,7 @@ impl CampaignArgs {
             inputs: std::iter::once(&self.plan)
                 .chain(&self.registration)
                 .map(PathBuf::as_path)
+                .chain(self.rig.instrument_file())
                 .collect(),
             outputs: vec![&self.out],
         }
@@ -96,15 +102,19 @@ pub fn run(geometry: &Geometry, args: &CampaignArgs) -> anyhow::Result<()> {
     args.drift.check_options()?;
     let drift_log = (!args.drift.no_reference).then(|| args.drift.log_path(&args.out));
     let readings_log = readings_log::log_path(&args.out);
+    let fiducials_file = end_fiducials::path(&args.out);
     let mut others: Vec<&std::path::Path> = vec![&args.plan, &args.out];
     others.extend(args.registration.as_deref());
+    others.extend(args.rig.instrument_file());
     hexacomp_formats::refuse_same_file(&readings_log, &others)?;
+    hexacomp_formats::refuse_same_file(&fiducials_file, &others)?;
     if let Some(log) = &drift_log {
         hexacomp_formats::refuse_same_file(log, &others)?;
-        hexacomp_formats::refuse_same_file(log, &[&readings_log])?;
+        hexacomp_formats::refuse_same_file(log, &[&readings_log, &fiducials_file])?;
         anyhow::ensure!(
-            log != &args.out && log != &readings_log,
-            "--drift-log {}: the record, its readings log and its drift log must be three files",
+            log != &args.out && log != &readings_log && log != &fiducials_file,
+            "--drift-log {}: the record, its readings log, its drift log and its fiducials must \
+             be four files",
             log.display()
         );
     }
@@ -165,11 +175,12 @@ pub fn run(geometry: &Geometry, args: &CampaignArgs) -> anyhow::Result<()> {
         )?;
         (Some(log), Some(check), frame)
     };
-    if done.len() == plan.len()
-        && !drift
-            .as_ref()
-            .is_some_and(|d| d.end_pending || d.start_pending)
-    {
+    let references_owed = drift
+        .as_ref()
+        .is_some_and(|d| d.end_pending || d.start_pending);
+    // Fiducials measured at the end of a run cut short before they were written are owed.
+    let fiducials_owed = registration.is_some() && !fiducials_file.exists();
+    if done.len() == plan.len() && !references_owed && !fiducials_owed {
         eprintln!(
             "the campaign is finished: all {} configurations of {} are recorded in {}; nothing \
              to do",
@@ -177,6 +188,11 @@ pub fn run(geometry: &Geometry, args: &CampaignArgs) -> anyhow::Result<()> {
             plan.file,
             args.out.display()
         );
+        if let Some(registration) = &registration {
+            let holds =
+                end_fiducials::recheck(registration, &fiducials_file, args.drift.limit_mm())?;
+            eprintln!("{holds}");
+        }
         return Ok(());
     }
     let super::rig::Rig {
@@ -190,15 +206,22 @@ pub fn run(geometry: &Geometry, args: &CampaignArgs) -> anyhow::Result<()> {
     let dwelling =
         options.dwell.as_secs_f64() * (options.readings - 1) as f64 + options.settle.as_secs_f64();
     let duration = |seconds: f64| humantime::format_duration(Duration::from_secs(seconds as u64));
+    let references = if left > 0 {
+        args.drift.references_in(left)
+    } else {
+        usize::from(references_owed)
+    };
     let estimate = match seconds_per_configuration(&args.out)? {
         Some((seconds, pairs)) => format!(
-            ", about {} ({} per configuration, the median of {pairs} recorded in a row)",
-            duration(left as f64 * seconds),
+            ", about {} ({} per configuration, the median of {pairs} recorded in a row, and as \
+             much per measurement of the reference: {references})",
+            duration((left + references) as f64 * seconds),
             duration(seconds)
         ),
         None if dwelling > 0.0 => format!(
-            ", at least {} of dwelling and settling (the progress bar estimates the rest)",
-            duration(left as f64 * dwelling)
+            ", at least {} of settling and dwelling for them and {references} measurements of \
+             the reference, moves not counted (the progress bar estimates the rest)",
+            duration((left + references) as f64 * dwelling)
         ),
         None => String::new(),
     };
@@ -324,6 +347,21 @@ pub fn run(geometry: &Geometry, args: &CampaignArgs) -> anyhow::Result<()> {
         summary.gaps.len(),
         args.out.display()
     );
+    // Every configuration is recorded: the registration's fiducials are measured again.
+    if let Some(registration) = &registration {
+        eprintln!(
+            "measuring the {} fiducials of the registration again",
+            registration.fiducials.len()
+        );
+        let holds = end_fiducials::measure(
+            instrument.as_mut(),
+            &options,
+            registration,
+            &fiducials_file,
+            args.drift.limit_mm(),
+        )?;
+        eprintln!("{holds}");
+    }
     anyhow::ensure!(
         summary.gaps.is_empty(),
         "{} configurations were recorded with nothing measured ({}); they stay gaps in {} \

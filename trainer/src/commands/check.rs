@@ -48,6 +48,7 @@ impl CheckArgs {
             inputs: std::iter::once(&self.promise)
                 .chain(self.model.iter().chain(&self.registration))
                 .map(PathBuf::as_path)
+                .chain(self.rig.instrument_file())
                 .collect(),
             outputs: self.out.iter().map(PathBuf::as_path).collect(),
         }

@@ -55,6 +55,22 @@ pub struct DriftArgs {
 }
 
 impl DriftArgs {
+    /// The largest movement of a reference target from its baseline (and of a fiducial from its
+    /// registration reading), mm.
+    pub fn limit_mm(&self) -> f64 {
+        self.drift_limit
+    }
+
+    /// How many times the reference is measured in a run of `configurations` (at its start,
+    /// every --reference-every, at its end); 0 with --no-reference.
+    pub fn references_in(&self, configurations: usize) -> usize {
+        match (self.no_reference, self.reference_every) {
+            (true, _) => 0,
+            (false, 0) => 2,
+            (false, every) => 2 + configurations.saturating_sub(1) / every,
+        }
+    }
+
     /// The drift log's path for the record `out`.
     pub fn log_path(&self, out: &Path) -> PathBuf {
         self.drift_log

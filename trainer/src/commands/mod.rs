@@ -5,6 +5,7 @@ pub mod campaign;
 pub mod check;
 pub mod deploy;
 pub mod drift_log;
+pub mod end_fiducials;
 pub mod evaluate;
 pub mod export;
 pub mod geometry;

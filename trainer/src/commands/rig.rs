@@ -9,6 +9,7 @@ use hexacomp_trainer::campaign::{
     CampaignOptions, Instrument, Machine, VirtualHardware, VirtualInstrument, VirtualMachine,
 };
 use hexacomp_trainer::command_instrument::CommandInstrument;
+use hexacomp_trainer::followed_file::FollowedFile;
 use hexacomp_trainer::linuxcnc_machine::{LinuxCncMachine, LinuxCncOptions};
 use hexacomp_trainer::manual::{ManualInstrument, ManualMachine};
 use hexacomp_virtual::{DEFAULT_MACHINE_SEED, ErrorModel, ErrorVariant, VirtualPlatform};
@@ -41,7 +42,13 @@ pub struct RigArgs {
     /// started stops the run.
     #[arg(long, value_name = "PROGRAM", required_if_eq("instrument", "command"))]
     instrument_command: Option<String>,
-    /// Seconds a reading of --instrument-command may take before it is killed and retried.
+    /// With --instrument file: the file the tracker's software appends its readings to, one CSV
+    /// line each as --instrument-command prints them (a fiducial's: x,y,z); lines appended while
+    /// the machine moved are skipped (docs/measuring.md).
+    #[arg(long, value_name = "FILE", required_if_eq("instrument", "file"))]
+    instrument_file: Option<std::path::PathBuf>,
+    /// Seconds a reading may take: --instrument-command is then killed and retried; with
+    /// --instrument file, the wait for the next line.
     #[arg(long, default_value_t = 60.0, value_name = "SECONDS")]
     command_timeout: f64,
     /// The instrument reports the platform's pose (a 6-DoF probe) instead of the targets.
@@ -104,6 +111,8 @@ enum InstrumentArg {
     Command,
     /// The operator types or pastes each reading on standard input.
     Manual,
+    /// The lines the tracker's software appends to a file (--instrument-file), followed.
+    File,
 }
 
 /// A machine and an instrument, built and checked.
@@ -119,6 +128,12 @@ pub struct Rig {
 }
 
 impl RigArgs {
+    /// The file the instrument's readings are followed in, if any (an input: nothing may be
+    /// written over it).
+    pub fn instrument_file(&self) -> Option<&std::path::Path> {
+        self.instrument_file.as_deref()
+    }
+
     /// Whether the instrument reports poses (a probe) rather than targets.
     pub fn probe(&self) -> bool {
         self.probe
@@ -165,7 +180,8 @@ impl RigArgs {
     /// Whether the operator answers on standard input (a manual machine or instrument): then no
     /// progress bar is drawn over the prompts.
     fn interactive(&self) -> bool {
-        self.machine == MachineArg::Manual || self.instrument == InstrumentArg::Manual
+        self.machine == MachineArg::Manual
+            || matches!(self.instrument, InstrumentArg::Manual | InstrumentArg::File)
     }
 
     /// The progress bar of `len` steps called `unit` (`configurations`, `attained poses`), with
@@ -205,6 +221,15 @@ impl RigArgs {
                 self.machine,
                 if self.probe { " (probe)" } else { "" }
             ),
+            InstrumentArg::File => format!(
+                "{:?} machine, instrument readings followed in {}{}",
+                self.machine,
+                self.instrument_file
+                    .as_deref()
+                    .unwrap_or(std::path::Path::new(""))
+                    .display(),
+                if self.probe { " (probe)" } else { "" }
+            ),
         }
     }
 
@@ -217,6 +242,7 @@ impl RigArgs {
             InstrumentArg::Virtual => "virtual instrument".to_string(),
             InstrumentArg::Command => format!("command {program:?}"),
             InstrumentArg::Manual => "manual instrument".to_string(),
+            InstrumentArg::File => "followed file instrument".to_string(),
         };
         format!(
             "machine {:?} (seed {}, machine seed {}, {} errors); {instrument}{}; geometry {}",
@@ -255,7 +281,7 @@ impl RigArgs {
                 anyhow::ensure!(!words.is_empty(), "--instrument-command is empty");
                 words
             }
-            InstrumentArg::Virtual | InstrumentArg::Manual => Vec::new(),
+            InstrumentArg::Virtual | InstrumentArg::Manual | InstrumentArg::File => Vec::new(),
         };
         let instrument_pose = super::instrument_pose(self.instrument_pose.as_deref())?;
         let model = ErrorModel::variant(self.error_variant);
@@ -291,7 +317,9 @@ impl RigArgs {
                         platform: platform.clone(),
                         seed: self.seed,
                     }),
-                    InstrumentArg::Command | InstrumentArg::Manual => controller,
+                    InstrumentArg::Command | InstrumentArg::Manual | InstrumentArg::File => {
+                        controller
+                    }
                 }
             }
             MachineArg::Manual => {
@@ -326,6 +354,13 @@ impl RigArgs {
                 targets: geometry.targets.len(),
                 probe: self.probe,
             }),
+            InstrumentArg::File => {
+                let path = self.instrument_file.clone().unwrap_or_default();
+                Box::new(
+                    FollowedFile::open(path.clone(), geometry.targets.len(), self.probe, timeout)
+                        .map_err(|e| anyhow::anyhow!("--instrument-file {}: {e}", path.display()))?,
+                )
+            }
         };
         Ok(Rig {
             machine,

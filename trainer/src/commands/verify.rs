@@ -99,6 +99,7 @@ impl VerifyArgs {
                 .into_iter()
                 .flatten()
                 .map(PathBuf::as_path)
+                .chain(self.rig.instrument_file())
                 .collect(),
             outputs: std::iter::once(&self.out)
                 .chain(self.json.iter().chain(&self.report))
