@@ -5,6 +5,7 @@
 //! comment line after the header, so a run with other settings cannot continue it.
 
 use std::io::{Read, Write};
+use std::os::unix::fs::MetadataExt;
 use std::path::{Path, PathBuf};
 
 use hexacomp_core::durable::sync_directory_of;
@@ -110,6 +111,8 @@ pub struct MeasurementsJournal {
     file: std::fs::File,
     kind: JournalKind,
     extra: &'static [&'static str],
+    /// This open created the file, and nothing was appended since.
+    created_empty: bool,
 }
 
 /// The header line of a journal of `kind` with the `extra` columns after the measured ones.
@@ -148,12 +151,19 @@ impl MeasurementsJournal {
             column: None,
             message,
         };
-        let mut file = std::fs::OpenOptions::new()
-            .read(true)
-            .append(true)
-            .create(true)
-            .open(path)
-            .map_err(|e| fail(0, format!("cannot open the journal: {e}")))?;
+        let open = |create: bool| {
+            std::fs::OpenOptions::new()
+                .read(true)
+                .append(true)
+                .create_new(create)
+                .open(path)
+        };
+        let (file, created) = match open(true) {
+            Ok(file) => (Ok(file), true),
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => (open(false), false),
+            Err(e) => (Err(e), false),
+        };
+        let mut file = file.map_err(|e| fail(0, format!("cannot open the journal: {e}")))?;
         rustix::fs::flock(&file, rustix::fs::FlockOperation::NonBlockingLockExclusive).map_err(
             |e| {
                 fail(
@@ -165,6 +175,17 @@ impl MeasurementsJournal {
                 )
             },
         )?;
+        // Locked, but perhaps a file a refused run removed meanwhile
+        // ([`MeasurementsJournal::discard_if_created`]): what is recorded must reach the path.
+        let identity = |m: std::fs::Metadata| (m.dev(), m.ino());
+        if std::fs::metadata(path).map(identity).ok() != file.metadata().map(identity).ok() {
+            return Err(fail(
+                0,
+                "the file was removed while it was being opened (another campaign refused at \
+                 the same moment): run again"
+                    .into(),
+            ));
+        }
         let mut bytes = Vec::new();
         file.read_to_end(&mut bytes)
             .map_err(|e| fail(0, format!("cannot read the journal: {e}")))?;
@@ -215,7 +236,19 @@ impl MeasurementsJournal {
             file,
             kind,
             extra,
+            created_empty: created,
         })
+    }
+
+    /// Removes the file when this open created it and nothing was appended since (it holds the
+    /// header alone): for a run refused after opening it, which leaves nothing behind. The lock
+    /// is held until the file is gone; a campaign that opened the path meanwhile finds it gone
+    /// once it holds the lock, and is refused.
+    pub fn discard_if_created(self) {
+        if self.created_empty {
+            let _ = std::fs::remove_file(&self.path);
+            let _ = sync_directory_of(&self.path);
+        }
     }
 
     /// Opens the log at `path` that belongs to the campaign record `record` (a drift log, a
@@ -271,6 +304,7 @@ impl MeasurementsJournal {
         }
         // One write of the whole line at the end (append mode, the file locked): a kill leaves
         // it whole or cut short.
+        self.created_empty = false;
         self.file.write_all(&line)?;
         self.file.sync_data()
     }

@@ -695,6 +695,10 @@ fn a_drift_log_lost_edited_or_shared_is_refused_and_a_missing_end_reference_is_t
         "{error}"
     );
     assert_eq!(data_lines(&d.join("a.csv")).len(), 3);
+    assert!(
+        !d.join("a.drift.csv").exists(),
+        "the refused run left the empty log it created"
+    );
     // Edited: a decision it does not know, named with its line.
     std::fs::write(
         d.join("a.drift.csv"),
@@ -726,6 +730,10 @@ fn a_drift_log_lost_edited_or_shared_is_refused_and_a_missing_end_reference_is_t
         text(&output.stderr)
     );
     assert_eq!(std::fs::read_to_string(d.join("a.drift.csv")).unwrap(), log);
+    assert!(
+        !d.join("b.csv").exists() && !d.join("b.readings.csv").exists(),
+        "the refused run left the record and readings log it created"
+    );
     // Killed after the last row, before the end reference: run again, it takes it.
     let cut: Vec<&str> = log.lines().collect();
     assert!(cut.last().unwrap().starts_with("R") && cut.last().unwrap().contains(",end,"));

@@ -147,24 +147,26 @@ pub fn run(geometry: &Geometry, args: &CampaignArgs) -> anyhow::Result<()> {
         .map(read_registration)
         .transpose()?;
     let mut journal = MeasurementsJournal::open(&args.out, kind, &rig.settings, &JOURNAL_COLUMNS)?;
-    let recorded = read_measurements(&args.out)?;
-    let done = check_recorded(&plan, &recorded)?;
-    let recorded_ids: Vec<String> = recorded.iter().map(|r| r.id.clone()).collect();
     let nothing_seen = match kind {
         JournalKind::Targets(count) => Observation::Targets(vec![None; count]),
         JournalKind::Pose => Observation::PoseMissed,
     };
-    let mut readings_log = ReadingsLog::open(
-        &args.out,
-        kind,
-        &rig.settings,
-        registration.as_ref().map(|r| r.instrument_pose),
-        nothing_seen.clone(),
-    )?;
-    let (mut drift_log, drift, into_record_frame) = if args.drift.no_reference {
-        (None, None, Vec::new())
-    } else {
-        let (log, check, frame) = DriftLog::open(
+    // The record's logs: a run refused here removes the files it created.
+    let opened = (|| -> anyhow::Result<_> {
+        let recorded = read_measurements(&args.out)?;
+        let done = check_recorded(&plan, &recorded)?;
+        let recorded_ids: Vec<String> = recorded.iter().map(|r| r.id.clone()).collect();
+        let readings_log = ReadingsLog::open(
+            &args.out,
+            kind,
+            &rig.settings,
+            registration.as_ref().map(|r| r.instrument_pose),
+            nothing_seen.clone(),
+        )?;
+        if args.drift.no_reference {
+            return Ok((done, readings_log, None, None, Vec::new()));
+        }
+        match DriftLog::open(
             &args.drift,
             &args.out,
             geometry,
@@ -172,8 +174,20 @@ pub fn run(geometry: &Geometry, args: &CampaignArgs) -> anyhow::Result<()> {
             &rig.settings,
             registration.as_ref(),
             &recorded_ids,
-        )?;
-        (Some(log), Some(check), frame)
+        ) {
+            Ok((log, check, frame)) => Ok((done, readings_log, Some(log), Some(check), frame)),
+            Err(e) => {
+                readings_log.discard_if_created();
+                Err(e)
+            }
+        }
+    })();
+    let (done, mut readings_log, mut drift_log, drift, into_record_frame) = match opened {
+        Ok(opened) => opened,
+        Err(e) => {
+            journal.discard_if_created();
+            return Err(e);
+        }
     };
     let references_owed = drift
         .as_ref()

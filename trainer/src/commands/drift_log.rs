@@ -197,78 +197,89 @@ impl DriftLog {
             settings,
             &DRIFT_COLUMNS,
         )?;
-        let entries: Records<DriftEntry> = read_drift_log(&path)?;
-        let last_good = entries
-            .iter()
-            .rev()
-            .find(|e| GOOD.contains(&e.decision.as_str()));
-        let checked_references = entries.iter().any(|e| e.event != "warm-up");
-        anyhow::ensure!(
-            last_good.is_some() || !checked_references,
-            "{}: it measured the reference but holds no baseline (decision baseline or \
-             accepted): it was edited; restore it, or start a new record",
-            path.display()
-        );
-        let good_count = last_good.map_or(0, |e| e.configurations);
-        anyhow::ensure!(
-            recorded.is_empty() || last_good.is_some(),
-            "{}: the record {} holds {} configurations but its drift log has no measurement of \
-             the reference: the frame and the baseline they were measured under are lost \
-             (restore the log, or start a new record)",
-            path.display(),
-            out.display(),
-            recorded.len()
-        );
-        let suspects: Vec<String> = recorded.get(good_count..).unwrap_or_default().to_vec();
-        // A stop after the last good measurement, even if a later run died in its warm-up.
-        let stopped = entries
-            .iter()
-            .rev()
-            .take_while(|e| !GOOD.contains(&e.decision.as_str()))
-            .any(|e| e.decision == "stopped");
-        if stopped && !suspects.is_empty() && !args.accept_drift {
-            anyhow::bail!(
-                "{}: the campaign stopped on drift; the configurations recorded since the last \
-                 good measurement of the reference ({}) may hold it: delete their lines from {} \
-                 to measure them again, or run with --accept-drift to keep them",
-                path.display(),
-                suspects.join(", "),
-                out.display()
+        // Refused after the log was opened: a log this run created is removed again.
+        let state = (|| -> anyhow::Result<_> {
+            let entries: Records<DriftEntry> = read_drift_log(&path)?;
+            let last_good = entries
+                .iter()
+                .rev()
+                .find(|e| GOOD.contains(&e.decision.as_str()));
+            let checked_references = entries.iter().any(|e| e.event != "warm-up");
+            anyhow::ensure!(
+                last_good.is_some() || !checked_references,
+                "{}: it measured the reference but holds no baseline (decision baseline or \
+                 accepted): it was edited; restore it, or start a new record",
+                path.display()
             );
-        }
-        let now = registration.map(|r| r.instrument_pose);
-        let (frame, mut note) = record_frame(
-            entries.first().map(|e| e.instrument_pose).unwrap_or(now),
-            entries.last().and_then(|e| e.instrument_pose),
-            now,
-            &path,
-        )?;
-        if stopped && !suspects.is_empty() {
-            let kept = format!("kept {} measured under the drift", suspects.join(", "));
-            note = Some(note.map_or(kept.clone(), |n| format!("{n}; {kept}")));
-        }
-        let baseline = entries
-            .iter()
-            .rev()
-            .find(|e| matches!(e.decision.as_str(), "baseline" | "accepted"))
-            .map(|e| e.reference.observed.clone());
-        // Rows recorded after the last measurement of the reference: a run killed after its last
-        // row, before its end measurement.
-        let end_pending = entries
-            .last()
-            .is_some_and(|e| e.configurations < recorded.len());
-        let check = DriftCheck {
-            pose_mm_deg: geometry.home,
-            every: args.reference_every,
-            limit_mm: args.drift_limit,
-            accept: args.accept_drift,
-            warm_up,
-            baseline,
-            first_number: entries.len() + 1,
-            note,
-            start_pending: stopped && !suspects.is_empty(),
-            suspects: if stopped { Vec::new() } else { suspects },
-            end_pending,
+            let good_count = last_good.map_or(0, |e| e.configurations);
+            anyhow::ensure!(
+                recorded.is_empty() || last_good.is_some(),
+                "{}: the record {} holds {} configurations but its drift log has no measurement of \
+                 the reference: the frame and the baseline they were measured under are lost \
+                 (restore the log, or start a new record)",
+                path.display(),
+                out.display(),
+                recorded.len()
+            );
+            let suspects: Vec<String> = recorded.get(good_count..).unwrap_or_default().to_vec();
+            // A stop after the last good measurement, even if a later run died in its warm-up.
+            let stopped = entries
+                .iter()
+                .rev()
+                .take_while(|e| !GOOD.contains(&e.decision.as_str()))
+                .any(|e| e.decision == "stopped");
+            if stopped && !suspects.is_empty() && !args.accept_drift {
+                anyhow::bail!(
+                    "{}: the campaign stopped on drift; the configurations recorded since the last \
+                     good measurement of the reference ({}) may hold it: delete their lines from {} \
+                     to measure them again, or run with --accept-drift to keep them",
+                    path.display(),
+                    suspects.join(", "),
+                    out.display()
+                );
+            }
+            let now = registration.map(|r| r.instrument_pose);
+            let (frame, mut note) = record_frame(
+                entries.first().map(|e| e.instrument_pose).unwrap_or(now),
+                entries.last().and_then(|e| e.instrument_pose),
+                now,
+                &path,
+            )?;
+            if stopped && !suspects.is_empty() {
+                let kept = format!("kept {} measured under the drift", suspects.join(", "));
+                note = Some(note.map_or(kept.clone(), |n| format!("{n}; {kept}")));
+            }
+            let baseline = entries
+                .iter()
+                .rev()
+                .find(|e| matches!(e.decision.as_str(), "baseline" | "accepted"))
+                .map(|e| e.reference.observed.clone());
+            // Rows recorded after the last measurement of the reference: a run killed after its last
+            // row, before its end measurement.
+            let end_pending = entries
+                .last()
+                .is_some_and(|e| e.configurations < recorded.len());
+            let check = DriftCheck {
+                pose_mm_deg: geometry.home,
+                every: args.reference_every,
+                limit_mm: args.drift_limit,
+                accept: args.accept_drift,
+                warm_up,
+                baseline,
+                first_number: entries.len() + 1,
+                note,
+                start_pending: stopped && !suspects.is_empty(),
+                suspects: if stopped { Vec::new() } else { suspects },
+                end_pending,
+            };
+            Ok((check, frame, now))
+        })();
+        let (check, frame, now) = match state {
+            Ok(state) => state,
+            Err(e) => {
+                journal.discard_if_created();
+                return Err(e);
+            }
         };
         Ok((
             Self {

@@ -95,6 +95,12 @@ impl ReadingsLog {
         &self.path
     }
 
+    /// Removes the log when this run created it and logged nothing (a run refused while
+    /// opening the campaign's files).
+    pub fn discard_if_created(self) {
+        self.journal.discard_if_created();
+    }
+
     /// Appends every attempt of the configuration `row` (its commanded pose and legs; `combined`
     /// says which readings were kept), each line on disk when this returns.
     pub fn append(
