@@ -245,7 +245,11 @@ impl MeasurementsJournal {
     /// is held until the file is gone; a campaign that opened the path meanwhile finds it gone
     /// once it holds the lock, and is refused.
     pub fn discard_if_created(self) {
-        if self.created_empty {
+        let identity = |m: std::fs::Metadata| (m.dev(), m.ino());
+        // Only the file this journal holds, not one that something else put at the path.
+        let ours = std::fs::metadata(&self.path).map(identity).ok()
+            == self.file.metadata().map(identity).ok();
+        if self.created_empty && ours {
             let _ = std::fs::remove_file(&self.path);
             let _ = sync_directory_of(&self.path);
         }

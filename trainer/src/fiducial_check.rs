@@ -129,30 +129,55 @@ impl FiducialCheck {
             .flatten()
     }
 
-    /// The decision: `Ok` with a line that says the registration holds when every fiducial of
-    /// positive weight moved at most `limit_mm`; otherwise an error that says what moved and
-    /// what to do (`written`: the file holding the fiducials as measured now), or that too few
-    /// were measured to tell.
-    pub fn decide(&self, limit_mm: f64, written: &str) -> std::result::Result<String, String> {
-        let lost = if self.lost.is_empty() {
-            String::new()
-        } else {
-            format!(
-                " (not measured: {})",
-                self.lost
-                    .iter()
-                    .map(|(name, why)| format!("{name}: {why}"))
-                    .collect::<Vec<_>>()
-                    .join("; ")
-            )
-        };
-        let Some(deviation) = self.deviation() else {
-            return Err(format!(
-                "the fiducials could not be checked: fewer than {MIN_FIDUCIALS} of positive \
-                 weight were measured{lost}; the registration is unchecked: run again to measure \
-                 them"
-            ));
-        };
+    /// The decision, `None` when fewer than [`MIN_FIDUCIALS`] of positive weight were measured
+    /// (it cannot be told); otherwise `Ok` with a line that says the registration holds when
+    /// every fiducial of positive weight moved at most `limit_mm`, or an error that says what
+    /// moved and what to do (`written`: the file holding the fiducials as measured now;
+    /// `one_frame`: the record is in the frame of the instrument as it stood all along, so a
+    /// registration made from `written` is the record's).
+    pub fn decide(
+        &self,
+        limit_mm: f64,
+        written: &str,
+        one_frame: bool,
+    ) -> Option<std::result::Result<String, String>> {
+        let deviation = self.deviation()?;
+        Some(self.judge(&deviation, limit_mm, written, one_frame))
+    }
+
+    /// Why the check cannot decide: fewer than [`MIN_FIDUCIALS`] of positive weight measured,
+    /// and those not measured with their reasons.
+    pub fn undecided(&self) -> String {
+        format!(
+            "fewer than {MIN_FIDUCIALS} fiducials of positive weight were measured{}",
+            self.lost_list()
+        )
+    }
+
+    /// ` (not measured: NAME: why; …)`, or nothing.
+    fn lost_list(&self) -> String {
+        if self.lost.is_empty() {
+            return String::new();
+        }
+        format!(
+            " (not measured: {})",
+            self.lost
+                .iter()
+                .map(|(name, why)| format!("{name}: {why}"))
+                .collect::<Vec<_>>()
+                .join("; ")
+        )
+    }
+
+    /// The decision on the fiducials' `deviation`.
+    fn judge(
+        &self,
+        deviation: &Deviation,
+        limit_mm: f64,
+        written: &str,
+        one_frame: bool,
+    ) -> std::result::Result<String, String> {
+        let lost = self.lost_list();
         if deviation.largest_mm <= limit_mm {
             return Ok(format!(
                 "the fiducials moved at most {:.4} mm since the registration (limit {limit_mm} \
@@ -179,13 +204,28 @@ impl FiducialCheck {
                 deviation.uneven_mm
             )
         };
+        let advice = if one_frame {
+            format!(
+                "The references held since the campaign began, so the tracker stood where it \
+                 stands now all along: register again from the fiducials measured now \
+                 (hexacomp-trainer register --measured {written} …) and give that registration \
+                 to solve and calibrate with this record"
+            )
+        } else {
+            format!(
+                "The record's frame changed during the campaign (registered again, or a drift \
+                 accepted): the rows recorded under this registration were brought into it \
+                 through a registration that does not hold. Find them by the registration in \
+                 the readings log (ix..ic), delete them from the record and measure them again \
+                 under a new registration (register --measured {written} locates the tracker as \
+                 it stands now)"
+            )
+        };
         Err(format!(
             "the fiducials moved up to {:.4} mm since the registration ({} the most; limit \
              {limit_mm} mm): {shape}{lost}. The registration does not bring this run's readings \
-             into the base frame. If the references held since the campaign began, the tracker \
-             stood where it stands now all along: register again from the fiducials measured \
-             now, {written} (hexacomp-trainer register --measured {written} …), and give that \
-             registration to solve and calibrate with this record",
+             into the base frame. {advice}. If something knocked a fiducial only for the \
+             moment, delete {written} and run again to measure them again",
             deviation.largest_mm, worst.point.name
         ))
     }
@@ -248,7 +288,7 @@ mod tests {
     fn fiducials_that_moved_less_than_the_limit_keep_the_registration() {
         let r = registration(AT);
         let check = compare(&r, &read_again(&r, [[0.01, 0.0, 0.0]; 4])).unwrap();
-        let holds = check.decide(0.05, "f.csv").unwrap();
+        let holds = check.decide(0.05, "f.csv", true).unwrap().unwrap();
         assert!(holds.contains("at most 0.0100 mm"), "{holds}");
     }
 
@@ -264,7 +304,7 @@ mod tests {
             ),
         )
         .unwrap();
-        let error = check.decide(0.05, "f.csv").unwrap_err();
+        let error = check.decide(0.05, "f.csv", true).unwrap().unwrap_err();
         assert!(
             error.contains("up to 0.2000 mm")
                 && error.contains("together by (0.2000, 0.0000, 0.0000) mm in the instrument's")
@@ -277,9 +317,16 @@ mod tests {
             &read_again(&r, [[0.0; 3], [0.0, 0.1, 0.0], [0.0; 3], [0.0; 3]]),
         )
         .unwrap();
-        let error = check.decide(0.05, "f.csv").unwrap_err();
+        let error = check.decide(0.05, "f.csv", true).unwrap().unwrap_err();
         assert!(
             error.contains("F2 the most") && error.contains("moved differently"),
+            "{error}"
+        );
+        // A record whose frame changed: the file locates the tracker now, not the record.
+        let error = check.decide(0.05, "f.csv", false).unwrap().unwrap_err();
+        assert!(
+            error.contains("frame changed during the campaign")
+                && !error.contains("give that registration to solve"),
             "{error}"
         );
     }
@@ -291,10 +338,11 @@ mod tests {
         points.remove(1);
         let mut check = compare(&r, &points).unwrap();
         check.lost.push(("F2".into(), "not seen".into()));
-        let error = check.decide(0.05, "f.csv").unwrap_err();
+        assert!(check.decide(0.05, "f.csv", true).is_none());
+        let why = check.undecided();
         assert!(
-            error.contains("could not be checked") && error.contains("F2: not seen"),
-            "{error}"
+            why.contains("fewer than 3") && why.contains("F2: not seen"),
+            "{why}"
         );
         let stranger = NamedPoint {
             name: "X9".into(),

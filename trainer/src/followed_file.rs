@@ -45,6 +45,9 @@ pub struct FollowedFile {
     identity: Option<(u64, u64)>,
     /// What the last reading was of (a configuration's id, a fiducial's name).
     last_subject: Option<String>,
+    /// A line was being written when the readings of a subject began: once whole, it is
+    /// skipped (it was measured before).
+    skip_partial: bool,
 }
 
 impl FollowedFile {
@@ -65,10 +68,18 @@ impl FollowedFile {
             lines: 0,
             identity: None,
             last_subject: None,
+            skip_partial: false,
         };
         if let Some(file) = followed.current()? {
             followed.identity = Some(identity(&file.metadata()?));
-            followed.skip_to_end(file)?;
+            let skipped = followed.skip_to_end(file)?;
+            if skipped > 0 {
+                eprintln!(
+                    "{}: skipped the {skipped} lines already in it (readings of an earlier \
+                     session)",
+                    followed.path.display()
+                );
+            }
         }
         Ok(followed)
     }
@@ -82,12 +93,14 @@ impl FollowedFile {
         }
     }
 
-    /// Consumes every complete line appended so far; returns how many were not empty.
+    /// Consumes every complete line appended so far, and marks a line still being written to be
+    /// skipped once whole; returns how many complete lines were not empty.
     fn skip_to_end(&mut self, mut file: std::fs::File) -> std::io::Result<u64> {
         file.seek(SeekFrom::Start(self.offset))?;
         let mut rest = Vec::new();
         file.read_to_end(&mut rest)?;
         let complete = rest.iter().rposition(|b| *b == b'\n').map_or(0, |k| k + 1);
+        self.skip_partial = complete < rest.len();
         let skipped = rest[..complete]
             .split(|b| *b == b'\n')
             .filter(|line| !line.trim_ascii().is_empty())
@@ -173,6 +186,14 @@ impl FollowedFile {
                                 ))
                             })?
                             .trim();
+                        if std::mem::take(&mut self.skip_partial) {
+                            eprintln!(
+                                "{}:{}: skipped, being written before the readings began",
+                                self.path.display(),
+                                self.lines
+                            );
+                            continue;
+                        }
                         if line.is_empty() || line.starts_with('#') {
                             continue;
                         }

@@ -62,6 +62,10 @@ pub struct CampaignArgs {
     /// the tracker moved and was registered again, readings are brought into that frame.
     #[arg(long, value_name = "FILE")]
     registration: Option<PathBuf>,
+    /// Do not measure the registration's fiducials again at the end (an instrument that cannot
+    /// measure them): the registration stays unchecked, and the end of the campaign says so.
+    #[arg(long, requires = "registration")]
+    skip_fiducials: bool,
     /// A program that reads the air and machine temperatures (°C): run (as a shell splits the
     /// words) once per configuration, it prints one line `AIR,MACHINE` (either cell may be empty),
     /// logged with the readings. When it fails the temperatures are left empty and it is said.
@@ -72,6 +76,10 @@ pub struct CampaignArgs {
     #[command(flatten)]
     drift: super::drift_log::DriftArgs,
 }
+
+/// What a campaign under a registration says with --skip-fiducials.
+const SKIPPED: &str = "the registration's fiducials were not measured again (--skip-fiducials): \
+                       the registration is unchecked";
 
 /// The longest a temperature program may take, per configuration.
 const TEMPERATURES_TIMEOUT: Duration = Duration::from_secs(30);
@@ -117,6 +125,22 @@ pub fn run(geometry: &Geometry, args: &CampaignArgs) -> anyhow::Result<()> {
              be four files",
             log.display()
         );
+    }
+    if let Some(followed) = args.rig.instrument_file() {
+        let absolute = |p: &std::path::Path| std::path::absolute(p).unwrap_or(p.to_path_buf());
+        for own in [&args.out, &readings_log, &fiducials_file]
+            .into_iter()
+            .chain(drift_log.as_ref())
+        {
+            anyhow::ensure!(
+                absolute(followed) != absolute(own),
+                "--instrument-file {}: the campaign writes that file itself",
+                followed.display()
+            );
+        }
+    }
+    if args.registration.is_some() {
+        end_fiducials::refuse_foreign(&fiducials_file)?;
     }
     let temperatures_program = args
         .temperatures_command
@@ -192,22 +216,44 @@ pub fn run(geometry: &Geometry, args: &CampaignArgs) -> anyhow::Result<()> {
     let references_owed = drift
         .as_ref()
         .is_some_and(|d| d.end_pending || d.start_pending);
-    // Fiducials measured at the end of a run cut short before they were written are owed.
-    let fiducials_owed = registration.is_some() && !fiducials_file.exists();
-    if done.len() == plan.len() && !references_owed && !fiducials_owed {
+    let finished = done.len() == plan.len() && !references_owed;
+    // The record is in the frame the instrument stands in now (a registration made from the
+    // fiducials measured now is the record's).
+    let one_frame = drift_log.as_ref().is_some_and(DriftLog::one_frame);
+    let check_fiducials = registration.as_ref().filter(|_| !args.skip_fiducials);
+    if finished {
+        let decided = match check_fiducials {
+            Some(r) if fiducials_file.exists() => {
+                end_fiducials::recheck(r, &fiducials_file, args.drift.limit_mm(), one_frame)?
+            }
+            // Owed: a run cut short before they were written, or none asked for.
+            Some(_) => None,
+            None if registration.is_some() => Some(SKIPPED.to_string()),
+            None => Some(String::new()),
+        };
+        if let Some(holds) = decided {
+            eprintln!(
+                "the campaign is finished: all {} configurations of {} are recorded in {}; \
+                 nothing to do",
+                plan.len(),
+                plan.file,
+                args.out.display()
+            );
+            if !holds.is_empty() {
+                eprintln!("{holds}");
+            }
+            return Ok(());
+        }
         eprintln!(
-            "the campaign is finished: all {} configurations of {} are recorded in {}; nothing \
-             to do",
+            "all {} configurations of {} are recorded in {}; the registration's fiducials are \
+             owed",
             plan.len(),
             plan.file,
             args.out.display()
         );
-        if let Some(registration) = &registration {
-            let holds =
-                end_fiducials::recheck(registration, &fiducials_file, args.drift.limit_mm())?;
-            eprintln!("{holds}");
-        }
-        return Ok(());
+    } else if registration.is_some() {
+        // Rows or references are recorded after fiducials measured before them.
+        end_fiducials::forget(&fiducials_file)?;
     }
     let super::rig::Rig {
         mut machine,
@@ -239,14 +285,16 @@ pub fn run(geometry: &Geometry, args: &CampaignArgs) -> anyhow::Result<()> {
         ),
         None => String::new(),
     };
-    eprintln!(
-        "{left} of {} configurations to measure{estimate} ({} readings each, {} already recorded \
-         in {})",
-        plan.len(),
-        options.readings,
-        done.len(),
-        args.out.display()
-    );
+    if !finished {
+        eprintln!(
+            "{left} of {} configurations to measure{estimate} ({} readings each, {} already \
+             recorded in {})",
+            plan.len(),
+            options.readings,
+            done.len(),
+            args.out.display()
+        );
+    }
     let bar = args.rig.progress_bar(left, "configurations");
     let campaign = Campaign {
         geometry,
@@ -362,34 +410,54 @@ pub fn run(geometry: &Geometry, args: &CampaignArgs) -> anyhow::Result<()> {
         args.out.display()
     );
     // Every configuration is recorded: the registration's fiducials are measured again.
-    if let Some(registration) = &registration {
-        eprintln!(
-            "measuring the {} fiducials of the registration again",
-            registration.fiducials.len()
-        );
-        let holds = end_fiducials::measure(
-            instrument.as_mut(),
-            &options,
-            registration,
-            &fiducials_file,
-            args.drift.limit_mm(),
-        )?;
-        eprintln!("{holds}");
+    let fiducials = match check_fiducials {
+        Some(registration) => {
+            eprintln!(
+                "measuring the {} fiducials of the registration again",
+                registration.fiducials.len()
+            );
+            end_fiducials::measure(
+                instrument.as_mut(),
+                &options,
+                registration,
+                &fiducials_file,
+                args.drift.limit_mm(),
+                one_frame,
+            )
+        }
+        None if registration.is_some() => Ok(SKIPPED.to_string()),
+        None => Ok(String::new()),
+    };
+    let gaps = (!summary.gaps.is_empty()).then(|| {
+        format!(
+            "{} configurations were recorded with nothing measured ({}); they stay gaps in {} \
+             (delete their lines to measure them again)",
+            summary.gaps.len(),
+            summary
+                .gaps
+                .iter()
+                .map(|(id, _)| id.as_str())
+                .collect::<Vec<_>>()
+                .join(", "),
+            args.out.display()
+        )
+    });
+    match (fiducials, gaps) {
+        (Ok(line), None) => {
+            if !line.is_empty() {
+                eprintln!("{line}");
+            }
+            Ok(())
+        }
+        (Ok(line), Some(gaps)) => {
+            if !line.is_empty() {
+                eprintln!("{line}");
+            }
+            anyhow::bail!(gaps)
+        }
+        (Err(e), None) => Err(e),
+        (Err(e), Some(gaps)) => Err(e.context(gaps)),
     }
-    anyhow::ensure!(
-        summary.gaps.is_empty(),
-        "{} configurations were recorded with nothing measured ({}); they stay gaps in {} \
-         (delete their lines to measure them again)",
-        summary.gaps.len(),
-        summary
-            .gaps
-            .iter()
-            .map(|(id, _)| id.as_str())
-            .collect::<Vec<_>>()
-            .join(", "),
-        args.out.display()
-    );
-    Ok(())
 }
 
 /// The median time between two configurations recorded one after the other in `record` (pairs

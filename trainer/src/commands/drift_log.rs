@@ -66,6 +66,7 @@ impl DriftArgs {
     pub fn references_in(&self, configurations: usize) -> usize {
         match (self.no_reference, self.reference_every) {
             (true, _) => 0,
+            (false, _) if configurations == 0 => 0,
             (false, 0) => 2,
             (false, every) => 2 + configurations.saturating_sub(1) / every,
         }
@@ -119,6 +120,9 @@ pub struct DriftLog {
     registration: Option<[f64; 6]>,
     /// The reference configuration's commanded pose, mm and degrees.
     reference: [f64; 6],
+    /// Every row of the record is (and this run's will be) in one frame, the instrument's as it
+    /// stood all along: no re-registration, no drift accepted over recorded rows.
+    one_frame: bool,
 }
 
 /// Where the record's frame stands: the poses that bring this run's readings into it, and a note
@@ -272,9 +276,17 @@ impl DriftLog {
                 suspects: if stopped { Vec::new() } else { suspects },
                 end_pending,
             };
-            Ok((check, frame, now))
+            let one_frame = frame.is_empty()
+                && entries
+                    .iter()
+                    .all(|e| e.instrument_pose == entries[0].instrument_pose)
+                && !entries
+                    .iter()
+                    .any(|e| e.decision == "accepted" && e.configurations > 0)
+                && (!args.accept_drift || recorded.is_empty());
+            Ok((check, frame, now, one_frame))
         })();
-        let (check, frame, now) = match state {
+        let (check, frame, now, one_frame) = match state {
             Ok(state) => state,
             Err(e) => {
                 journal.discard_if_created();
@@ -287,10 +299,18 @@ impl DriftLog {
                 path,
                 registration: now,
                 reference: geometry.home,
+                one_frame,
             },
             check,
             frame,
         ))
+    }
+
+    /// Whether the record is in one frame, the instrument's as it stood all along (no
+    /// re-registration, no drift accepted over recorded rows): then a registration of the
+    /// instrument as it stands now is the record's.
+    pub fn one_frame(&self) -> bool {
+        self.one_frame
     }
 
     /// The log's path.

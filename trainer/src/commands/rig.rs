@@ -283,6 +283,10 @@ impl RigArgs {
             }
             InstrumentArg::Virtual | InstrumentArg::Manual | InstrumentArg::File => Vec::new(),
         };
+        anyhow::ensure!(
+            self.instrument_file.is_none() || self.instrument == InstrumentArg::File,
+            "--instrument-file is followed by --instrument file only"
+        );
         let instrument_pose = super::instrument_pose(self.instrument_pose.as_deref())?;
         let model = ErrorModel::variant(self.error_variant);
         let platform = VirtualPlatform::new(geometry, &model, self.machine_seed, self.seed)?;
