@@ -38,16 +38,25 @@ pub enum Method {
     RobustCoupled,
     /// Decoupled networks on robust corrections.
     RobustDecoupled,
+    /// Decoupled networks on the exact corrections of the same configurations (the legs that
+    /// put the noiseless machine on each commanded pose, known only in simulation): what the
+    /// model class reaches without noise in its training data.
+    ExactDecoupled,
+    /// The exact legs of each pose, driven with the machine's repeatability: the floor no
+    /// method can go below.
+    Floor,
 }
 
 impl Method {
     /// Every method, in table order.
-    pub const ALL: [Method; 5] = [
+    pub const ALL: [Method; 7] = [
         Method::Uncompensated,
         Method::ModelBased,
         Method::OrdinaryCoupled,
         Method::RobustCoupled,
         Method::RobustDecoupled,
+        Method::ExactDecoupled,
+        Method::Floor,
     ];
 
     /// A short label for tables and legends.
@@ -58,6 +67,8 @@ impl Method {
             Method::OrdinaryCoupled => "ordinary coupled",
             Method::RobustCoupled => "robust coupled",
             Method::RobustDecoupled => "robust decoupled",
+            Method::ExactDecoupled => "decoupled, exact corrections",
+            Method::Floor => "floor",
         }
     }
 }
@@ -202,6 +213,20 @@ pub fn evaluate(
         "measuring {largest} configurations on the virtual machine"
     ));
     let (_, measurements) = robust_pipeline.measure_virtual(&mut platform)?;
+    let truth = platform.machine().clone();
+    let exact_rows = |n: usize| -> Vec<JointCorrection> {
+        measurements[..n]
+            .iter()
+            .map(|m| {
+                let exact = truth.exact_command(&Pose::from_mm_deg(m.pose_mm_deg));
+                JointCorrection {
+                    id: m.id.clone(),
+                    legs: m.legs,
+                    corrections: std::array::from_fn(|i| exact[i] - m.legs[i]),
+                }
+            })
+            .collect()
+    };
     // The instrument that measures the validation poses draws its noise apart from the machine's
     // moves, so the reached errors do not depend on whether they are also measured.
     let instrument = platform.reseeded(options.instrument_seed);
@@ -236,7 +261,7 @@ pub fn evaluate(
     let mut inputs = Vec::new();
     for &n in &options.training_sizes {
         progress(&format!(
-            "{n} configurations: identifying the geometry, training three networks"
+            "{n} configurations: identifying the geometry, training four networks"
         ));
         let identified =
             identify(geometry, &measurements[..n], &IdentifyOptions::default())?.geometry;
@@ -244,6 +269,7 @@ pub fn evaluate(
         let ordinary_coupled = fit(&rows(&ordinary, n), Architecture::Coupled, input)?;
         let coupled = fit(&rows(&robust, n), Architecture::Coupled, input)?;
         let decoupled = fit(&rows(&robust, n), Architecture::Decoupled, input)?;
+        let exact_decoupled = fit(&exact_rows(n), Architecture::Decoupled, input)?;
         // Every method meets the same repeatability and instrument noise: each drives a copy of
         // the machine in the same state, measured by a copy of the instrument in the same state.
         let machine = platform.clone();
@@ -264,6 +290,10 @@ pub fn evaluate(
                     Method::RobustDecoupled => {
                         compensate_pose(geometry, Some(&decoupled.model), pose).legs
                     }
+                    Method::ExactDecoupled => {
+                        compensate_pose(geometry, Some(&exact_decoupled.model), pose).legs
+                    }
+                    Method::Floor => truth.exact_command(pose),
                 }
             };
             errors.push((

@@ -119,6 +119,22 @@ fn redo(g: &Geometry, o: &EvaluationOptions) -> Redone {
         let ordinary_coupled = fit(&first(&ordinary, n), Architecture::Coupled, input);
         let coupled = fit(&first(&robust, n), Architecture::Coupled, input);
         let decoupled = fit(&first(&robust, n), Architecture::Decoupled, input);
+        // The exact corrections: the legs that land the noiseless machine on each commanded
+        // pose, minus the commanded ones (the machine's own inverse, tested in the virtual
+        // platform's tests).
+        let truth = platform.machine().clone();
+        let exact: Vec<JointCorrection> = measurements[..n]
+            .iter()
+            .map(|m| {
+                let legs = truth.exact_command(&Pose::from_mm_deg(m.pose_mm_deg));
+                JointCorrection {
+                    id: m.id.clone(),
+                    legs: m.legs,
+                    corrections: std::array::from_fn(|i| legs[i] - m.legs[i]),
+                }
+            })
+            .collect();
+        let exact_decoupled = fit(&exact, Architecture::Decoupled, input);
         errors.push(vec![
             (Method::Uncompensated, {
                 let errors = drive(&|p| inverse_kinematics(g, p).lengths);
@@ -145,6 +161,11 @@ fn redo(g: &Geometry, o: &EvaluationOptions) -> Redone {
                 Method::RobustDecoupled,
                 drive(&|p| compensate_pose(g, Some(&decoupled), p).legs),
             ),
+            (
+                Method::ExactDecoupled,
+                drive(&|p| compensate_pose(g, Some(&exact_decoupled), p).legs),
+            ),
+            (Method::Floor, drive(&|p| truth.exact_command(p))),
         ]);
         if n == largest {
             let other = fit(
@@ -287,6 +308,9 @@ fn on_a_purely_geometric_machine_the_model_based_baseline_is_exact_and_ordinary_
     let model_based = size.stats(Method::ModelBased, Protocol::Reached);
     assert!(model_based.position_mm.max < 1e-4, "{model_based:?}");
     assert!(model_based.orientation_deg.max < 1e-5, "{model_based:?}");
+    // Without noise the floor is zero: the exact legs land on every pose.
+    let floor = size.stats(Method::Floor, Protocol::Reached);
+    assert!(floor.position_mm.max < 1e-8, "{floor:?}");
     assert!(
         size.stats(Method::Uncompensated, Protocol::Reached)
             .position_mm
@@ -500,6 +524,24 @@ fn the_evaluate_command_prints_the_tables_of_the_largest_size_and_writes_the_fig
             })
             .collect();
         assert_eq!(row(&stdout, &[&head]), expected);
+    }
+    // Against the floor: each method's mean and max over the floor's, per size.
+    let against = section(&stdout, "Against the floor");
+    for size in &evaluation.sizes {
+        let floor = size.stats(Method::Floor, Protocol::Reached).position_mm;
+        let expected: Vec<String> = Method::ALL
+            .iter()
+            .filter(|m| **m != Method::Floor)
+            .flat_map(|m| {
+                let s = size.stats(*m, Protocol::Reached).position_mm;
+                [
+                    format!("{:.2}", s.mean / floor.mean),
+                    "/".to_string(),
+                    format!("{:.2}", s.max / floor.max),
+                ]
+            })
+            .collect();
+        assert_eq!(row(against, &[&size.configurations.to_string()]), expected);
     }
     // Table 1.
     assert!(stdout.contains("Table 1: robust networks at 12 configurations"));

@@ -9,7 +9,7 @@ use rand_distr::{Distribution, StandardNormal};
 use super::error_model::ErrorModel;
 use hexacomp_core::error::Result;
 use hexacomp_core::geometry::{Geometry, LEGS};
-use hexacomp_core::kinematics::{ForwardOptions, forward_kinematics};
+use hexacomp_core::kinematics::{ForwardOptions, forward_kinematics, inverse_kinematics};
 use hexacomp_core::pose::Pose;
 use hexacomp_core::screw::ActuationScrews;
 
@@ -137,6 +137,30 @@ impl TrueMachine {
         };
         std::array::from_fn(|i| {
             compression[i] * self.compliance_mm_per_n[i] * lengths[i] / self.stroke_mid_mm
+        })
+    }
+
+    /// The encoder leg lengths (mm) whose noiseless move reaches `pose` (base frame; mm, rad)
+    /// exactly: the true geometry's inverse kinematics, the gravity sag at that pose added back,
+    /// the lead-screw errors inverted. What a perfect compensation commands: driven with the
+    /// machine's repeatability, it leaves the floor no method can go below.
+    pub fn exact_command(&self, pose: &Pose) -> [f64; LEGS] {
+        let loaded = inverse_kinematics(&self.geometry, pose).lengths;
+        // The sag depends on the unloaded lengths only through the compliance growing with
+        // length (relative change ~1e-4 per pass): a few fixed-point passes settle it.
+        let mut unloaded = loaded;
+        for _ in 0..4 {
+            let sag = self.gravity_shortening(pose, &unloaded);
+            unloaded = std::array::from_fn(|i| loaded[i] + sag[i]);
+        }
+        // q + pitch(q) = unloaded; the pitch error's slope is ~1e-3, so q ← unloaded − pitch(q)
+        // gains three digits a pass.
+        std::array::from_fn(|i| {
+            let mut q = unloaded[i];
+            for _ in 0..8 {
+                q = unloaded[i] - self.pitch_error(i, q);
+            }
+            q
         })
     }
 

@@ -153,6 +153,29 @@ fn geometric_only_machine_is_exactly_its_true_geometry() {
 }
 
 #[test]
+fn the_exact_command_lands_the_noiseless_machine_on_the_pose() {
+    // Every error source of the paper's machine but the noise: the true geometry, lead-screw
+    // errors and gravity sag. The exact command undoes them all; the nominal one misses.
+    let (g, poses) = workspace_poses(200, 7);
+    let model = ErrorModel::variant(ErrorVariant::NoiseFree);
+    let mut vp = VirtualPlatform::new(&g, &model, DEFAULT_MACHINE_SEED, 0).unwrap();
+    let truth = vp.machine().clone();
+    let mut nominal_misses: f64 = 0.0;
+    for pose in poses {
+        let reached = vp.move_legs(&truth.exact_command(&pose), &pose).unwrap();
+        let error = hexacomp_core::stats::PoseErrorNorm::between(&pose, &reached);
+        // Ten times the forward kinematics' tolerance on the legs (1e-9 mm).
+        assert!(
+            error.position_mm < 1e-8 && error.orientation_deg < 1e-8,
+            "{error:?}"
+        );
+        let nominal = vp.move_to_pose(&pose).unwrap();
+        nominal_misses = nominal_misses.max((nominal.position - pose.position).length());
+    }
+    assert!(nominal_misses > 0.5, "{nominal_misses}");
+}
+
+#[test]
 fn gravity_compresses_symmetric_legs_equally() {
     // Symmetric machine at home, centred load, no scatter: each leg carries m·g/(6·s_z) and
     // shortens by that force times its compliance (legs at mid-stroke length ratio L/L_mid).

@@ -85,6 +85,9 @@ pub fn run(geometry: &Geometry, args: &EvaluateArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// The methods compared.
+const METHODS: usize = Method::ALL.len();
+
 /// Every file `evaluate` writes into its folder.
 const FIGURES: [&str; 4] = [
     "fig12_position.svg",
@@ -120,14 +123,37 @@ pub fn print_evaluation(evaluation: &Evaluation, validation: usize) {
     let mut header = vec!["configurations".to_string()];
     header.extend(Method::ALL.iter().map(|m| m.label().to_string()));
     let refs: Vec<&str> = header.iter().map(String::as_str).collect();
-    let mut table = Table::<6>::new(refs.try_into().expect("6 columns"));
+    let mut table = Table::<{ METHODS + 1 }>::new(refs.try_into().expect("a column per method"));
     for size in &evaluation.sizes {
         let mut row = vec![size.configurations.to_string()];
         row.extend(Method::ALL.iter().map(|m| {
             let s = size.stats(*m, Protocol::Reached);
             format!("{:.4} / {:.4}", s.position_mm.mean, s.orientation_deg.mean)
         }));
-        table.row(row.try_into().expect("6 cells"));
+        table.row(row.try_into().expect("a cell per method"));
+    }
+    println!("{table}");
+
+    println!(
+        "Against the floor: mean / max position error reached, as multiples of the floor's mean \
+         / max (the exact legs of each pose, driven with the machine's repeatability)"
+    );
+    let compared: Vec<Method> = Method::ALL
+        .into_iter()
+        .filter(|m| *m != Method::Floor)
+        .collect();
+    let mut header = vec!["configurations".to_string()];
+    header.extend(compared.iter().map(|m| m.label().to_string()));
+    let refs: Vec<&str> = header.iter().map(String::as_str).collect();
+    let mut table = Table::<METHODS>::new(refs.try_into().expect("a column per method"));
+    for size in &evaluation.sizes {
+        let floor = size.stats(Method::Floor, Protocol::Reached).position_mm;
+        let mut row = vec![size.configurations.to_string()];
+        row.extend(compared.iter().map(|m| {
+            let s = size.stats(*m, Protocol::Reached).position_mm;
+            format!("{:.2} / {:.2}", s.mean / floor.mean, s.max / floor.max)
+        }));
+        table.row(row.try_into().expect("a cell per method"));
     }
     println!("{table}");
 
@@ -198,10 +224,10 @@ fn protocol_heading(protocol: Protocol) -> &'static str {
 
 /// The paper's Table 2 of `size` in `protocol`: max, mean and std of the position and
 /// orientation errors of every method.
-fn table_2(size: &SizeResult, protocol: Protocol) -> Table<7> {
+fn table_2(size: &SizeResult, protocol: Protocol) -> Table<{ METHODS + 2 }> {
     let mut header = vec!["pose error", ""];
     header.extend(Method::ALL.iter().map(|m| m.label()));
-    let mut table = Table::<7>::new(header.try_into().expect("7 columns"));
+    let mut table = Table::<{ METHODS + 2 }>::new(header.try_into().expect("a column per method"));
     let stats: Vec<PoseErrorStats> = Method::ALL
         .iter()
         .map(|m| size.stats(*m, protocol))
@@ -220,7 +246,7 @@ fn table_2(size: &SizeResult, protocol: Protocol) -> Table<7> {
         ] {
             let mut row = vec![name.to_string(), label.to_string()];
             row.extend(stats.iter().map(|s| format!("{:.4}", value(pick(s)))));
-            table.row(row.try_into().expect("7 cells"));
+            table.row(row.try_into().expect("a cell per method"));
         }
     }
     table
