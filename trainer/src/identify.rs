@@ -12,15 +12,22 @@
 //! Gauss–Newton steps solve `J·δθ = r` by SVD, dropping directions whose singular value is below
 //! a fraction of the largest: parameter combinations the measurements cannot see stay at their
 //! nominal values. Compensation is then the identified geometry's inverse kinematics.
+//!
+//! Optionally the model is shaped further like the machine ([`crate::physical`]): a lead-screw
+//! error curve per leg (`pitch_basis` B-spline coefficients each) and the legs' compliance under
+//! the platform's weight (4 per leg). Both change the loaded leg length, as the offset does: a
+//! pitch coefficient's column of `G` is its basis function at the leg's commanded length, a
+//! compliance coefficient's is `−h_im` at the pose.
 
 use hexacomp_core::records::MeasuredConfiguration;
 use hexacomp_core::screw::{ActuationScrews, point_matrix};
 use hexacomp_core::{ForwardOptions, Geometry, LEGS, Pose, forward_kinematics};
-use nalgebra::{DMatrix, DVector, SMatrix};
+use nalgebra::{DMatrix, DVector};
 
 use crate::error::{Error, Result};
+use crate::physical::{COMPLIANCE_TERMS, PhysicalModel, PitchCurves};
 
-/// Number of identified parameters: 6 × (3 + 3 + 1).
+/// Number of geometric parameters: 6 × (3 + 3 + 1).
 pub const PARAMETERS: usize = 42;
 
 /// Settings of the identification.
@@ -35,6 +42,24 @@ pub struct IdentifyOptions {
     pub stall_fraction: f64,
     /// Singular values below this fraction of the largest are treated as zero (unidentifiable).
     pub relative_cutoff: f64,
+    /// B-spline coefficients of each leg's lead-screw error curve (0: no pitch errors
+    /// identified).
+    pub pitch_basis: usize,
+    /// Identify the legs' compliance under the platform's weight.
+    pub compliance: bool,
+}
+
+impl IdentifyOptions {
+    /// How many parameters are identified.
+    pub fn parameters(&self) -> usize {
+        PARAMETERS
+            + LEGS * self.pitch_basis
+            + if self.compliance {
+                LEGS * COMPLIANCE_TERMS
+            } else {
+                0
+            }
+    }
 }
 
 impl Default for IdentifyOptions {
@@ -44,6 +69,8 @@ impl Default for IdentifyOptions {
             step_tolerance_mm: 1e-10,
             stall_fraction: 1e-9,
             relative_cutoff: 1e-9,
+            pitch_basis: 0,
+            compliance: false,
         }
     }
 }
@@ -53,9 +80,12 @@ impl Default for IdentifyOptions {
 pub struct Identification {
     /// The nominal geometry with identified joint centres and leg offsets.
     pub geometry: Geometry,
+    /// The whole identified model: the geometry, and the pitch curves and compliance when they
+    /// were identified (zero otherwise).
+    pub model: PhysicalModel,
     /// Gauss–Newton iterations performed.
     pub iterations: usize,
-    /// Parameter directions the measurements determine (≤ 42).
+    /// Parameter directions the measurements determine (≤ [`IdentifyOptions::parameters`]).
     pub rank: usize,
     /// RMS of the target residuals with the nominal geometry, mm.
     pub rms_before_mm: f64,
@@ -77,15 +107,17 @@ pub fn identify(
             rows.len()
         )));
     }
-    let mut geometry = nominal.clone();
+    let mut model = PhysicalModel::geometric(nominal.clone());
+    model.pitch = PitchCurves::zero(nominal.leg_range, options.pitch_basis);
+    let parameters = options.parameters();
     let mut poses: Vec<Pose> = rows.iter().map(MeasuredConfiguration::pose).collect();
     let mut rms_before = None;
     let mut rms_previous = f64::INFINITY;
     let mut rank = 0;
     let mut iterations = 0;
     for _ in 0..options.max_iterations {
-        let (jacobian, residual) =
-            linearise(&geometry, rows, &mut poses).map_err(|e| ill_conditioned(e, rank))?;
+        let (jacobian, residual) = linearise(&model, options, rows, &mut poses)
+            .map_err(|e| ill_conditioned(e, rank, parameters))?;
         let rms = (residual.norm_squared() / residual.len() as f64).sqrt();
         rms_before.get_or_insert(rms);
         if rms_previous.is_finite() && rms_previous - rms <= options.stall_fraction * rms_previous {
@@ -98,16 +130,31 @@ pub fn identify(
         let step = svd
             .solve(&residual, cutoff)
             .map_err(|e| Error::InsufficientData(format!("identification step: {e}")))?;
-        apply(&mut geometry, &step);
+        // A step that raises the residual, or takes the legs where the geometry cannot reach
+        // them, is halved (up to ten times): a direction the data barely sees must not throw
+        // the model away. None lowering it: the fit is done.
+        let Some((trial, trial_poses)) = (0..10).find_map(|halvings| {
+            let mut trial = model.clone();
+            apply(&mut trial, options, &(&step * 0.5f64.powi(halvings)));
+            let mut trial_poses = poses.clone();
+            let (_, trial_residual) = linearise(&trial, options, rows, &mut trial_poses).ok()?;
+            (trial_residual.norm_squared() < residual.norm_squared())
+                .then_some((trial, trial_poses))
+        }) else {
+            break;
+        };
+        model = trial;
+        poses = trial_poses;
         iterations += 1;
         if step.amax() < options.step_tolerance_mm {
             break;
         }
     }
-    let (_, residual) =
-        linearise(&geometry, rows, &mut poses).map_err(|e| ill_conditioned(e, rank))?;
+    let (_, residual) = linearise(&model, options, rows, &mut poses)
+        .map_err(|e| ill_conditioned(e, rank, parameters))?;
     Ok(Identification {
-        geometry,
+        geometry: model.geometry.clone(),
+        model,
         iterations,
         rank,
         rms_before_mm: rms_before.unwrap_or(0.0),
@@ -127,27 +174,33 @@ pub fn target_distance(geometry: &Geometry, row: &MeasuredConfiguration) -> Opti
 }
 
 /// `error` of an iterate, with the likely cause when the last step's data determined fewer
-/// than all parameter combinations (`rank` of them): an ill-conditioned identification drifts
-/// into geometries where forward kinematics fails.
-fn ill_conditioned(error: Error, rank: usize) -> Error {
-    if rank == 0 || rank >= PARAMETERS {
+/// than all `parameters` combinations (`rank` of them): an ill-conditioned identification
+/// drifts into geometries where forward kinematics fails.
+fn ill_conditioned(error: Error, rank: usize, parameters: usize) -> Error {
+    if rank == 0 || rank >= parameters {
         return error;
     }
     Error::InsufficientData(format!(
-        "{error}; the configurations determine only {rank} of the {PARAMETERS} parameter \
+        "{error}; the configurations determine only {rank} of the {parameters} parameter \
          combinations (ill-conditioned: measure configurations spread over the whole workspace)"
     ))
 }
 
-/// The Jacobian `∂r_Pc/∂θ` (3 rows per measured point × 42; per configuration `P·T·G`, Eq. 5
-/// with `ρ = G·δθ`) and the residual `r_Pm − r_Pc` (the `ζ` of Eq. 4) at the current
-/// parameters, over every configuration's [`hexacomp_core::observation::Observation::points`] (a measured pose counts as its
-/// targets placed at it); `poses` are updated to the model's poses (and seed the next call).
+/// The Jacobian `∂r_Pc/∂θ` (3 rows per measured point × the parameters of `options`; per
+/// configuration `P·T·G`, Eq. 5 with `ρ = G·δθ`) and the residual `r_Pm − r_Pc` (the `ζ` of
+/// Eq. 4) at the current parameters, over every configuration's
+/// [`hexacomp_core::observation::Observation::points`] (a measured pose counts as its targets
+/// placed at it); `poses` are updated to the model's poses (and seed the next call).
 fn linearise(
-    geometry: &Geometry,
+    model: &PhysicalModel,
+    options: &IdentifyOptions,
     rows: &[MeasuredConfiguration],
     poses: &mut [Pose],
 ) -> Result<(DMatrix<f64>, DVector<f64>)> {
+    let geometry = &model.geometry;
+    let parameters = options.parameters();
+    let pitch_columns = PARAMETERS;
+    let compliance_columns = PARAMETERS + LEGS * options.pitch_basis;
     let points: Vec<Vec<usize>> = rows
         .iter()
         .map(|row| {
@@ -156,12 +209,13 @@ fn linearise(
         })
         .collect();
     let total = 3 * points.iter().map(Vec::len).sum::<usize>();
-    let mut jacobian = DMatrix::zeros(total, PARAMETERS);
+    let mut jacobian = DMatrix::zeros(total, parameters);
     let mut residual = DVector::zeros(total);
     let fk = ForwardOptions::default();
     let mut at = 0;
     for ((row, pose), which) in rows.iter().zip(poses.iter_mut()).zip(&points) {
-        *pose = forward_kinematics(geometry, &row.legs, pose, &fk).map_err(|e| {
+        let lengths = model.loaded_lengths(&row.legs, pose);
+        *pose = forward_kinematics(geometry, &lengths, pose, &fk).map_err(|e| {
             Error::InsufficientData(format!(
                 "configuration {}: forward kinematics of the identified geometry: {e}",
                 row.id
@@ -172,7 +226,7 @@ fn linearise(
             Error::InsufficientData(format!("configuration {} is singular", row.id))
         })?;
         let rotation_t = pose.rotation().transpose();
-        let mut g = SMatrix::<f64, LEGS, PARAMETERS>::zeros();
+        let mut g = DMatrix::<f64>::zeros(LEGS, parameters);
         for i in 0..LEGS {
             let s = screws.directions[i];
             let s_platform = rotation_t * s;
@@ -181,13 +235,26 @@ fn linearise(
                 g[(i, 18 + 3 * i + axis)] = -s_platform[axis];
             }
             g[(i, 36 + i)] = 1.0;
+            // A pitch coefficient and a compliance coefficient lengthen the leg as its offset.
+            for (k, b) in model.pitch.basis_at(row.legs[i]).iter().enumerate() {
+                g[(i, pitch_columns + options.pitch_basis * i + k)] = *b;
+            }
+        }
+        if options.compliance {
+            let unloaded: [f64; LEGS] =
+                std::array::from_fn(|i| row.legs[i] + model.pitch.error(i, row.legs[i]));
+            let basis = model.compliance_basis(pose, &unloaded);
+            for (i, terms) in basis.iter().enumerate() {
+                for (m, h) in terms.iter().enumerate() {
+                    g[(i, compliance_columns + COMPLIANCE_TERMS * i + m)] = -h;
+                }
+            }
         }
         let t = DMatrix::from_column_slice(LEGS, LEGS, t.as_slice());
-        let g = DMatrix::from_column_slice(LEGS, PARAMETERS, g.as_slice());
         let block = point_matrix(geometry, pose, which) * t * g;
         let height = 3 * which.len();
         jacobian
-            .view_mut((at, 0), (height, PARAMETERS))
+            .view_mut((at, 0), (height, parameters))
             .copy_from(&block);
         residual
             .rows_mut(at, height)
@@ -197,14 +264,24 @@ fn linearise(
     Ok((jacobian, residual))
 }
 
-/// Adds a parameter step (the order of [`linearise`]'s columns) to the geometry.
-fn apply(geometry: &mut Geometry, step: &DVector<f64>) {
+/// Adds a parameter step (the order of [`linearise`]'s columns) to the model.
+fn apply(model: &mut PhysicalModel, options: &IdentifyOptions, step: &DVector<f64>) {
+    let geometry = &mut model.geometry;
     for i in 0..LEGS {
         for axis in 0..3 {
             geometry.base_joints[i][axis] += step[3 * i + axis];
             geometry.platform_joints[i][axis] += step[18 + 3 * i + axis];
         }
         geometry.leg_offsets[i] += step[36 + i];
+        for (k, c) in model.pitch.coefficients[i].iter_mut().enumerate() {
+            *c += step[PARAMETERS + options.pitch_basis * i + k];
+        }
+        if options.compliance {
+            let first = PARAMETERS + LEGS * options.pitch_basis + COMPLIANCE_TERMS * i;
+            for (m, c) in model.compliance[i].iter_mut().enumerate() {
+                *c += step[first + m];
+            }
+        }
     }
 }
 
@@ -262,7 +339,14 @@ mod tests {
         // directions the data cannot see (the null space of ∂r_Pc/∂θ at the nominal geometry).
         let delta = parameter_change(&result.geometry, &g);
         let mut poses: Vec<Pose> = rows.iter().map(MeasuredConfiguration::pose).collect();
-        let (jacobian, _) = linearise(&g, &rows, &mut poses).unwrap();
+        let options = IdentifyOptions::default();
+        let (jacobian, _) = linearise(
+            &PhysicalModel::geometric(g.clone()),
+            &options,
+            &rows,
+            &mut poses,
+        )
+        .unwrap();
         let svd = jacobian.svd(false, true);
         let v_t = svd.v_t.unwrap();
         let mut order: Vec<usize> = (0..PARAMETERS).collect();

@@ -18,7 +18,9 @@
 //!   every command, the bench and the tests run;
 //! - [`svg`], [`table`]: plots and terminal tables for reports;
 //! - [`identify`]: the model-based baseline — identification of the geometric parameters by
-//!   iterative least squares, compensation by the identified inverse kinematics;
+//!   iterative least squares, compensation by the identified inverse kinematics; [`physical`]:
+//!   the model shaped further like the machine (lead-screw curves, compliance under the
+//!   weight), identified the same way;
 //! - [`registration`]: locating the instrument in the base frame from fiducials, and bringing
 //!   measurements from its frame into the base frame;
 //! - [`iso9283`], [`verify`], [`verify_report`]: the ISO 9283 pose test — its poses, running
@@ -46,6 +48,7 @@ pub mod iso9283;
 pub mod linuxcnc;
 pub mod linuxcnc_machine;
 pub mod manual;
+pub mod physical;
 pub mod pipeline;
 pub mod plan;
 pub mod registration;

@@ -17,7 +17,7 @@ use hexacomp_core::stats::{ErrorStats, PoseErrorNorm, PoseErrorStats};
 use hexacomp_core::{Geometry, LEGS, Pose, inverse_kinematics};
 use hexacomp_trainer::corrections::{Checks, Outcome, SolverOptions, solve_all};
 use hexacomp_trainer::evaluate::{
-    Evaluation, EvaluationOptions, Method, Protocol, ValidationErrors, evaluate,
+    Evaluation, EvaluationOptions, Method, PHYSICAL, Protocol, ValidationErrors, evaluate,
 };
 use hexacomp_trainer::identify::{IdentifyOptions, identify};
 use hexacomp_trainer::train::{Architecture, TrainOptions, train};
@@ -116,6 +116,7 @@ fn redo(g: &Geometry, o: &EvaluationOptions) -> Redone {
         let identified = identify(g, &measurements[..n], &IdentifyOptions::default())
             .unwrap()
             .geometry;
+        let physical = identify(g, &measurements[..n], &PHYSICAL).unwrap().model;
         let ordinary_coupled = fit(&first(&ordinary, n), Architecture::Coupled, input);
         let coupled = fit(&first(&robust, n), Architecture::Coupled, input);
         let decoupled = fit(&first(&robust, n), Architecture::Decoupled, input);
@@ -149,6 +150,7 @@ fn redo(g: &Geometry, o: &EvaluationOptions) -> Redone {
                 Method::ModelBased,
                 drive(&|p| inverse_kinematics(&identified, p).lengths),
             ),
+            (Method::Physical, drive(&|p| physical.command(p))),
             (
                 Method::OrdinaryCoupled,
                 drive(&|p| compensate_pose(g, Some(&ordinary_coupled), p).legs),

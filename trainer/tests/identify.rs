@@ -67,3 +67,59 @@ fn a_configuration_the_model_cannot_place_is_a_clear_error_naming_it() {
         other => panic!("expected a clear error, got {other:?}"),
     }
 }
+
+#[test]
+fn a_machine_whose_errors_the_physical_model_can_express_is_recovered_and_commanded_exactly() {
+    // Geometry, quadratic lead-screw errors (in the span of the cubic B-splines) and compliance
+    // under the weight, without noise: the physical model has the machine's own form.
+    let g = Geometry::prototype();
+    let rows = common::plan_rows(&g, 80, 9);
+    let paper = ErrorModel::variant(ErrorVariant::NoiseFree);
+    let model = ErrorModel {
+        pitch: hexacomp_virtual::PitchErrors {
+            periodic_sigma_mm: 0.0,
+            ..paper.pitch
+        },
+        ..paper
+    };
+    let (platform, measurements) = common::measure(&g, &model, DEFAULT_MACHINE_SEED, 1, &rows);
+    let options = IdentifyOptions {
+        pitch_basis: 8,
+        compliance: true,
+        relative_cutoff: 1e-6,
+        ..IdentifyOptions::default()
+    };
+    let result = identify(&g, &measurements, &options).unwrap();
+    assert!(result.rms_before_mm > 0.3, "{result:?}");
+    assert!(result.rms_after_mm < 1e-5, "{result:?}");
+    // Its command lands the noiseless machine on fresh poses, where the geometry alone misses.
+    let truth = platform.machine().clone();
+    let geometric = identify(&g, &measurements, &IdentifyOptions::default()).unwrap();
+    let poses = hexacomp_core::sampling::WorkspaceSampler::new(
+        &g,
+        31,
+        hexacomp_core::sampling::SamplerOptions::default(),
+    )
+    .unwrap()
+    .samples(40)
+    .unwrap();
+    let miss = |command: [f64; 6], pose: &hexacomp_core::Pose| {
+        let reached = truth
+            .settle(&truth.unloaded_lengths(&command), pose)
+            .unwrap();
+        (reached.position - pose.position).length()
+    };
+    let physical = poses
+        .iter()
+        .map(|p| miss(result.model.command(p), p))
+        .fold(0.0, f64::max);
+    let geometry_only = poses
+        .iter()
+        .map(|p| miss(inverse_kinematics(&geometric.geometry, p).lengths, p))
+        .fold(0.0, f64::max);
+    assert!(physical < 1e-4, "physical model misses by {physical} mm");
+    assert!(
+        geometry_only > 0.01,
+        "geometry alone misses by {geometry_only} mm"
+    );
+}
