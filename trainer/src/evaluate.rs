@@ -79,9 +79,10 @@ impl Method {
 }
 
 /// The physical model's identification: eight B-spline coefficients per lead-screw curve (a
-/// knot every 30 mm of the prototype's 150 mm stroke; six, ten, twelve and sixteen measured
-/// worse, docs/accuracy.md), the compliance, and directions below 1e-6 of the largest singular
-/// value left alone (at 1e-9 the weakly seen ends of the curves diverged).
+/// knot every 30 mm of the prototype's 150 mm stroke; over 50, 100 and 150 configurations six,
+/// ten, twelve and sixteen measured worse, docs/accuracy.md), the compliance, and directions
+/// below 1e-6 of the largest singular value left alone (at 1e-9 the weakly seen ends of the
+/// curves diverged).
 pub const PHYSICAL: IdentifyOptions = IdentifyOptions {
     max_iterations: 30,
     step_tolerance_mm: 1e-10,

@@ -50,10 +50,28 @@ pub struct IdentifyOptions {
 }
 
 impl IdentifyOptions {
-    /// How many parameters are identified.
+    /// Identified coefficients per lead-screw curve: all but the middle one.
+    fn pitch_columns(&self) -> usize {
+        self.pitch_basis.saturating_sub(1)
+    }
+
+    /// The column of leg `leg`'s pitch coefficient `k` among the pitch columns, `None` for the
+    /// middle one (held at 0).
+    fn pitch_column(&self, leg: usize, k: usize) -> Option<usize> {
+        let pinned = self.pitch_basis / 2;
+        let within = match k.cmp(&pinned) {
+            std::cmp::Ordering::Less => k,
+            std::cmp::Ordering::Equal => return None,
+            std::cmp::Ordering::Greater => k - 1,
+        };
+        Some(PARAMETERS + self.pitch_columns() * leg + within)
+    }
+
+    /// How many parameters are identified (a lead-screw curve's middle coefficient stays 0: the
+    /// leg's offset carries its constant).
     pub fn parameters(&self) -> usize {
         PARAMETERS
-            + LEGS * self.pitch_basis
+            + LEGS * self.pitch_columns()
             + if self.compliance {
                 LEGS * COMPLIANCE_TERMS
             } else {
@@ -107,6 +125,12 @@ pub fn identify(
             rows.len()
         )));
     }
+    if (1..4).contains(&options.pitch_basis) {
+        return Err(Error::InvalidSetting(format!(
+            "{} B-spline coefficients per lead-screw curve: 0 (none) or at least 4 are needed",
+            options.pitch_basis
+        )));
+    }
     let mut model = PhysicalModel::geometric(nominal.clone());
     model.pitch = PitchCurves::zero(nominal.leg_range, options.pitch_basis);
     let parameters = options.parameters();
@@ -124,29 +148,52 @@ pub fn identify(
             break;
         }
         rms_previous = rms;
-        let svd = jacobian.svd(true, true);
+        // The pitch and compliance columns are scaled to the geometric columns' typical norm
+        // before the truncated SVD, so that the cutoff judges what the data can see and not
+        // their units; the geometric columns (mm per mm) keep the baseline's minimum-norm answer.
+        let scales = column_scales(&jacobian);
+        let mut scaled = jacobian;
+        for (j, scale) in scales.iter().enumerate() {
+            scaled.column_mut(j).unscale_mut(*scale);
+        }
+        let svd = scaled.svd(true, true);
         let cutoff = options.relative_cutoff * svd.singular_values.max();
         rank = svd.singular_values.iter().filter(|s| **s > cutoff).count();
         let step = svd
             .solve(&residual, cutoff)
-            .map_err(|e| Error::InsufficientData(format!("identification step: {e}")))?;
+            .map_err(|e| Error::InsufficientData(format!("identification step: {e}")))?
+            .component_div(&scales);
         // A step that raises the residual, or takes the legs where the geometry cannot reach
         // them, is halved (up to ten times): a direction the data barely sees must not throw
-        // the model away. None lowering it: the fit is done.
-        let Some((trial, trial_poses)) = (0..10).find_map(|halvings| {
+        // the model away. None lowering it: the fit is done, unless no step could be taken at
+        // all because every one left the reach of the geometry.
+        let mut unreachable = None;
+        let accepted = (0..10).find_map(|halvings| {
+            let step = &step * 0.5f64.powi(halvings);
             let mut trial = model.clone();
-            apply(&mut trial, options, &(&step * 0.5f64.powi(halvings)));
+            apply(&mut trial, options, &step);
             let mut trial_poses = poses.clone();
-            let (_, trial_residual) = linearise(&trial, options, rows, &mut trial_poses).ok()?;
-            (trial_residual.norm_squared() < residual.norm_squared())
-                .then_some((trial, trial_poses))
-        }) else {
-            break;
+            match linearise(&trial, options, rows, &mut trial_poses) {
+                Ok((_, r)) if r.norm_squared() < residual.norm_squared() => {
+                    Some((trial, trial_poses, step))
+                }
+                Ok(_) => None,
+                Err(e) => {
+                    unreachable = Some(e);
+                    None
+                }
+            }
+        });
+        let Some((trial, trial_poses, taken)) = accepted else {
+            match unreachable {
+                Some(e) if iterations == 0 => return Err(ill_conditioned(e, rank, parameters)),
+                _ => break,
+            }
         };
         model = trial;
         poses = trial_poses;
         iterations += 1;
-        if step.amax() < options.step_tolerance_mm {
+        if taken.amax() < options.step_tolerance_mm {
             break;
         }
     }
@@ -171,6 +218,26 @@ pub fn target_distance(geometry: &Geometry, row: &MeasuredConfiguration) -> Opti
     let pose =
         forward_kinematics(geometry, &row.legs, &row.pose(), &ForwardOptions::default()).ok()?;
     Some(row.observed.misfit(geometry, &pose).norm())
+}
+
+/// The divisor of each column of `jacobian` before the truncated SVD: 1 for the geometric
+/// columns, and for the others their norm over the geometric columns' median norm (1 for a
+/// column the data does not touch).
+fn column_scales(jacobian: &DMatrix<f64>) -> DVector<f64> {
+    let norms: Vec<f64> = jacobian.column_iter().map(|c| c.norm()).collect();
+    let mut geometric = norms[..PARAMETERS].to_vec();
+    geometric.sort_by(f64::total_cmp);
+    let typical = geometric[PARAMETERS / 2];
+    DVector::from_iterator(
+        norms.len(),
+        norms.iter().enumerate().map(|(j, n)| {
+            if j < PARAMETERS || *n == 0.0 || typical == 0.0 {
+                1.0
+            } else {
+                n / typical
+            }
+        }),
+    )
 }
 
 /// `error` of an iterate, with the likely cause when the last step's data determined fewer
@@ -199,8 +266,7 @@ fn linearise(
 ) -> Result<(DMatrix<f64>, DVector<f64>)> {
     let geometry = &model.geometry;
     let parameters = options.parameters();
-    let pitch_columns = PARAMETERS;
-    let compliance_columns = PARAMETERS + LEGS * options.pitch_basis;
+    let compliance_columns = PARAMETERS + LEGS * options.pitch_columns();
     let points: Vec<Vec<usize>> = rows
         .iter()
         .map(|row| {
@@ -236,8 +302,12 @@ fn linearise(
             }
             g[(i, 36 + i)] = 1.0;
             // A pitch coefficient and a compliance coefficient lengthen the leg as its offset.
+            // The middle basis function's coefficient stays 0: the functions sum to one, so
+            // with it the curve and the offset could trade a constant.
             for (k, b) in model.pitch.basis_at(row.legs[i]).iter().enumerate() {
-                g[(i, pitch_columns + options.pitch_basis * i + k)] = *b;
+                if let Some(column) = options.pitch_column(i, k) {
+                    g[(i, column)] = *b;
+                }
             }
         }
         if options.compliance {
@@ -274,10 +344,12 @@ fn apply(model: &mut PhysicalModel, options: &IdentifyOptions, step: &DVector<f6
         }
         geometry.leg_offsets[i] += step[36 + i];
         for (k, c) in model.pitch.coefficients[i].iter_mut().enumerate() {
-            *c += step[PARAMETERS + options.pitch_basis * i + k];
+            if let Some(column) = options.pitch_column(i, k) {
+                *c += step[column];
+            }
         }
         if options.compliance {
-            let first = PARAMETERS + LEGS * options.pitch_basis + COMPLIANCE_TERMS * i;
+            let first = PARAMETERS + LEGS * options.pitch_columns() + COMPLIANCE_TERMS * i;
             for (m, c) in model.compliance[i].iter_mut().enumerate() {
                 *c += step[first + m];
             }

@@ -4,6 +4,7 @@ mod common;
 
 use hexacomp_core::{Geometry, inverse_kinematics};
 use hexacomp_trainer::Error;
+use hexacomp_trainer::evaluate::PHYSICAL;
 use hexacomp_trainer::identify::{IdentifyOptions, PARAMETERS, identify};
 use hexacomp_virtual::{DEFAULT_MACHINE_SEED, ErrorModel, ErrorVariant};
 
@@ -83,13 +84,9 @@ fn a_machine_whose_errors_the_physical_model_can_express_is_recovered_and_comman
         ..paper
     };
     let (platform, measurements) = common::measure(&g, &model, DEFAULT_MACHINE_SEED, 1, &rows);
-    let options = IdentifyOptions {
-        pitch_basis: 8,
-        compliance: true,
-        relative_cutoff: 1e-6,
-        ..IdentifyOptions::default()
-    };
-    let result = identify(&g, &measurements, &options).unwrap();
+    let result = identify(&g, &measurements, &PHYSICAL).unwrap();
+    // Every parameter is seen: no lead-screw curve trades a constant with its leg's offset.
+    assert_eq!(result.rank, PHYSICAL.parameters(), "{result:?}");
     assert!(result.rms_before_mm > 0.3, "{result:?}");
     assert!(result.rms_after_mm < 1e-5, "{result:?}");
     // Its command lands the noiseless machine on fresh poses, where the geometry alone misses.

@@ -153,8 +153,8 @@ impl TrueMachine {
             let sag = self.gravity_shortening(pose, &unloaded);
             unloaded = std::array::from_fn(|i| loaded[i] + sag[i]);
         }
-        // q + pitch(q) = unloaded; the pitch error's slope is ~1e-3, so q ← unloaded − pitch(q)
-        // gains three digits a pass.
+        // q + pitch(q) = unloaded; the pitch error's slope is ~1e-3 (~2e-2 with the strong-pitch
+        // variant's errors), so q ← unloaded − pitch(q) gains two to three digits a pass.
         std::array::from_fn(|i| {
             let mut q = unloaded[i];
             for _ in 0..8 {

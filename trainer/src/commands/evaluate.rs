@@ -151,7 +151,12 @@ pub fn print_evaluation(evaluation: &Evaluation, validation: usize) {
         let mut row = vec![size.configurations.to_string()];
         row.extend(compared.iter().map(|m| {
             let s = size.stats(*m, Protocol::Reached).position_mm;
-            format!("{:.2} / {:.2}", s.mean / floor.mean, s.max / floor.max)
+            // A machine without noise has no floor to compare with.
+            if floor.max > 0.0 {
+                format!("{:.2} / {:.2}", s.mean / floor.mean, s.max / floor.max)
+            } else {
+                "—".to_string()
+            }
         }));
         table.row(row.try_into().expect("a cell per method"));
     }
