@@ -35,6 +35,9 @@ pub enum Method {
     /// The identified physical model: geometry, a lead-screw curve per leg and the legs'
     /// compliance under the weight ([`crate::physical`]).
     Physical,
+    /// The physical model, and decoupled networks trained on the robust corrections it leaves
+    /// (each stage fitted on what the one before left).
+    PhysicalResidual,
     /// Coupled network on corrections solved with λ = 0 (the paper's ordinary compensator).
     OrdinaryCoupled,
     /// Coupled network on robust corrections.
@@ -52,10 +55,11 @@ pub enum Method {
 
 impl Method {
     /// Every method, in table order.
-    pub const ALL: [Method; 8] = [
+    pub const ALL: [Method; 9] = [
         Method::Uncompensated,
         Method::ModelBased,
         Method::Physical,
+        Method::PhysicalResidual,
         Method::OrdinaryCoupled,
         Method::RobustCoupled,
         Method::RobustDecoupled,
@@ -69,6 +73,7 @@ impl Method {
             Method::Uncompensated => "before",
             Method::ModelBased => "model-based",
             Method::Physical => "physical model",
+            Method::PhysicalResidual => "physical + networks",
             Method::OrdinaryCoupled => "ordinary coupled",
             Method::RobustCoupled => "robust coupled",
             Method::RobustDecoupled => "robust decoupled",
@@ -280,11 +285,34 @@ pub fn evaluate(
     let mut inputs = Vec::new();
     for &n in &options.training_sizes {
         progress(&format!(
-            "{n} configurations: identifying the geometry, training four networks"
+            "{n} configurations: identifying the geometry and the physical model, training five \
+             networks"
         ));
         let identified =
             identify(geometry, &measurements[..n], &IdentifyOptions::default())?.geometry;
         let physical = identify(geometry, &measurements[..n], &PHYSICAL)?.model;
+        let left_by_physical: Vec<JointCorrection> = rows(&robust, n)
+            .into_iter()
+            .map(|row| {
+                let pose = measurements
+                    .iter()
+                    .find(|m| m.id == row.id)
+                    .expect("a correction of a measured configuration")
+                    .pose();
+                let modelled = physical.command(&pose);
+                JointCorrection {
+                    corrections: std::array::from_fn(|i| {
+                        row.corrections[i] - (modelled[i] - row.legs[i])
+                    }),
+                    ..row
+                }
+            })
+            .collect();
+        let residual = fit(
+            &left_by_physical,
+            Architecture::Decoupled,
+            options.train.input,
+        )?;
         let input = options.train.input;
         let ordinary_coupled = fit(&rows(&ordinary, n), Architecture::Coupled, input)?;
         let coupled = fit(&rows(&robust, n), Architecture::Coupled, input)?;
@@ -302,6 +330,11 @@ pub fn evaluate(
                     Method::Uncompensated => inverse_kinematics(geometry, pose).lengths,
                     Method::ModelBased => inverse_kinematics(&identified, pose).lengths,
                     Method::Physical => physical.command(pose),
+                    Method::PhysicalResidual => {
+                        let left = compensate_pose(geometry, Some(&residual.model), pose);
+                        let modelled = physical.command(pose);
+                        std::array::from_fn(|i| modelled[i] + left.corrections[i])
+                    }
                     Method::OrdinaryCoupled => {
                         compensate_pose(geometry, Some(&ordinary_coupled.model), pose).legs
                     }

@@ -117,6 +117,21 @@ fn redo(g: &Geometry, o: &EvaluationOptions) -> Redone {
             .unwrap()
             .geometry;
         let physical = identify(g, &measurements[..n], &PHYSICAL).unwrap().model;
+        // What the physical model leaves of the robust corrections, for the networks after it.
+        let left: Vec<JointCorrection> = first(&robust, n)
+            .into_iter()
+            .zip(&measurements[..n])
+            .map(|(row, m)| {
+                let modelled = physical.command(&Pose::from_mm_deg(m.pose_mm_deg));
+                JointCorrection {
+                    corrections: std::array::from_fn(|i| {
+                        row.corrections[i] - modelled[i] + row.legs[i]
+                    }),
+                    ..row
+                }
+            })
+            .collect();
+        let residual = fit(&left, Architecture::Decoupled, input);
         let ordinary_coupled = fit(&first(&ordinary, n), Architecture::Coupled, input);
         let coupled = fit(&first(&robust, n), Architecture::Coupled, input);
         let decoupled = fit(&first(&robust, n), Architecture::Decoupled, input);
@@ -151,6 +166,14 @@ fn redo(g: &Geometry, o: &EvaluationOptions) -> Redone {
                 drive(&|p| inverse_kinematics(&identified, p).lengths),
             ),
             (Method::Physical, drive(&|p| physical.command(p))),
+            (
+                Method::PhysicalResidual,
+                drive(&|p| {
+                    let modelled = physical.command(p);
+                    let left = compensate_pose(g, Some(&residual), p).corrections;
+                    std::array::from_fn(|i| modelled[i] + left[i])
+                }),
+            ),
             (
                 Method::OrdinaryCoupled,
                 drive(&|p| compensate_pose(g, Some(&ordinary_coupled), p).legs),

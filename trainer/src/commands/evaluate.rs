@@ -17,7 +17,8 @@ use hexacomp_trainer::table::Table;
 
 /// Compare the compensation methods on the virtual platform, on fresh validation poses that no
 /// training used: uncompensated, the model-based baseline (identified geometry), the physical
-/// model (geometry, a lead-screw curve per leg, compliance under the weight), the ordinary
+/// model (geometry, a lead-screw curve per leg, compliance under the weight) alone and with
+/// decoupled networks on the corrections it leaves, the ordinary
 /// compensator (coupled network, λ = 0), the robust coupled and decoupled compensators, the
 /// decoupled networks trained on the exact corrections (known only in simulation), and the
 /// floor: the exact legs of each pose, driven with the machine's repeatability, which no method
