@@ -5,7 +5,6 @@
 //! comment line after the header, so a run with other settings cannot continue it.
 
 use std::io::{Read, Write};
-use std::os::unix::fs::MetadataExt;
 use std::path::{Path, PathBuf};
 
 use hexacomp_core::durable::sync_directory_of;
@@ -115,6 +114,12 @@ pub struct MeasurementsJournal {
     created_empty: bool,
 }
 
+/// Whether `path` names the open `file` (not a file put in its place, nor nothing).
+fn path_holds(path: &Path, file: &std::fs::File) -> bool {
+    let identity = |m: std::fs::Metadata| crate::file_identity(&m);
+    std::fs::metadata(path).map(identity).ok() == file.metadata().map(identity).ok()
+}
+
 /// The header line of a journal of `kind` with the `extra` columns after the measured ones.
 fn header(kind: JournalKind, extra: &[&str]) -> String {
     let measured = measured_columns(kind);
@@ -177,8 +182,7 @@ impl MeasurementsJournal {
         )?;
         // Locked, but perhaps a file a refused run removed meanwhile
         // ([`MeasurementsJournal::discard_if_created`]): what is recorded must reach the path.
-        let identity = |m: std::fs::Metadata| (m.dev(), m.ino());
-        if std::fs::metadata(path).map(identity).ok() != file.metadata().map(identity).ok() {
+        if !path_holds(path, &file) {
             return Err(fail(
                 0,
                 "the file was removed while it was being opened (another campaign refused at \
@@ -245,11 +249,8 @@ impl MeasurementsJournal {
     /// is held until the file is gone; a campaign that opened the path meanwhile finds it gone
     /// once it holds the lock, and is refused.
     pub fn discard_if_created(self) {
-        let identity = |m: std::fs::Metadata| (m.dev(), m.ino());
         // Only the file this journal holds, not one that something else put at the path.
-        let ours = std::fs::metadata(&self.path).map(identity).ok()
-            == self.file.metadata().map(identity).ok();
-        if self.created_empty && ours {
+        if self.created_empty && path_holds(&self.path, &self.file) {
             let _ = std::fs::remove_file(&self.path);
             let _ = sync_directory_of(&self.path);
         }

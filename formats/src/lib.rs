@@ -528,18 +528,23 @@ pub fn write_file(
     file.commit().map_err(failed)
 }
 
+/// What makes a file the file it is, whatever path names it: its device and inode.
+pub fn file_identity(metadata: &std::fs::Metadata) -> (u64, u64) {
+    use std::os::unix::fs::MetadataExt;
+    (metadata.dev(), metadata.ino())
+}
+
 /// Refuses an output that is the same file as one of the inputs (the same file by device and
 /// inode, whatever the spelling of the paths, links included) — to be called before anything is
 /// written, so that a command never replaces what it reads. An output that does not exist yet
 /// cannot be an input.
 pub fn refuse_same_file(output: &Path, inputs: &[&Path]) -> Result<()> {
-    use std::os::unix::fs::MetadataExt;
     let Ok(out) = std::fs::metadata(output) else {
         return Ok(());
     };
     for input in inputs {
         if let Ok(meta) = std::fs::metadata(input)
-            && (meta.dev(), meta.ino()) == (out.dev(), out.ino())
+            && file_identity(&meta) == file_identity(&out)
         {
             return Err(Error::SameFile {
                 output: output.display().to_string(),

@@ -10,12 +10,12 @@
 //! Units: mm and degrees, the instrument's frame.
 
 use std::io::{Read, Seek, SeekFrom};
-use std::os::unix::fs::MetadataExt;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use glam::DVec3;
 use hexacomp_core::observation::Observation;
+use hexacomp_formats::file_identity;
 
 use crate::campaign::{Arrival, Instrument, ReadError};
 use crate::command_instrument::{parse_point, parse_reading};
@@ -71,7 +71,7 @@ impl FollowedFile {
             skip_partial: false,
         };
         if let Some(file) = followed.current()? {
-            followed.identity = Some(identity(&file.metadata()?));
+            followed.identity = Some(file_identity(&file.metadata()?));
             let skipped = followed.skip_to_end(file)?;
             if skipped > 0 {
                 eprintln!(
@@ -82,6 +82,11 @@ impl FollowedFile {
             }
         }
         Ok(followed)
+    }
+
+    /// An error reading the file: the campaign cannot go on following it.
+    fn broken(&self, e: std::io::Error) -> ReadError {
+        ReadError::Broken(format!("following {}: {e}", self.path.display()))
     }
 
     /// The file as it is now, `None` while it does not exist.
@@ -113,10 +118,7 @@ impl FollowedFile {
     /// The file, refused when another file took its place or it was cut shorter than what was
     /// consumed (the readings already taken could not be told from new ones).
     fn checked(&mut self) -> Result<Option<std::fs::File>, ReadError> {
-        let broken = |e: std::io::Error| {
-            ReadError::Broken(format!("following {}: {e}", self.path.display()))
-        };
-        let Some(file) = self.current().map_err(broken)? else {
+        let Some(file) = self.current().map_err(|e| self.broken(e))? else {
             return match self.identity {
                 Some(_) => Err(ReadError::Broken(format!(
                     "{} was removed while it was followed",
@@ -125,8 +127,8 @@ impl FollowedFile {
                 None => Ok(None),
             };
         };
-        let metadata = file.metadata().map_err(broken)?;
-        let now = identity(&metadata);
+        let metadata = file.metadata().map_err(|e| self.broken(e))?;
+        let now = file_identity(&metadata);
         if *self.identity.get_or_insert(now) != now || metadata.len() < self.offset {
             return Err(ReadError::Broken(format!(
                 "{} was replaced or cut short while it was followed (its software must append \
@@ -145,9 +147,7 @@ impl FollowedFile {
         }
         self.last_subject = Some(subject.to_string());
         if let Some(file) = self.checked()? {
-            let skipped = self.skip_to_end(file).map_err(|e| {
-                ReadError::Broken(format!("following {}: {e}", self.path.display()))
-            })?;
+            let skipped = self.skip_to_end(file).map_err(|e| self.broken(e))?;
             if skipped > 0 {
                 eprintln!(
                     "{}: skipped {skipped} line{} appended before {subject} stood still",
@@ -165,14 +165,12 @@ impl FollowedFile {
         let deadline = Instant::now() + self.timeout;
         loop {
             if let Some(mut file) = self.checked()? {
-                let io = |e: std::io::Error| {
-                    ReadError::Broken(format!("following {}: {e}", self.path.display()))
-                };
-                file.seek(SeekFrom::Start(self.offset)).map_err(io)?;
+                file.seek(SeekFrom::Start(self.offset))
+                    .map_err(|e| self.broken(e))?;
                 let mut rest = Vec::new();
                 file.take(MAX_LINE_BYTES)
                     .read_to_end(&mut rest)
-                    .map_err(io)?;
+                    .map_err(|e| self.broken(e))?;
                 match rest.iter().position(|b| *b == b'\n') {
                     Some(end) => {
                         self.offset += end as u64 + 1;
@@ -241,11 +239,6 @@ impl FollowedFile {
         parse(&line)
             .map_err(|why| ReadError::Failed(format!("{}:{number}: {why}", self.path.display())))
     }
-}
-
-/// A file's device and inode.
-fn identity(metadata: &std::fs::Metadata) -> (u64, u64) {
-    (metadata.dev(), metadata.ino())
 }
 
 impl Instrument for FollowedFile {

@@ -443,20 +443,14 @@ pub fn run(geometry: &Geometry, args: &CampaignArgs) -> anyhow::Result<()> {
         )
     });
     match (fiducials, gaps) {
-        (Ok(line), None) => {
-            if !line.is_empty() {
-                eprintln!("{line}");
-            }
-            Ok(())
-        }
-        (Ok(line), Some(gaps)) => {
-            if !line.is_empty() {
-                eprintln!("{line}");
-            }
-            anyhow::bail!(gaps)
-        }
         (Err(e), None) => Err(e),
         (Err(e), Some(gaps)) => Err(e.context(gaps)),
+        (Ok(line), gaps) => {
+            if !line.is_empty() {
+                eprintln!("{line}");
+            }
+            gaps.map_or(Ok(()), |gaps| Err(anyhow::anyhow!(gaps)))
+        }
     }
 }
 
