@@ -59,7 +59,8 @@ pub struct Provenance {
     pub training_samples: usize,
     /// Samples held out to choose the hidden-node count.
     pub validation_samples: usize,
-    /// Holdout validation RMSE of the chosen size (Eq. 18, or Eq. 21 for decoupled), mm.
+    /// Holdout validation RMSE of the chosen size (Eq. 18, or Eq. 21 for decoupled), mm. For a
+    /// physical model carried into networks: against the model's corrections.
     pub validation_rmse_mm: f64,
     /// Free text: the tool, its version, the source files.
     pub source: String,

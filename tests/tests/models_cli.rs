@@ -272,9 +272,35 @@ fn calibrate_runs_the_whole_pipeline_and_summarises() {
         "model-coupled.hxm",
         "model-decoupled.hxm",
         "model-decoupled.selection.svg",
+        "model-physical.hxm",
     ] {
         assert!(out_dir.join(file).exists(), "{file} missing");
     }
+    // The candidates are compared on configurations they were not fitted on; on the virtual
+    // machine, whose errors have the physical model's form, the physical model wins and is the
+    // model file.
+    for (name, says) in [
+        ("coupled", "holdout validation RMSE"),
+        ("decoupled", "holdout validation RMSE"),
+        ("physical", "departure from the model"),
+    ] {
+        let line = report
+            .lines()
+            .find(|l| l.starts_with(&format!("  {name} ")) && l.contains("cross-validated"))
+            .unwrap_or_else(|| panic!("no cross-validated {name} summary in\n{report}"));
+        assert!(
+            line.contains("hidden nodes") && line.contains(says),
+            "{line}"
+        );
+    }
+    assert!(
+        report.contains("model.hxm = the physical model"),
+        "{report}"
+    );
+    assert_eq!(
+        std::fs::read(out_dir.join("model.hxm")).unwrap(),
+        std::fs::read(out_dir.join("model-physical.hxm")).unwrap()
+    );
     assert!(
         report.contains("Calibration summary (60 configurations, virtual platform)"),
         "{report}"
@@ -311,6 +337,25 @@ fn calibrate_runs_the_whole_pipeline_and_summarises() {
         .collect();
     assert_eq!(row.len(), 5, "{row:?}");
     assert!(row[0] > 0.0 && row[3] > 0.0 && row[0] != row[3], "{row:?}");
+    // The physical model's row lies between the floor's and the decoupled networks'.
+    let reached_mean = |label: &str| -> f64 {
+        let line = report
+            .lines()
+            .find(|l| l.starts_with(label))
+            .unwrap_or_else(|| panic!("no {label} row in\n{report}"));
+        line[label.len()..]
+            .split_whitespace()
+            .next()
+            .unwrap()
+            .parse()
+            .unwrap()
+    };
+    let physical = reached_mean("physical model (as networks)");
+    let floor = reached_mean("floor (exact legs, with the machine's repeatability)");
+    assert!(
+        floor < physical && physical < row[0],
+        "{floor} {physical} {row:?}"
+    );
     Model::load(&out_dir.join("model.hxm"), &Geometry::prototype()).unwrap();
 }
 

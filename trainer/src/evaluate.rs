@@ -11,15 +11,16 @@
 use hexacomp_core::compensator::compensate_pose;
 use hexacomp_core::kinematics::pose_from_targets;
 use hexacomp_core::model::NetworkInput;
-use hexacomp_core::records::JointCorrection;
+use hexacomp_core::records::{JointCorrection, MeasuredConfiguration};
 use hexacomp_core::sampling::{SamplerOptions, WorkspaceSampler};
 use hexacomp_core::stats::{PoseErrorNorm, PoseErrorStats};
 use hexacomp_core::{Geometry, Pose, inverse_kinematics};
 use hexacomp_virtual::{ErrorModel, VirtualPlatform};
 
 use crate::corrections::{Checks, SolverOptions};
+use crate::distill::{DistillOptions, distill};
 use crate::error::{Error, Result};
-use crate::identify::{IdentifyOptions, identify};
+use crate::identify::{IdentifyOptions, PHYSICAL, identify};
 use crate::pipeline::Pipeline;
 use crate::plan::PlanOptions;
 use crate::screening::ScreeningOptions;
@@ -38,6 +39,9 @@ pub enum Method {
     /// The physical model, and decoupled networks trained on the robust corrections it leaves
     /// (each stage fitted on what the one before left).
     PhysicalResidual,
+    /// The physical model carried into decoupled networks ([`crate::distill`]): what a model
+    /// file holds of it.
+    PhysicalNetworks,
     /// Coupled network on corrections solved with λ = 0 (the paper's ordinary compensator).
     OrdinaryCoupled,
     /// Coupled network on robust corrections.
@@ -55,11 +59,12 @@ pub enum Method {
 
 impl Method {
     /// Every method, in table order.
-    pub const ALL: [Method; 9] = [
+    pub const ALL: [Method; 10] = [
         Method::Uncompensated,
         Method::ModelBased,
         Method::Physical,
         Method::PhysicalResidual,
+        Method::PhysicalNetworks,
         Method::OrdinaryCoupled,
         Method::RobustCoupled,
         Method::RobustDecoupled,
@@ -74,6 +79,7 @@ impl Method {
             Method::ModelBased => "model-based",
             Method::Physical => "physical model",
             Method::PhysicalResidual => "physical + networks",
+            Method::PhysicalNetworks => "physical model, as networks",
             Method::OrdinaryCoupled => "ordinary coupled",
             Method::RobustCoupled => "robust coupled",
             Method::RobustDecoupled => "robust decoupled",
@@ -82,20 +88,6 @@ impl Method {
         }
     }
 }
-
-/// The physical model's identification: eight B-spline coefficients per lead-screw curve (a
-/// knot every 30 mm of the prototype's 150 mm stroke; over 50, 100 and 150 configurations six,
-/// ten, twelve and sixteen measured worse, docs/accuracy.md), the compliance, and directions
-/// below 1e-6 of the largest singular value left alone (at 1e-9 the weakly seen ends of the
-/// curves diverged).
-pub const PHYSICAL: IdentifyOptions = IdentifyOptions {
-    max_iterations: 30,
-    step_tolerance_mm: 1e-10,
-    stall_fraction: 1e-9,
-    relative_cutoff: 1e-6,
-    pitch_basis: 8,
-    compliance: true,
-};
 
 /// Settings of an evaluation.
 #[derive(Debug, Clone)]
@@ -118,6 +110,8 @@ pub struct EvaluationOptions {
     pub instrument_seed: u64,
     /// Network training settings (the input is set per model).
     pub train: TrainOptions,
+    /// How the physical model is carried into networks.
+    pub distill: DistillOptions,
 }
 
 /// How a pose error at a validation pose is obtained.
@@ -238,6 +232,8 @@ pub fn evaluate(
     ));
     let (_, measurements) = robust_pipeline.measure_virtual(&mut platform)?;
     let truth = platform.machine().clone();
+    // The machine commanded with the exact legs of a configuration's pose reaches it: those
+    // legs are the row's commanded ones, and its equivalent legs the pose's nominal ones.
     let exact_rows = |n: usize| -> Vec<JointCorrection> {
         measurements[..n]
             .iter()
@@ -245,7 +241,7 @@ pub fn evaluate(
                 let exact = truth.exact_command(&Pose::from_mm_deg(m.pose_mm_deg));
                 JointCorrection {
                     id: m.id.clone(),
-                    legs: m.legs,
+                    legs: exact,
                     corrections: std::array::from_fn(|i| exact[i] - m.legs[i]),
                 }
             })
@@ -285,8 +281,8 @@ pub fn evaluate(
     let mut inputs = Vec::new();
     for &n in &options.training_sizes {
         progress(&format!(
-            "{n} configurations: identifying the geometry and the physical model, training five \
-             networks"
+            "{n} configurations: identifying the geometry and the physical model, carrying it \
+             into networks, training five more"
         ));
         let identified =
             identify(geometry, &measurements[..n], &IdentifyOptions::default())?.geometry;
@@ -308,6 +304,11 @@ pub fn evaluate(
                 }
             })
             .collect();
+        let measured: Vec<Pose> = measurements[..n]
+            .iter()
+            .map(MeasuredConfiguration::pose)
+            .collect();
+        let distilled = distill(geometry, &physical, &measured, &options.distill, &|_| {})?;
         let residual = fit(
             &left_by_physical,
             Architecture::Decoupled,
@@ -334,6 +335,9 @@ pub fn evaluate(
                         let left = compensate_pose(geometry, Some(&residual.model), pose);
                         let modelled = physical.command(pose);
                         std::array::from_fn(|i| modelled[i] + left.corrections[i])
+                    }
+                    Method::PhysicalNetworks => {
+                        compensate_pose(geometry, Some(&distilled.model), pose).legs
                     }
                     Method::OrdinaryCoupled => {
                         compensate_pose(geometry, Some(&ordinary_coupled.model), pose).legs

@@ -93,6 +93,20 @@ impl Default for IdentifyOptions {
     }
 }
 
+/// The physical model's identification (the default of `calibrate` and `evaluate`): eight B-spline coefficients per lead-screw curve (a
+/// knot every 30 mm of the prototype's 150 mm stroke; over 50, 100 and 150 configurations six,
+/// ten, twelve and sixteen measured worse, docs/accuracy.md), the compliance, and directions
+/// below 1e-6 of the largest singular value left alone (at 1e-9 the weakly seen ends of the
+/// curves diverged).
+pub const PHYSICAL: IdentifyOptions = IdentifyOptions {
+    max_iterations: 30,
+    step_tolerance_mm: 1e-10,
+    stall_fraction: 1e-9,
+    relative_cutoff: 1e-6,
+    pitch_basis: 8,
+    compliance: true,
+};
+
 /// The identified geometry and how the identification went.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Identification {

@@ -16,10 +16,11 @@ use hexacomp_core::sampling::{SamplerOptions, WorkspaceSampler};
 use hexacomp_core::stats::{ErrorStats, PoseErrorNorm, PoseErrorStats};
 use hexacomp_core::{Geometry, LEGS, Pose, inverse_kinematics};
 use hexacomp_trainer::corrections::{Checks, Outcome, SolverOptions, solve_all};
+use hexacomp_trainer::distill::{DistillOptions, distill};
 use hexacomp_trainer::evaluate::{
-    Evaluation, EvaluationOptions, Method, PHYSICAL, Protocol, ValidationErrors, evaluate,
+    Evaluation, EvaluationOptions, Method, Protocol, ValidationErrors, evaluate,
 };
-use hexacomp_trainer::identify::{IdentifyOptions, identify};
+use hexacomp_trainer::identify::{IdentifyOptions, PHYSICAL, identify};
 use hexacomp_trainer::train::{Architecture, TrainOptions, train};
 use hexacomp_virtual::{DEFAULT_MACHINE_SEED, ErrorModel, ErrorVariant, VirtualPlatform};
 
@@ -37,6 +38,16 @@ fn options(sizes: Vec<usize>, error_model: ErrorModel) -> EvaluationOptions {
             hidden_sizes: vec![1, 2, 3],
             restarts: 1,
             ..TrainOptions::default()
+        },
+        distill: DistillOptions {
+            samples: 60,
+            seed: 8,
+            train: TrainOptions {
+                hidden_sizes: vec![2, 4],
+                restarts: 1,
+                max_iterations: 30,
+                ..TrainOptions::default()
+            },
         },
     }
 }
@@ -132,12 +143,17 @@ fn redo(g: &Geometry, o: &EvaluationOptions) -> Redone {
             })
             .collect();
         let residual = fit(&left, Architecture::Decoupled, input);
+        // The physical model carried into networks over the poses the prefix measured.
+        let measured: Vec<Pose> = measurements[..n].iter().map(|m| m.pose()).collect();
+        let distilled = distill(g, &physical, &measured, &o.distill, &|_| {})
+            .unwrap()
+            .model;
         let ordinary_coupled = fit(&first(&ordinary, n), Architecture::Coupled, input);
         let coupled = fit(&first(&robust, n), Architecture::Coupled, input);
         let decoupled = fit(&first(&robust, n), Architecture::Decoupled, input);
         // The exact corrections: the legs that land the noiseless machine on each commanded
-        // pose, minus the commanded ones (the machine's own inverse, tested in the virtual
-        // platform's tests).
+        // pose (the machine's own inverse, tested in the virtual platform's tests), commanded,
+        // minus the pose's nominal legs.
         let truth = platform.machine().clone();
         let exact: Vec<JointCorrection> = measurements[..n]
             .iter()
@@ -145,7 +161,7 @@ fn redo(g: &Geometry, o: &EvaluationOptions) -> Redone {
                 let legs = truth.exact_command(&Pose::from_mm_deg(m.pose_mm_deg));
                 JointCorrection {
                     id: m.id.clone(),
-                    legs: m.legs,
+                    legs,
                     corrections: std::array::from_fn(|i| legs[i] - m.legs[i]),
                 }
             })
@@ -173,6 +189,10 @@ fn redo(g: &Geometry, o: &EvaluationOptions) -> Redone {
                     let left = compensate_pose(g, Some(&residual), p).corrections;
                     std::array::from_fn(|i| modelled[i] + left[i])
                 }),
+            ),
+            (
+                Method::PhysicalNetworks,
+                drive(&|p| compensate_pose(g, Some(&distilled), p).legs),
             ),
             (
                 Method::OrdinaryCoupled,
@@ -487,6 +507,7 @@ fn the_evaluate_command_prints_the_tables_of_the_largest_size_and_writes_the_fig
         noise_seed: 2,
         instrument_seed: 3,
         train: TrainOptions::default(),
+        distill: DistillOptions::default(),
     };
     let evaluation = evaluate(&g, &o, &|_| {}).unwrap();
     let largest = &evaluation.sizes[0];

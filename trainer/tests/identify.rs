@@ -4,8 +4,7 @@ mod common;
 
 use hexacomp_core::{Geometry, inverse_kinematics};
 use hexacomp_trainer::Error;
-use hexacomp_trainer::evaluate::PHYSICAL;
-use hexacomp_trainer::identify::{IdentifyOptions, PARAMETERS, identify};
+use hexacomp_trainer::identify::{IdentifyOptions, PARAMETERS, PHYSICAL, identify};
 use hexacomp_virtual::{DEFAULT_MACHINE_SEED, ErrorModel, ErrorVariant};
 
 #[test]

@@ -159,7 +159,21 @@ pub fn train_with_progress(
 ) -> anyhow::Result<Trained> {
     // The bar counts the work of Levenberg–Marquardt iterations, so it moves within a fit on
     // large inputs; fits that settle early skip ahead, so the real time left is often shorter.
-    let bar = ProgressBar::new(training_work(rows.len(), architecture, &pipeline.train));
+    let bar = work_bar(
+        training_work(rows.len(), architecture, &pipeline.train),
+        format!("training {} networks", arch_name(architecture)),
+    );
+    let mut trained = pipeline
+        .train(geometry, rows, architecture, &|n| bar.inc(n))
+        .context("training")?;
+    bar.finish_and_clear();
+    trained.model.provenance.source = source;
+    Ok(trained)
+}
+
+/// A progress bar over `total` units of training work, with the time left.
+pub fn work_bar(total: u64, message: String) -> ProgressBar {
+    let bar = ProgressBar::new(total);
     bar.set_style(
         ProgressStyle::with_template(
             "{msg} [{bar:30}] {percent_precise}% ({elapsed}, about {eta} left)",
@@ -167,13 +181,8 @@ pub fn train_with_progress(
         .expect("valid template")
         .progress_chars("=> "),
     );
-    bar.set_message(format!("training {} networks", arch_name(architecture)));
-    let mut trained = pipeline
-        .train(geometry, rows, architecture, &|n| bar.inc(n))
-        .context("training")?;
-    bar.finish_and_clear();
-    trained.model.provenance.source = source;
-    Ok(trained)
+    bar.set_message(message);
+    bar
 }
 
 pub fn arch_name(architecture: Architecture) -> &'static str {
