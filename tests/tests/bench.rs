@@ -89,6 +89,11 @@ fn demo_calibrates_hot_swaps_streams_and_compensates_the_path() {
         before > 0.3 && after < before / 10.0,
         "{before} → {after}\n{stdout}"
     );
+    // The floor the same machine reaches with its exact legs: above zero (its repeatability),
+    // below what any model reaches.
+    let floor = number_after(stdout, "exact (the floor)");
+    assert!(floor > 0.0 && floor < after, "{floor} {after}\n{stdout}");
+    assert!(stdout.contains("the floor, exact legs"), "{stdout}");
     for variant in ["hexacomp", "echo", "uds", "inprocess"] {
         assert!(
             stdout.contains(&format!("\n{variant} ")),

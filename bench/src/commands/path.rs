@@ -3,9 +3,7 @@
 
 use std::path::PathBuf;
 
-use hexacomp_core::stats::PoseErrorStats;
-
-use crate::accuracy::{self, PathAccuracy};
+use crate::accuracy::{self, PathAccuracy, PathStats};
 use crate::path::{Path, interpolate};
 use crate::report::{self, JsonSummary, Summary, write_into};
 use crate::session::{PathArgs, Session, SetupArgs, VariantKind};
@@ -44,8 +42,8 @@ pub struct PathCommand {
 pub struct PathReport {
     /// The latency figures.
     pub summary: Summary,
-    /// Accuracy before and after compensation.
-    pub accuracy: (PoseErrorStats, PoseErrorStats),
+    /// Accuracy before and after compensation and at the floor.
+    pub accuracy: PathStats,
 }
 
 pub fn run(command: &PathCommand) -> anyhow::Result<()> {
@@ -155,10 +153,7 @@ pub fn report_path(
     let accuracy = if run.points_out.len() == path.poses.len() {
         accuracy::along_path(&session.platform, &path.poses, &run.points_out, stride)?
     } else {
-        PathAccuracy {
-            before: Vec::new(),
-            after: Vec::new(),
-        }
+        PathAccuracy::default()
     };
     let stats = accuracy.stats();
     if !accuracy.before.is_empty() {
@@ -170,8 +165,9 @@ pub fn report_path(
             "max ‖ε‖ deg",
         ]);
         for (name, s) in [
-            ("nominal (uncompensated)", stats.0),
-            ("compensated", stats.1),
+            ("nominal (uncompensated)", stats.before),
+            ("compensated", stats.after),
+            ("exact (the floor)", stats.floor),
         ] {
             table.row([
                 name.to_string(),
