@@ -3,6 +3,7 @@
 //! would actually trace — and with the exact legs of each point (known only in simulation): the
 //! floor no compensation can go below, the machine's repeatability.
 
+use anyhow::Context;
 use hexacomp_client::CompensatedPoint;
 use hexacomp_core::stats::{PoseErrorNorm, PoseErrorStats};
 use hexacomp_core::{Pose, inverse_kinematics};
@@ -65,16 +66,28 @@ pub fn along_path(
         (platform.clone(), platform.clone(), platform.clone());
     let truth = platform.machine();
     let mut accuracy = PathAccuracy::default();
-    for (values, point) in poses.iter().zip(compensated).step_by(stride.max(1)) {
+    for (index, (values, point)) in poses
+        .iter()
+        .zip(compensated)
+        .enumerate()
+        .step_by(stride.max(1))
+    {
         let pose = Pose::from_mm_deg(*values);
+        let at = |legs: &str| format!("the virtual machine at path point {index} with the {legs}");
         let nominal = inverse_kinematics(&geometry, &pose).lengths;
-        let reached = nominal_run.move_legs(&nominal, &pose)?;
+        let reached = nominal_run
+            .move_legs(&nominal, &pose)
+            .with_context(|| at("nominal legs"))?;
         accuracy
             .before
             .push(PoseErrorNorm::between(&pose, &reached));
-        let reached = compensated_run.move_legs(&point.legs, &pose)?;
+        let reached = compensated_run
+            .move_legs(&point.legs, &pose)
+            .with_context(|| at("compensated legs"))?;
         accuracy.after.push(PoseErrorNorm::between(&pose, &reached));
-        let reached = exact_run.move_legs(&truth.exact_command(&pose), &pose)?;
+        let reached = exact_run
+            .move_legs(&truth.exact_command(&pose), &pose)
+            .with_context(|| at("exact legs"))?;
         accuracy.floor.push(PoseErrorNorm::between(&pose, &reached));
     }
     Ok(accuracy)

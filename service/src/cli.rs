@@ -8,6 +8,7 @@ use std::time::Duration;
 use clap::Parser;
 use hexacomp_core::Geometry;
 use hexacomp_protocol::DEFAULT_INSTANCE;
+use tracing_subscriber::filter::LevelFilter;
 
 use crate::serving::WaitMode;
 use crate::termination::{TerminationSignals, signal_name};
@@ -21,6 +22,9 @@ use crate::{Error, Service, ServiceOptions};
 /// service answers nominal inverse kinematics with the status `no_model`. Models are hot-swapped
 /// with `hexacomp-trainer deploy`; the last accepted one persists in the state directory and is
 /// served again after a restart. Stops cleanly on SIGINT/SIGTERM.
+///
+/// Logs to standard error at the level RUST_LOG names (error, warn, info, debug, trace or off;
+/// default info; target=level directives are not supported), in colour only on a terminal.
 #[derive(Debug, Clone, Parser)]
 #[command(name = "hexacomp-service", version)]
 pub struct Args {
@@ -64,13 +68,44 @@ enum WaitArg {
     Sleep,
 }
 
-/// Logs to standard error (level from `RUST_LOG`, default info), iceoryx2's own log at errors
-/// only unless its level is set in the environment.
+/// Logs to standard error at the level `RUST_LOG` names (one of `error`, `warn`, `info`,
+/// `debug`, `trace`, `off`; `target=level` directives are not supported), at info when it is
+/// unset or empty, and when it names no single level, which the log then says. iceoryx2's own
+/// log at errors only unless its level is set in the environment. Colours only when standard
+/// error is a terminal and `NO_COLOR` is not set: a log file or the journal gets plain text.
 pub fn init_logging() {
+    use std::io::IsTerminal;
+    let requested = std::env::var_os("RUST_LOG").filter(|v| !v.to_string_lossy().trim().is_empty());
+    let level = requested
+        .as_ref()
+        .map(|value| single_level(&value.to_string_lossy()));
+    let colour = std::io::stderr().is_terminal()
+        && std::env::var_os("NO_COLOR").is_none_or(|v| v.is_empty());
     tracing_subscriber::fmt()
         .with_writer(std::io::stderr)
+        .with_ansi(colour)
+        .with_max_level(level.flatten().unwrap_or(LevelFilter::INFO))
         .init();
+    if let (Some(value), Some(None)) = (&requested, level) {
+        tracing::warn!(
+            "RUST_LOG={value:?} is not a single level (error, warn, info, debug, trace, off; \
+             target=level directives are not supported): logging at info"
+        );
+    }
     iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
+}
+
+/// The level `value` names (case and surrounding blanks ignored), if it names one.
+fn single_level(value: &str) -> Option<LevelFilter> {
+    match value.trim().to_ascii_lowercase().as_str() {
+        "error" => Some(LevelFilter::ERROR),
+        "warn" => Some(LevelFilter::WARN),
+        "info" => Some(LevelFilter::INFO),
+        "debug" => Some(LevelFilter::DEBUG),
+        "trace" => Some(LevelFilter::TRACE),
+        "off" => Some(LevelFilter::OFF),
+        _ => None,
+    }
 }
 
 fn default_state_dir(instance: &str) -> PathBuf {

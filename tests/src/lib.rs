@@ -316,6 +316,11 @@ impl ServiceProcess {
     /// Starts the service for `instance` with extra `args` (e.g. `--state-dir`, `--model`) and
     /// waits until a client can connect (10 s at most).
     pub fn start(instance: &str, args: &[&str]) -> Self {
+        Self::start_with_env(instance, args, &[])
+    }
+
+    /// [`ServiceProcess::start`] with environment variables `env` (name, value) set for it.
+    pub fn start_with_env(instance: &str, args: &[&str], env: &[(&str, &str)]) -> Self {
         let log = std::env::temp_dir().join(format!("hexacomp-{instance}.log"));
         // An earlier start of this instance, or of another run that had the same process id,
         // may have written to the file: this start's log is what follows.
@@ -323,6 +328,9 @@ impl ServiceProcess {
         let child = Command::new(binary("hexacomp-service"))
             .args(["--instance", instance])
             .args(args)
+            // The developer's own log level would change what the tests read in the log.
+            .env_remove("RUST_LOG")
+            .envs(env.iter().copied())
             .stdout(std::process::Stdio::null())
             // Appended to: a restarted service of the same instance adds to the same log.
             .stderr(

@@ -90,10 +90,14 @@ fn demo_calibrates_hot_swaps_streams_and_compensates_the_path() {
         "{before} → {after}\n{stdout}"
     );
     // The floor the same machine reaches with its exact legs: above zero (its repeatability),
-    // below what any model reaches.
+    // below what the compensated run reaches, and the same in the summary.
     let floor = number_after(stdout, "exact (the floor)");
     assert!(floor > 0.0 && floor < after, "{floor} {after}\n{stdout}");
-    assert!(stdout.contains("the floor, exact legs"), "{stdout}");
+    assert_eq!(
+        number_after(stdout, "exact legs with the machine's repeatability: "),
+        floor,
+        "{stdout}"
+    );
     for variant in ["hexacomp", "echo", "uds", "inprocess"] {
         assert!(
             stdout.contains(&format!("\n{variant} ")),

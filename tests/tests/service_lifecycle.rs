@@ -1,5 +1,6 @@
 //! The service's life outside serving: what it does with a persisted model it cannot use, a
-//! `--model` that validation refuses, SIGTERM and SIGINT, and `--client-budget 0`.
+//! `--model` that validation refuses, SIGTERM and SIGINT, its log (plain text in a file, at the
+//! level `RUST_LOG` names), and `--client-budget 0`.
 
 use std::path::Path;
 
@@ -111,6 +112,11 @@ fn sigterm_and_sigint_stop_the_service_cleanly_and_the_instance_can_start_again(
             log.contains("stopped; iceoryx2 resources released"),
             "signal {signal}:\n{log}"
         );
+        // Its standard error is a file, not a terminal: no colour codes in it.
+        assert!(
+            log.contains("INFO") && !log.contains('\u{1b}'),
+            "signal {signal}: escape sequences in the log:\n{log:?}"
+        );
         // The connected client times out; once it is gone, so are the endpoints: a new client
         // finds no service.
         client.set_timeout(Duration::from_millis(50));
@@ -125,6 +131,29 @@ fn sigterm_and_sigint_stop_the_service_cleanly_and_the_instance_can_start_again(
         // The instance starts again at once, with the persisted model.
         service = ServiceProcess::start(&instance, &["--state-dir", p(&state)]);
         assert_eq!(service.client().unwrap().status().unwrap().generation, 1);
+    }
+}
+
+#[test]
+fn rust_log_sets_the_level_and_a_value_that_names_none_is_said() {
+    let dir = tempfile::tempdir().unwrap();
+    let state = dir.path().join("state");
+    let (_, model) = save_smooth_model(dir.path(), 5);
+    let args = ["--state-dir", p(&state), "--model", p(&model)];
+    // At warn, the start and the stop (info) are not logged.
+    let instance = unique_instance("quiet");
+    let service = ServiceProcess::start_with_env(&instance, &args, &[("RUST_LOG", "warn")]);
+    let (status, log) = service.stop_with(libc::SIGTERM);
+    assert_eq!(status.code(), Some(0), "{log}");
+    assert!(!log.contains("INFO"), "{log}");
+    // A value that is no single level: info, and said; an empty one: info.
+    for (value, said) in [("hexacomp_service=debug", true), ("", false)] {
+        let instance = unique_instance("loud");
+        let service = ServiceProcess::start_with_env(&instance, &args, &[("RUST_LOG", value)]);
+        let (status, log) = service.stop_with(libc::SIGTERM);
+        assert_eq!(status.code(), Some(0), "{log}");
+        assert!(log.contains("INFO"), "RUST_LOG={value:?}:\n{log}");
+        assert_eq!(log.contains("is not a single level"), said, "{log}");
     }
 }
 
