@@ -109,21 +109,26 @@ pub fn run(command: &DemoCommand) -> anyhow::Result<()> {
     }
     println!("{}", report::latency_table(&rows));
 
-    let PathStats {
-        before: uncompensated,
-        after: compensated,
-        floor,
-    } = report.accuracy;
+    let accuracy = match report.accuracy {
+        Some(PathStats {
+            before,
+            after,
+            floor,
+        }) => format!(
+            "path error {:.4} → {:.4} mm mean, {:.4} → {:.4} mm max ({:.1}× better; the floor, \
+             exact legs with the machine's repeatability: {:.4} mm mean)",
+            before.position_mm.mean,
+            after.position_mm.mean,
+            before.position_mm.max,
+            after.position_mm.max,
+            before.position_mm.mean / after.position_mm.mean,
+            floor.position_mm.mean,
+        ),
+        None => "path error not measured: not every point was answered".to_string(),
+    };
     println!(
-        "\nSummary: path error {:.4} → {:.4} mm mean, {:.4} → {:.4} mm max ({:.1}× better; the \
-         floor, exact legs with the machine's repeatability: {:.4} mm mean); round trip p50 \
-         {:.2} µs, p99.9 {:.2} µs, deadline misses at {} Hz: {}; {:.1} s in all.",
-        uncompensated.position_mm.mean,
-        compensated.position_mm.mean,
-        uncompensated.position_mm.max,
-        compensated.position_mm.max,
-        uncompensated.position_mm.mean / compensated.position_mm.mean,
-        floor.position_mm.mean,
+        "\nSummary: {accuracy}; round trip p50 {:.2} µs, p99.9 {:.2} µs, deadline misses at {} \
+         Hz: {}; {:.1} s in all.",
         report.summary.p50_ns as f64 / 1e3,
         report.summary.p999_ns as f64 / 1e3,
         spec.rate_hz,

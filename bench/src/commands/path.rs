@@ -42,8 +42,9 @@ pub struct PathCommand {
 pub struct PathReport {
     /// The latency figures.
     pub summary: Summary,
-    /// Accuracy before and after compensation and at the floor.
-    pub accuracy: PathStats,
+    /// Accuracy before and after compensation and at the floor; `None` when not every point was
+    /// answered (the path was not driven).
+    pub accuracy: Option<PathStats>,
 }
 
 pub fn run(command: &PathCommand) -> anyhow::Result<()> {
@@ -197,6 +198,6 @@ pub fn report_path(
     println!("wrote {}", names.join(", "));
     Ok(PathReport {
         summary,
-        accuracy: stats,
+        accuracy: (!accuracy.before.is_empty()).then_some(stats),
     })
 }
