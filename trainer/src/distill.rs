@@ -19,7 +19,7 @@ use hexacomp_core::{Geometry, LEGS, Pose, inverse_kinematics};
 
 use crate::error::{Error, Result};
 use crate::physical::PhysicalModel;
-use crate::train::{Architecture, TrainOptions, Trained, train};
+use crate::train::{Architecture, TrainOptions, Trained, leg_range, train};
 
 /// Settings of the distillation.
 #[derive(Debug, Clone, PartialEq)]
@@ -71,16 +71,11 @@ fn row(nominal: &Geometry, model: &PhysicalModel, pose: &Pose, id: String) -> Jo
 
 /// The smallest and largest nominal length of each leg over `poses`, mm.
 pub fn measured_range(nominal: &Geometry, poses: &[Pose]) -> [[f64; 2]; LEGS] {
-    poses.iter().fold(
-        [[f64::INFINITY, f64::NEG_INFINITY]; LEGS],
-        |mut range, pose| {
-            let legs = inverse_kinematics(nominal, pose).lengths;
-            for (r, v) in range.iter_mut().zip(legs) {
-                *r = [r[0].min(v), r[1].max(v)];
-            }
-            range
-        },
-    )
+    let legs: Vec<[f64; LEGS]> = poses
+        .iter()
+        .map(|pose| inverse_kinematics(nominal, pose).lengths)
+        .collect();
+    std::array::from_fn(|leg| leg_range(&legs, leg))
 }
 
 /// `count` poses drawn over the workspace with `seed` whose nominal legs lie within `range`

@@ -78,7 +78,7 @@ pub fn physical_candidate(
         .iter()
         .map(MeasuredConfiguration::pose)
         .collect();
-    let distilled = distill(nominal, &physical, &measured, distill_options, progress)?;
+    let mut distilled = distill(nominal, &physical, &measured, distill_options, progress)?;
     let fidelity = fidelity(
         nominal,
         &physical,
@@ -95,7 +95,6 @@ pub fn physical_candidate(
             fidelity.rms_mm
         )));
     }
-    let mut distilled = distilled;
     distilled.model.provenance.configurations = measurements.len();
     Ok(PhysicalCandidate {
         distilled,

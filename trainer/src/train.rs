@@ -194,7 +194,7 @@ fn shuffled(count: usize, seed: u64) -> Vec<usize> {
 }
 
 /// The smallest and largest value of leg `leg` over `values`, mm.
-fn leg_range(values: &[[f64; LEGS]], leg: usize) -> [f64; 2] {
+pub(crate) fn leg_range(values: &[[f64; LEGS]], leg: usize) -> [f64; 2] {
     values
         .iter()
         .fold([f64::INFINITY, f64::NEG_INFINITY], |[lo, hi], v| {
@@ -312,34 +312,17 @@ pub fn cross_validated_rmse(
     }
     let (inputs, targets) = samples(rows, options.input);
     let normalisation = Normalisation::of(&inputs)?;
-    let x: Vec<[f64; LEGS]> = inputs.iter().map(|q| normalisation.apply(q)).collect();
+    // The split's normalised samples; its own holdout is not used here.
+    let split = Split::new(&inputs, &targets, &normalisation, options);
     let fold = folds(rows.len(), fold_count, options.seed);
-    let data = |indices: &[usize], legs: &[usize]| Data {
-        x: indices.iter().map(|&k| x[k]).collect(),
-        y: indices
-            .iter()
-            .flat_map(|&k| {
-                let row = &targets[k];
-                legs.iter().map(move |&l| row[l])
-            })
-            .collect(),
-        outputs: legs.len(),
-    };
     let mut squared = 0.0;
     for f in 0..fold_count {
         let (held, fitted): (Vec<usize>, Vec<usize>) = (0..rows.len()).partition(|&k| fold[k] == f);
         for (net, legs) in networks.iter().enumerate() {
             let seed = seed_for(options.seed ^ (f as u64) << 48, net as u64, hidden[net]);
-            let (network, _, _) = fit(&data(&fitted, legs), hidden[net], options, seed, &|_| {});
-            let mut out = [0.0; LEGS];
-            for &k in &held {
-                network.evaluate(&x[k], &mut out[..legs.len()]);
-                squared += legs
-                    .iter()
-                    .zip(&out)
-                    .map(|(&l, o)| (targets[k][l] - o).powi(2))
-                    .sum::<f64>();
-            }
+            let fitted = split.data(&fitted, legs);
+            let (network, _, _) = fit(&fitted, hidden[net], options, seed, &|_| {});
+            squared += squared_error(&network, &split.data(&held, legs));
         }
     }
     Ok((squared / rows.len() as f64).sqrt())
@@ -605,10 +588,14 @@ fn sweep(
 
 /// RMSE of Eq. 18: `√(1/K Σ‖y − N(x)‖²)`, mm.
 fn rmse(network: &Network, data: &Data) -> f64 {
+    (squared_error(network, data) / data.x.len() as f64).sqrt()
+}
+
+/// `Σ‖y − N(x)‖²` over `data`'s samples, mm².
+fn squared_error(network: &Network, data: &Data) -> f64 {
     let mut out = [0.0; LEGS];
     let o = data.outputs;
-    let sum: f64 = data
-        .x
+    data.x
         .iter()
         .enumerate()
         .map(|(k, x)| {
@@ -617,8 +604,7 @@ fn rmse(network: &Network, data: &Data) -> f64 {
                 .map(|j| (data.y[k * o + j] - out[j]).powi(2))
                 .sum::<f64>()
         })
-        .sum();
-    (sum / data.x.len() as f64).sqrt()
+        .sum()
 }
 
 /// The best of `options.restarts` LM fits of a `hidden`-node network; returns it, its training

@@ -408,12 +408,10 @@ fn physical(
     measurements: &[MeasuredConfiguration],
 ) -> anyhow::Result<Candidate> {
     let options = DistillOptions::default();
+    // The drawn poses and the measured configurations' own.
+    let poses = options.samples + solved.corrections.len();
     let bar = work_bar(
-        training_work(
-            options.samples + solved.corrections.len(),
-            Architecture::Decoupled,
-            &options.train,
-        ),
+        training_work(poses, Architecture::Decoupled, &options.train),
         "identifying the physical model, carrying it into networks".into(),
     );
     let identified = physical_candidate(
@@ -431,7 +429,7 @@ fn physical(
     model.provenance.source = format!(
         "{}: physical model as networks, {} poses, cross-validated {:.4} mm",
         source(measurements.len()),
-        options.samples + solved.corrections.len(),
+        poses,
         candidate.score_mm
     );
     let f = candidate.fidelity;
