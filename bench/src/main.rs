@@ -105,6 +105,6 @@ fn serve_uds(
     let model = model
         .map(|path| Model::load(path, &geometry))
         .transpose()?
-        .map(|model| hexacomp_service::Generation { model, number: 1 });
+        .map(|model| hexacomp_service::Generation::new(&model, 1));
     uds::serve(socket, geometry, model)
 }

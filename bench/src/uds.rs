@@ -169,7 +169,11 @@ mod tests {
         let mut out = [CompensatedPoint::empty(); 3];
         client.compensate(&poses, &mut out).unwrap();
         for (pose, got) in poses.iter().zip(&out) {
-            let want = compensate_pose(&geometry, None, &Pose::from_mm_deg(*pose));
+            let want = compensate_pose(
+                &geometry,
+                None::<&hexacomp_core::fused::FusedModel>,
+                &Pose::from_mm_deg(*pose),
+            );
             assert_eq!(got.legs, want.legs);
             assert_eq!(got.status as u8, want.status as u8);
         }

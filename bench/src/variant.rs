@@ -80,7 +80,7 @@ impl InProcess {
     pub fn new(geometry: Geometry, model: Option<hexacomp_core::model::Model>) -> Self {
         Self {
             geometry,
-            model: model.map(|model| Generation { model, number: 1 }),
+            model: model.map(|model| Generation::new(&model, 1)),
         }
     }
 }

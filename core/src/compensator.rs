@@ -1,7 +1,12 @@
 //! Run-time compensation (Eq. 19, Eq. 20): nominal inverse kinematics, the model's correction,
-//! and a status for every point. The service and `hexacomp-trainer predict` both call this, so
-//! they return the same numbers.
+//! and a status for every point.
+//!
+//! The model is anything that gives [`Corrections`]: a [`Model`] (the reference evaluation, which
+//! training and evaluation use) or its serving form, a [`FusedModel`] (the service and
+//! `hexacomp-trainer predict` both use it, so they return the same numbers). The statuses are
+//! decided here, by the same code for both.
 
+use crate::fused::FusedModel;
 use crate::geometry::{Geometry, LEGS};
 use crate::kinematics::{LegStatus, inverse_kinematics, stroke_status};
 use crate::model::Model;
@@ -23,10 +28,51 @@ pub struct Compensated {
 /// Tolerance on the trained range before a point counts as outside it, mm.
 const RANGE_TOLERANCE_MM: f64 = 1e-6;
 
+/// What compensation needs of a model: its raw corrections and the ranges its statuses are
+/// decided by.
+pub trait Corrections {
+    /// The raw corrections `Δq = N(q, w)` (mm) at network input legs `q` (mm), before clamping.
+    fn raw_corrections(&self, q: &[f64; LEGS]) -> [f64; LEGS];
+    /// `[min, max]` of each nominal leg answered without `outside_trained_range`, mm.
+    fn training_range(&self) -> &[[f64; 2]; LEGS];
+    /// `[min, max]` of each correction that may be returned, mm.
+    fn correction_bounds(&self) -> &[[f64; 2]; LEGS];
+}
+
+impl Corrections for Model {
+    #[inline]
+    fn raw_corrections(&self, q: &[f64; LEGS]) -> [f64; LEGS] {
+        Model::raw_corrections(self, q)
+    }
+    fn training_range(&self) -> &[[f64; 2]; LEGS] {
+        &self.training_range
+    }
+    fn correction_bounds(&self) -> &[[f64; 2]; LEGS] {
+        &self.correction_bounds
+    }
+}
+
+impl Corrections for FusedModel {
+    #[inline]
+    fn raw_corrections(&self, q: &[f64; LEGS]) -> [f64; LEGS] {
+        FusedModel::raw_corrections(self, q)
+    }
+    fn training_range(&self) -> &[[f64; 2]; LEGS] {
+        FusedModel::training_range(self)
+    }
+    fn correction_bounds(&self) -> &[[f64; 2]; LEGS] {
+        FusedModel::correction_bounds(self)
+    }
+}
+
 /// Compensates nominal leg lengths `q` (mm) with `model` (or reports `NoModel`): the predicted
 /// corrections `Δq = N(q, ŵ)` (Eq. 19), clamped to the model's bounds, and the corrected legs
 /// `q_m = q + Δq` (Eq. 20). Allocation-free.
-pub fn compensate_legs(geometry: &Geometry, model: Option<&Model>, q: &[f64; LEGS]) -> Compensated {
+pub fn compensate_legs<M: Corrections>(
+    geometry: &Geometry,
+    model: Option<&M>,
+    q: &[f64; LEGS],
+) -> Compensated {
     let unchanged = |status| Compensated {
         legs: *q,
         corrections: [0.0; LEGS],
@@ -48,7 +94,7 @@ pub fn compensate_legs(geometry: &Geometry, model: Option<&Model>, q: &[f64; LEG
     let raw = model.raw_corrections(q);
     let mut status = PointStatus::Ok;
     let outside = (0..LEGS).any(|i| {
-        let [lo, hi] = model.training_range[i];
+        let [lo, hi] = model.training_range()[i];
         q[i] < lo - RANGE_TOLERANCE_MM || q[i] > hi + RANGE_TOLERANCE_MM
     });
     if outside {
@@ -56,7 +102,7 @@ pub fn compensate_legs(geometry: &Geometry, model: Option<&Model>, q: &[f64; LEG
     }
     let mut corrections = raw;
     for (i, c) in corrections.iter_mut().enumerate() {
-        let [lo, hi] = model.correction_bounds[i];
+        let [lo, hi] = model.correction_bounds()[i];
         if !c.is_finite() {
             return unchanged(PointStatus::InvalidInput);
         }
@@ -80,7 +126,11 @@ pub fn compensate_legs(geometry: &Geometry, model: Option<&Model>, q: &[f64; LEG
 }
 
 /// Compensates a pose (mm, rad): nominal inverse kinematics, then [`compensate_legs`].
-pub fn compensate_pose(geometry: &Geometry, model: Option<&Model>, pose: &Pose) -> Compensated {
+pub fn compensate_pose<M: Corrections>(
+    geometry: &Geometry,
+    model: Option<&M>,
+    pose: &Pose,
+) -> Compensated {
     if !pose.is_finite() {
         return Compensated {
             legs: [f64::NAN; LEGS],

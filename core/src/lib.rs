@@ -10,6 +10,8 @@
 //! - [`screw`]: the paper's matrices `W`, `T = W⁻ᵀ` (Eq. 3), `P` (Eq. 4) and `cond(PT)`;
 //! - [`sampling`]: seeded uniform poses over the task workspace;
 //! - [`network`], [`model`]: the trained networks, their normalisation and the model file;
+//! - [`fused`], [`activation`]: a model's serving form, its networks fused into one layer
+//!   evaluated four hidden nodes at a time with a vectorisable `tanh`;
 //! - [`observation`]: what an instrument measured of a configuration (targets, some perhaps not
 //!   seen, or a 6-DoF pose) and its linearisation (Eq. 4);
 //! - [`records`]: planned poses, measured configurations and joint corrections with their ids,
@@ -25,9 +27,11 @@
 
 #![warn(missing_docs)]
 
+pub mod activation;
 pub mod compensator;
 pub mod durable;
 pub mod error;
+pub mod fused;
 pub mod geometry;
 pub mod kinematics;
 pub mod model;

@@ -1,11 +1,12 @@
 //! The hot path allocates nothing: a counting global allocator around model inference and pose
-//! compensation.
+//! compensation, by the reference model and by its fused serving form.
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
 
 use hexacomp_core::Geometry;
 use hexacomp_core::compensator::compensate_pose;
+use hexacomp_core::fused::FusedModel;
 use hexacomp_core::model::{Model, NetworkInput, Networks, Provenance};
 use hexacomp_core::network::{Network, Normalisation};
 use hexacomp_core::sampling::{SamplerOptions, WorkspaceSampler};
@@ -75,10 +76,13 @@ fn inference_and_compensation_allocate_nothing() {
         .samples(1000)
         .unwrap();
     for m in &models {
+        // The serving form is built once at load (that allocates); evaluating it must not.
+        let fused = FusedModel::new(m);
         let before = allocations();
         let mut checksum = 0.0;
         for pose in &poses {
             checksum += compensate_pose(&g, Some(m), pose).legs[0];
+            checksum += compensate_pose(&g, Some(&fused), pose).legs[0];
         }
         let after = allocations();
         assert!(checksum.is_finite());

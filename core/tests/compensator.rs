@@ -1,8 +1,13 @@
-//! Run-time compensation: known answers, a status for every kind of point, which status wins
+//! Run-time compensation, by both forms of a model (the reference and the fused serving one,
+//! which must agree): known answers, a status for every kind of point, which status wins
 //! when several apply, and the exact meaning of the model's trained range, its correction bounds
 //! and the stroke ends (inclusive, per leg).
 
-use hexacomp_core::compensator::{Compensated, PointStatus, compensate_legs, compensate_pose};
+#[path = "common/both_forms.rs"]
+mod both_forms;
+
+use both_forms::{compensate_legs, compensate_pose};
+use hexacomp_core::compensator::{Compensated, PointStatus};
 use hexacomp_core::model::{Model, NetworkInput, Networks, Provenance};
 use hexacomp_core::network::{Network, Normalisation};
 use hexacomp_core::{Geometry, Pose, inverse_kinematics};

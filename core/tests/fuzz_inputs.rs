@@ -6,13 +6,16 @@
 //! fuzz_inputs`; crashers proptest finds are written to `fuzz_inputs.proptest-regressions`
 //! beside this file and replayed first on every run.
 
+#[path = "common/both_forms.rs"]
+mod both_forms;
 mod common;
 #[path = "common/edits.rs"]
 mod edits;
 
+use both_forms::{compensate_legs, compensate_pose};
 use common::model;
 use edits::{Edit, apply, edit};
-use hexacomp_core::compensator::{Compensated, PointStatus, compensate_legs, compensate_pose};
+use hexacomp_core::compensator::{Compensated, PointStatus};
 use hexacomp_core::model::{Model, Networks};
 use hexacomp_core::network::Network;
 use hexacomp_core::{Geometry, Pose};

@@ -192,7 +192,7 @@ fn handle_deploy(
     let line = summarise(&model);
     match setup
         .outgoing
-        .try_send(Box::new(Generation { model, number }))
+        .try_send(Box::new(Generation::new(&model, number)))
     {
         Ok(()) => *numbered = number,
         Err(TrySendError::Full(_)) => {

@@ -155,7 +155,7 @@ impl Service {
         let setup = ServingSetup {
             instance: instance.clone(),
             geometry: geometry.clone(),
-            initial: initial.map(|(model, number)| Box::new(Generation { model, number })),
+            initial: initial.map(|(model, number)| Box::new(Generation::new(&model, number))),
             incoming,
             retired: retired_tx,
             counters: counters.clone(),

@@ -46,11 +46,21 @@ pub struct Counters {
     pub generation: AtomicU64,
 }
 
-/// A model with the generation it serves as.
+/// A model, in its serving form, with the generation it serves as.
 #[derive(Debug)]
 pub struct Generation {
-    /// The model.
-    pub model: hexacomp_core::model::Model,
+    /// The model's serving form (built when the model is accepted, off the serving thread).
+    pub model: hexacomp_core::fused::FusedModel,
     /// Its generation number (1, 2, …).
     pub number: u64,
+}
+
+impl Generation {
+    /// `model` serving as generation `number`.
+    pub fn new(model: &hexacomp_core::model::Model, number: u64) -> Self {
+        Self {
+            model: hexacomp_core::fused::FusedModel::new(model),
+            number,
+        }
+    }
 }

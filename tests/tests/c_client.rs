@@ -5,6 +5,7 @@
 
 use hexacomp_core::Geometry;
 use hexacomp_core::compensator::{compensate_legs, compensate_pose};
+use hexacomp_core::fused::FusedModel;
 use hexacomp_core::pose::Pose;
 use hexacomp_tests::c_program::{compile, run_against};
 use hexacomp_tests::{ServiceProcess, save_smooth_model, unique_instance};
@@ -34,9 +35,13 @@ fn a_c_program_linked_statically_and_dynamically_gets_the_compensators_answers()
                 "P" | "J" | "B" | "K" | "A" => {
                     let input = numbers(&fields[2..8]);
                     let expected = if matches!(fields[0], "J" | "K") {
-                        compensate_legs(&g, Some(&model), &input)
+                        compensate_legs(&g, Some(&FusedModel::new(&model)), &input)
                     } else {
-                        compensate_pose(&g, Some(&model), &Pose::from_mm_deg(input))
+                        compensate_pose(
+                            &g,
+                            Some(&FusedModel::new(&model)),
+                            &Pose::from_mm_deg(input),
+                        )
                     };
                     assert_eq!(fields[8], (expected.status as u8).to_string(), "{line}");
                     assert_eq!(fields[9], "1", "{line}");

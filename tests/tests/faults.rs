@@ -9,6 +9,7 @@ use std::time::{Duration, Instant};
 use hexacomp_client::DeployOutcome;
 use hexacomp_core::Geometry;
 use hexacomp_core::compensator::compensate_pose;
+use hexacomp_core::fused::FusedModel;
 use hexacomp_core::pose::Pose;
 use hexacomp_tests::{
     ServiceProcess, save_smooth_model, spawn_test_client, test_client_report, unique_instance,
@@ -125,7 +126,7 @@ fn the_service_sigkilled_mid_stream_five_times_restarts_without_cleanup_and_clie
     let point = status.compensate_pose(pose).unwrap();
     let expected = compensate_pose(
         &Geometry::prototype(),
-        Some(&model),
+        Some(&FusedModel::new(&model)),
         &Pose::from_mm_deg(pose),
     );
     assert_eq!(point.legs, expected.legs);
@@ -229,7 +230,11 @@ fn a_deployer_killed_mid_deploy_leaves_the_old_model_serving() {
     assert!(status.model.contains("smooth_model(3)"), "{}", status.model);
     let pose = [1.0, 2.0, 300.0, 0.5, 0.5, 0.5];
     let point = client.compensate_pose(pose).unwrap();
-    let expected = compensate_pose(&Geometry::prototype(), Some(&old), &Pose::from_mm_deg(pose));
+    let expected = compensate_pose(
+        &Geometry::prototype(),
+        Some(&FusedModel::new(&old)),
+        &Pose::from_mm_deg(pose),
+    );
     assert_eq!(point.legs, expected.legs);
     // The persisted model is still the old one: a restart serves it.
     drop(client);
@@ -280,7 +285,7 @@ fn a_state_directory_that_cannot_be_written_is_reported_and_serving_goes_on() {
     let point = client.compensate_pose(pose).unwrap();
     let expected = compensate_pose(
         &Geometry::prototype(),
-        Some(&second_model),
+        Some(&FusedModel::new(&second_model)),
         &Pose::from_mm_deg(pose),
     );
     assert_eq!((point.legs, point.generation), (expected.legs, 2));

@@ -21,6 +21,7 @@ use std::sync::Mutex;
 use std::time::Duration;
 
 use hexacomp_core::compensator::{PointStatus, compensate_legs};
+use hexacomp_core::fused::FusedModel;
 use hexacomp_core::model::Model;
 use hexacomp_core::sampling::{SamplerOptions, WorkspaceSampler};
 use hexacomp_core::{Pose, inverse_kinematics};
@@ -57,7 +58,7 @@ fn one_at_a_time() -> std::sync::MutexGuard<'static, ()> {
 /// The correction the service's `model` gives for `sample`'s legs (inch).
 fn service_correction(sim: &SimConfig, model: &Model, sample: &Sample) -> [f64; 6] {
     let legs_mm = sample.legs.map(|q| q * MM_PER_INCH);
-    let answer = compensate_legs(&sim.geometry, Some(model), &legs_mm);
+    let answer = compensate_legs(&sim.geometry, Some(&FusedModel::new(model)), &legs_mm);
     assert_eq!(answer.status, PointStatus::Ok, "legs {legs_mm:?} mm");
     answer.corrections.map(|c| c / MM_PER_INCH)
 }

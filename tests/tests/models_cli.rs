@@ -5,6 +5,7 @@ use std::path::{Path, PathBuf};
 
 use hexacomp_core::Geometry;
 use hexacomp_core::compensator::{compensate_legs, compensate_pose};
+use hexacomp_core::fused::FusedModel;
 use hexacomp_core::model::Model;
 use hexacomp_tests::run;
 
@@ -103,7 +104,7 @@ fn predict_returns_exactly_the_library_compensation() {
     assert!(!poses.is_empty());
     let mut joints = String::from("id,q1,q2,q3,q4,q5,q6\n");
     for (line, row) in lines.zip(&poses) {
-        let expected = compensate_pose(&g, Some(&model), &row.pose());
+        let expected = compensate_pose(&g, Some(&FusedModel::new(&model)), &row.pose());
         let cells: Vec<&str> = line.split(',').collect();
         assert_eq!(cells[0], row.id);
         for i in 0..6 {
@@ -133,7 +134,7 @@ fn predict_returns_exactly_the_library_compensation() {
     let written = std::fs::read_to_string(&out2).unwrap();
     assert_eq!(written.lines().count(), 1 + legs.len());
     for (line, row) in written.lines().skip(1).zip(&legs) {
-        let expected = compensate_legs(&g, Some(&model), &row.legs);
+        let expected = compensate_legs(&g, Some(&FusedModel::new(&model)), &row.legs);
         let cells: Vec<&str> = line.split(',').collect();
         assert_eq!(cells[0], row.id);
         for i in 0..6 {

@@ -12,6 +12,7 @@ use hexacomp_client::wire::{
 };
 use hexacomp_core::Geometry;
 use hexacomp_core::compensator::{PointStatus, compensate_legs, compensate_pose};
+use hexacomp_core::fused::FusedModel;
 use hexacomp_core::pose::Pose;
 use hexacomp_tests::{
     ServiceProcess, raw_client, save_smooth_model, spawn_test_client, test_client_report,
@@ -130,9 +131,13 @@ fn any_request_gets_its_outcome_and_every_point_exactly_the_compensators_answer(
         assert_eq!(response.payload().len(), count);
         for (point, answer) in points.iter().zip(response.payload()) {
             let local = if kind == RequestKind::Joints as u32 {
-                compensate_legs(&g, Some(&model), point)
+                compensate_legs(&g, Some(&FusedModel::new(&model)), point)
             } else {
-                compensate_pose(&g, Some(&model), &Pose::from_mm_deg(*point))
+                compensate_pose(
+                    &g,
+                    Some(&FusedModel::new(&model)),
+                    &Pose::from_mm_deg(*point),
+                )
             };
             let status = PointStatus::from_u8(answer.status).expect("a known status");
             assert_eq!(status, local.status, "request {r} point {point:?}");

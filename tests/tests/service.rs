@@ -7,6 +7,7 @@ use std::time::{Duration, Instant};
 use hexacomp_client::wire::RequestKind;
 use hexacomp_client::{CompensatedPoint, DeployOutcome, PointStatus};
 use hexacomp_core::compensator::{compensate_legs, compensate_pose};
+use hexacomp_core::fused::FusedModel;
 use hexacomp_core::model::Model;
 use hexacomp_core::sampling::{SamplerOptions, WorkspaceSampler};
 use hexacomp_core::stats::PoseErrorNorm;
@@ -83,7 +84,11 @@ fn client_results_equal_predict_for_10000_poses_single_and_batched() {
         let got = client.compensate_pose(pose.to_mm_deg()).unwrap();
         assert_same(
             &got,
-            &compensate_pose(&g, Some(&model), &Pose::from_mm_deg(pose.to_mm_deg())),
+            &compensate_pose(
+                &g,
+                Some(&FusedModel::new(&model)),
+                &Pose::from_mm_deg(pose.to_mm_deg()),
+            ),
         );
         assert_eq!(got.generation, 1);
     }
@@ -97,7 +102,11 @@ fn client_results_equal_predict_for_10000_poses_single_and_batched() {
         for (got, pose) in out.iter().zip(chunk) {
             assert_same(
                 got,
-                &compensate_pose(&g, Some(&model), &Pose::from_mm_deg(*pose)),
+                &compensate_pose(
+                    &g,
+                    Some(&FusedModel::new(&model)),
+                    &Pose::from_mm_deg(*pose),
+                ),
             );
         }
     }
@@ -112,7 +121,7 @@ fn client_results_equal_predict_for_10000_poses_single_and_batched() {
         .compensate_batch(RequestKind::Joints, &legs, out)
         .unwrap();
     for (got, q) in out.iter().zip(&legs) {
-        assert_same(got, &compensate_legs(&g, Some(&model), q));
+        assert_same(got, &compensate_legs(&g, Some(&FusedModel::new(&model)), q));
     }
     let status = client.status().unwrap();
     assert_eq!(status.requests, 10_000 + 10 + 1);
@@ -281,7 +290,11 @@ fn after_sigkill_a_restarted_service_serves_the_last_accepted_model() {
     assert_eq!(point.generation, 2);
     assert_same(
         &point,
-        &compensate_pose(&g, Some(&second_model), &Pose::from_mm_deg(pose)),
+        &compensate_pose(
+            &g,
+            Some(&FusedModel::new(&second_model)),
+            &Pose::from_mm_deg(pose),
+        ),
     );
 }
 
@@ -412,7 +425,11 @@ fn event_mode_serves_the_same_numbers_swaps_and_leaves_the_core_free_when_idle()
         let got = client.compensate_pose(values).unwrap();
         assert_same(
             &got,
-            &compensate_pose(&g, Some(&first_model), &Pose::from_mm_deg(values)),
+            &compensate_pose(
+                &g,
+                Some(&FusedModel::new(&first_model)),
+                &Pose::from_mm_deg(values),
+            ),
         );
     }
     let bytes = std::fs::read(&second).unwrap();

@@ -15,7 +15,7 @@ use std::time::Duration;
 
 use glam::DVec3;
 use hexacomp_core::compensator::{PointStatus, compensate_legs};
-use hexacomp_core::model::Model;
+use hexacomp_core::fused::FusedModel;
 use hexacomp_core::observation::Observation;
 use hexacomp_core::pose::{rotation_from_vector, rotation_vector};
 use hexacomp_core::records::{MeasuredConfiguration, NamedPoint, NamedPose};
@@ -785,9 +785,9 @@ pub struct VirtualMachine {
     /// The seed the keys are drawn from.
     pub seed: u64,
     /// The compensation active in the machine's controller, whose corrections are added to the
-    /// nominal legs (`verify --model`); none for a calibration campaign, which measures the
-    /// machine as it is.
-    pub compensation: Option<Model>,
+    /// nominal legs (`verify --model`), in the serving form the service computes with; none for
+    /// a calibration campaign, which measures the machine as it is.
+    pub compensation: Option<FusedModel>,
 }
 
 impl Machine for VirtualMachine {

@@ -32,5 +32,5 @@ pub fn generation(geometry: &Geometry, number: u64) -> Box<Generation> {
         geometry: geometry.fingerprint(),
         provenance: Provenance::default(),
     };
-    Box::new(Generation { model, number })
+    Box::new(Generation::new(&model, number))
 }

@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use hexacomp_core::Geometry;
 use hexacomp_core::Pose;
 use hexacomp_core::compensator::{Compensated, compensate_legs, compensate_pose};
+use hexacomp_core::fused::FusedModel;
 use hexacomp_core::model::Model;
 use hexacomp_formats::{PointsFile, bytes_progress, compensate_file};
 
@@ -53,7 +54,8 @@ impl PredictArgs {
 }
 
 pub fn run(geometry: &Geometry, args: &PredictArgs) -> anyhow::Result<()> {
-    let model = Model::load(&args.model, geometry)?;
+    // The serving form: the numbers the service returns for the same points.
+    let model = FusedModel::new(&Model::load(&args.model, geometry)?);
     let (input, compensate): (_, &PointCompensation) = match (&args.poses, &args.joints) {
         (Some(path), _) => (PointsFile::Poses(path), &|pose| {
             compensate_pose(geometry, Some(&model), &Pose::from_mm_deg(*pose))

@@ -4,6 +4,7 @@
 use std::time::Duration;
 
 use hexacomp_core::Geometry;
+use hexacomp_core::fused::FusedModel;
 use hexacomp_core::model::Model;
 use hexacomp_trainer::campaign::{
     CampaignOptions, Instrument, Machine, VirtualHardware, VirtualInstrument, VirtualMachine,
@@ -295,7 +296,7 @@ impl RigArgs {
             MachineArg::Virtual => Box::new(VirtualMachine {
                 platform: platform.clone(),
                 seed: self.seed,
-                compensation,
+                compensation: compensation.as_ref().map(FusedModel::new),
             }),
             MachineArg::Linuxcnc => {
                 anyhow::ensure!(

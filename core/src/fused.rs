@@ -1,0 +1,298 @@
+//! The serving form of a [`Model`]: its network(s) fused into one hidden layer evaluated
+//! [`LANES`] hidden nodes at a time, with the vectorisable [`tanh_lanes`].
+//!
+//! A coupled network or six decoupled ones are the same computation once fused: every hidden
+//! node `j` (of whichever network) has six input weights, a bias and one output weight per leg —
+//! for a decoupled network's node, zero for the legs its network does not drive. The nodes are
+//! laid out in blocks of [`LANES`] (the last one padded with nodes of zero weights, whose
+//! activation is `tanh 0 = 0`), each block's weights stored lane by lane, so one block is a few
+//! SIMD multiplies and adds, one vector `tanh`, and six more multiplies and adds.
+//!
+//! What it computes, against the reference [`Model::raw_corrections`]:
+//! - the normalised input and every hidden node's sum `b1 + Σ w1·x` are the same operations in
+//!   the same order, so the same bits;
+//! - the activation is [`tanh_lanes`], within [`TANH_MAX_ERROR`] of the exact one;
+//! - each output sums its hidden nodes in [`LANES`] partial sums, added pairwise at the end,
+//!   instead of one after the other.
+//!
+//! A correction therefore differs from the reference by a few units in its last place plus at
+//! most `TANH_MAX_ERROR · Σ|w2|` (a property test checks ≤ 1 nm over the workspace and its edges;
+//! the figures it sees are far smaller).
+//!
+//! The evaluation picks, once at construction, the AVX2 build of the same code when the CPU has
+//! it (standard library detection, no nightly features); both builds compute each lane with the
+//! same IEEE 754 operations and give the same bits (tested).
+
+use crate::activation::{LANES, TANH_MAX_ERROR, tanh_lanes};
+use crate::geometry::LEGS;
+use crate::model::{Model, Networks};
+use crate::network::{Network, Normalisation};
+
+/// [`LANES`] hidden nodes of the fused layer, stored lane by lane.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+struct Block {
+    /// `w1[i][l]`: weight of normalised input `i` into the block's node `l`.
+    input_weights: [[f64; LANES]; LEGS],
+    /// `b1[l]`: the node's bias.
+    biases: [f64; LANES],
+    /// `w2[k][l]`: weight of the node's activation in correction `k` (mm).
+    output_weights: [[f64; LANES]; LEGS],
+}
+
+/// Which build of the evaluation runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Kernel {
+    /// The baseline instruction set of the target (SSE2 on x86-64).
+    Portable,
+    /// AVX2 (x86-64 only, chosen when the CPU reports it).
+    #[cfg(target_arch = "x86_64")]
+    Avx2,
+}
+
+impl Kernel {
+    /// The fastest build this CPU runs.
+    fn detect() -> Self {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            return Kernel::Avx2;
+        }
+        Kernel::Portable
+    }
+}
+
+/// A model's networks fused for serving, with the ranges its statuses are decided by. Built once
+/// when a model is loaded; evaluating it allocates nothing.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FusedModel {
+    blocks: Vec<Block>,
+    /// `b2[k]`: the output bias of correction `k` (mm).
+    output_biases: [f64; LEGS],
+    normalisation: Normalisation,
+    training_range: [[f64; 2]; LEGS],
+    correction_bounds: [[f64; 2]; LEGS],
+    kernel: Kernel,
+}
+
+impl FusedModel {
+    /// The serving form of `model` (which [`Model::validate`] has accepted).
+    pub fn new(model: &Model) -> Self {
+        let mut nodes = Vec::new();
+        let mut output_biases = [0.0; LEGS];
+        match &model.networks {
+            Networks::Coupled(network) => {
+                push_nodes(network, 0..LEGS, &mut nodes);
+                output_biases = std::array::from_fn(|k| output_bias(network, k));
+            }
+            Networks::Decoupled(networks) => {
+                for (leg, network) in networks.iter().enumerate() {
+                    push_nodes(network, leg..leg + 1, &mut nodes);
+                    output_biases[leg] = output_bias(network, 0);
+                }
+            }
+        }
+        let blocks = nodes
+            .chunks(LANES)
+            .map(|chunk| {
+                let mut block = Block::default();
+                for (l, node) in chunk.iter().enumerate() {
+                    for i in 0..LEGS {
+                        block.input_weights[i][l] = node.input_weights[i];
+                        block.output_weights[i][l] = node.output_weights[i];
+                    }
+                    block.biases[l] = node.bias;
+                }
+                block
+            })
+            .collect();
+        Self {
+            blocks,
+            output_biases,
+            normalisation: model.normalisation,
+            training_range: model.training_range,
+            correction_bounds: model.correction_bounds,
+            kernel: Kernel::detect(),
+        }
+    }
+
+    /// The raw corrections `Δq = N(q, w)` (mm) for network input legs `q` (mm), before
+    /// clamping: [`Model::raw_corrections`] to within a few ulp plus
+    /// `TANH_MAX_ERROR · Σ|w2|` (see the module documentation). Allocation-free.
+    #[inline]
+    pub fn raw_corrections(&self, q: &[f64; LEGS]) -> [f64; LEGS] {
+        let x = self.normalisation.apply(q);
+        let sums = match self.kernel {
+            Kernel::Portable => hidden_sums(&self.blocks, &x),
+            #[cfg(target_arch = "x86_64")]
+            // SAFETY: `Kernel::Avx2` is only chosen when the CPU reports AVX2.
+            Kernel::Avx2 => unsafe { hidden_sums_avx2(&self.blocks, &x) },
+        };
+        std::array::from_fn(|k| {
+            let [a, b, c, d] = sums[k];
+            self.output_biases[k] + ((a + b) + (c + d))
+        })
+    }
+
+    /// `[min, max]` of each nominal leg the model was trained over, mm (the model's).
+    pub fn training_range(&self) -> &[[f64; 2]; LEGS] {
+        &self.training_range
+    }
+
+    /// `[min, max]` of each correction the model may return, mm (the model's).
+    pub fn correction_bounds(&self) -> &[[f64; 2]; LEGS] {
+        &self.correction_bounds
+    }
+
+    /// The largest change of any correction a change of the activation by [`TANH_MAX_ERROR`]
+    /// at every hidden node can cause: `TANH_MAX_ERROR · max_k Σ_j |w2_kj|`, mm.
+    pub fn activation_error_bound(&self) -> f64 {
+        (0..LEGS)
+            .map(|k| {
+                self.blocks
+                    .iter()
+                    .flat_map(|b| b.output_weights[k])
+                    .map(f64::abs)
+                    .sum::<f64>()
+            })
+            .fold(0.0, f64::max)
+            * TANH_MAX_ERROR
+    }
+}
+
+/// One hidden node of the fused layer.
+struct Node {
+    input_weights: [f64; LEGS],
+    bias: f64,
+    output_weights: [f64; LEGS],
+}
+
+/// Appends `network`'s hidden nodes, its outputs driving the corrections `legs`.
+fn push_nodes(network: &Network, legs: std::ops::Range<usize>, nodes: &mut Vec<Node>) {
+    let (h, o) = (network.hidden(), network.outputs());
+    let w = network.weights();
+    let (w1, rest) = w.split_at(h * LEGS);
+    let (b1, w2) = (&rest[..h], &rest[h..h + o * h]);
+    for j in 0..h {
+        let mut output_weights = [0.0; LEGS];
+        for (k, leg) in legs.clone().enumerate() {
+            output_weights[leg] = w2[k * h + j];
+        }
+        nodes.push(Node {
+            input_weights: std::array::from_fn(|i| w1[j * LEGS + i]),
+            bias: b1[j],
+            output_weights,
+        });
+    }
+}
+
+/// Output bias `b2[k]` of `network`.
+fn output_bias(network: &Network, k: usize) -> f64 {
+    let w = network.weights();
+    w[w.len() - network.outputs() + k]
+}
+
+/// Each correction's [`LANES`] partial sums `Σ w2·tanh(b1 + Σ w1·x)` over the blocks, for
+/// normalised input `x`.
+#[inline(always)]
+fn hidden_sums_inline(blocks: &[Block], x: &[f64; LEGS]) -> [[f64; LANES]; LEGS] {
+    let mut sums = [[0.0; LANES]; LEGS];
+    for block in blocks {
+        // Input 0 first, then 1…5: the reference's order, so `z` is the same bits.
+        let mut z: [f64; LANES] = std::array::from_fn(|l| block.input_weights[0][l] * x[0]);
+        for (weights, xi) in block.input_weights.iter().zip(x).skip(1) {
+            z = std::array::from_fn(|l| z[l] + weights[l] * xi);
+        }
+        let activation = tanh_lanes(std::array::from_fn(|l| block.biases[l] + z[l]));
+        for (sum, weights) in sums.iter_mut().zip(&block.output_weights) {
+            *sum = std::array::from_fn(|l| sum[l] + weights[l] * activation[l]);
+        }
+    }
+    sums
+}
+
+/// [`hidden_sums_inline`] for the target's baseline instruction set.
+fn hidden_sums(blocks: &[Block], x: &[f64; LEGS]) -> [[f64; LANES]; LEGS] {
+    hidden_sums_inline(blocks, x)
+}
+
+/// [`hidden_sums_inline`] compiled for AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn hidden_sums_avx2(blocks: &[Block], x: &[f64; LEGS]) -> [[f64; LANES]; LEGS] {
+    hidden_sums_inline(blocks, x)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::{NetworkInput, Provenance};
+
+    /// A decoupled model of irregular sizes (so blocks mix networks and the last is padded)
+    /// with weights that drive the activations over their whole range.
+    fn decoupled() -> Model {
+        let sizes = [5, 2, 7, 1, 3, 4];
+        let networks = sizes
+            .iter()
+            .enumerate()
+            .map(|(leg, &h)| {
+                let count = Network::weight_count(h, 1);
+                let weights = (0..count)
+                    .map(|i| ((i * 7 + leg * 13) as f64).sin() * 3.0)
+                    .collect();
+                Network::from_weights(h, 1, weights).unwrap()
+            })
+            .collect();
+        Model {
+            networks: Networks::Decoupled(networks),
+            input: NetworkInput::Equivalent,
+            normalisation: Normalisation {
+                mean: [355.0; LEGS],
+                span: [140.0; LEGS],
+            },
+            training_range: [[290.0, 420.0]; LEGS],
+            correction_bounds: [[-1.0, 1.0]; LEGS],
+            geometry: crate::Geometry::prototype().fingerprint(),
+            provenance: Provenance::default(),
+        }
+    }
+
+    fn legs(i: usize) -> [f64; LEGS] {
+        std::array::from_fn(|k| 280.0 + ((i * 31 + k * 17) % 160) as f64 + (i as f64).cos())
+    }
+
+    #[test]
+    fn fused_networks_compute_the_reference_corrections() {
+        let model = decoupled();
+        let fused = FusedModel::new(&model);
+        assert_eq!(fused.blocks.len(), 6, "22 nodes in blocks of 4");
+        for i in 0..10_000 {
+            let q = legs(i);
+            let (got, want) = (fused.raw_corrections(&q), model.raw_corrections(&q));
+            for k in 0..LEGS {
+                assert!(
+                    (got[k] - want[k]).abs() < 1e-13,
+                    "{q:?}: {got:?} vs {want:?}"
+                );
+            }
+        }
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn the_avx2_and_portable_builds_give_the_same_bits() {
+        if !std::arch::is_x86_feature_detected!("avx2") {
+            eprintln!("no AVX2 on this CPU: only the portable build can run");
+            return;
+        }
+        let fused = FusedModel::new(&decoupled());
+        for i in 0..10_000 {
+            let x = fused.normalisation.apply(&legs(i));
+            let portable = hidden_sums(&fused.blocks, &x);
+            // SAFETY: AVX2 was detected above.
+            let avx2 = unsafe { hidden_sums_avx2(&fused.blocks, &x) };
+            assert_eq!(
+                portable.map(|s| s.map(f64::to_bits)),
+                avx2.map(|s| s.map(f64::to_bits))
+            );
+        }
+    }
+}

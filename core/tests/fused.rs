@@ -1,0 +1,164 @@
+//! The fused serving form of a model against the reference evaluation, over the whole workspace
+//! and at its edges: random coupled and decoupled models of every size the trainer makes, with
+//! training ranges and correction bounds narrow enough that every status occurs. Each point's
+//! legs and corrections must agree within 1 nm (the bound; the differences seen are
+//! about 1e-15 mm) and its status must be the same.
+//!
+//! Deeper runs: `PROPTEST_CASES=2000 cargo test --release -p hexacomp-core --test fused`.
+
+use std::cell::RefCell;
+
+use hexacomp_core::compensator::{Compensated, PointStatus, compensate_pose};
+use hexacomp_core::fused::FusedModel;
+use hexacomp_core::model::{Model, NetworkInput, Networks, Provenance};
+use hexacomp_core::network::{Network, Normalisation};
+use hexacomp_core::sampling::{SamplerOptions, WorkspaceSampler};
+use hexacomp_core::{Geometry, Pose};
+use proptest::prelude::*;
+use rand::{RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+/// The bound the fast path must keep, mm (1 nm).
+const AGREEMENT_MM: f64 = 1e-6;
+
+/// A network of `hidden` nodes and `outputs` outputs: input weights of scale `input_scale`
+/// (large scales saturate the activations), output weights within ±0.05 mm.
+fn network(rng: &mut ChaCha8Rng, hidden: usize, outputs: usize, input_scale: f64) -> Network {
+    let mut weights = Vec::with_capacity(Network::weight_count(hidden, outputs));
+    for _ in 0..hidden * 6 + hidden {
+        weights.push(input_scale * rng.random_range(-1.0..1.0));
+    }
+    for _ in 0..outputs * hidden + outputs {
+        weights.push(rng.random_range(-0.05..0.05));
+    }
+    Network::from_weights(hidden, outputs, weights).unwrap()
+}
+
+/// A random model for `geometry`: coupled or decoupled, 1–64 hidden nodes per network, trained
+/// over the legs 300–410 mm of the 280–430 mm stroke, corrections bounded to ±0.08 mm.
+fn random_model(geometry: &Geometry, seed: u64, coupled: bool, input_scale: f64) -> Model {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let networks = if coupled {
+        let hidden = rng.random_range(1..=64);
+        Networks::Coupled(network(&mut rng, hidden, 6, input_scale))
+    } else {
+        Networks::Decoupled(
+            (0..6)
+                .map(|_| {
+                    let hidden = rng.random_range(1..=24);
+                    network(&mut rng, hidden, 1, input_scale)
+                })
+                .collect(),
+        )
+    };
+    let model = Model {
+        networks,
+        input: NetworkInput::Equivalent,
+        normalisation: Normalisation {
+            mean: std::array::from_fn(|_| rng.random_range(340.0..370.0)),
+            span: std::array::from_fn(|_| rng.random_range(80.0..150.0)),
+        },
+        training_range: [[300.0, 410.0]; 6],
+        correction_bounds: [[-0.08, 0.08]; 6],
+        geometry: geometry.fingerprint(),
+        provenance: Provenance::default(),
+    };
+    model.validate().unwrap();
+    model
+}
+
+/// Poses on the workspace's edge: from the home pose towards `pose` and beyond, the last pose
+/// (to the bisection's resolution, about 1e-15 of the way) whose legs are all in the stroke, and
+/// the first whose legs are not.
+fn edge_poses(geometry: &Geometry, pose: &Pose) -> [Pose; 2] {
+    let home = geometry.home_pose().to_mm_deg();
+    let target = pose.to_mm_deg();
+    let along =
+        |t: f64| Pose::from_mm_deg(std::array::from_fn(|i| home[i] + t * (target[i] - home[i])));
+    let inside = |t: f64| hexacomp_core::inverse_kinematics(geometry, &along(t)).all_in_stroke();
+    let (mut lo, mut hi) = (0.0, 1.0);
+    while inside(hi) {
+        (lo, hi) = (hi, 2.0 * hi);
+    }
+    for _ in 0..200 {
+        let mid = 0.5 * (lo + hi);
+        if mid == lo || mid == hi {
+            break;
+        }
+        if inside(mid) { lo = mid } else { hi = mid }
+    }
+    [along(lo), along(hi)]
+}
+
+/// The largest difference seen between the two forms, and how many points had each status.
+#[derive(Default)]
+struct Seen {
+    largest_mm: f64,
+    statuses: [usize; 6],
+}
+
+fn check(seen: &RefCell<Seen>, reference: &Compensated, fused: &Compensated, pose: &Pose) {
+    assert_eq!(reference.status, fused.status, "at {pose:?}");
+    let mut seen = seen.borrow_mut();
+    for (a, b) in [
+        (reference.legs, fused.legs),
+        (reference.corrections, fused.corrections),
+    ] {
+        for (x, y) in a.iter().zip(b) {
+            let difference = if x.to_bits() == y.to_bits() {
+                0.0
+            } else {
+                (x - y).abs()
+            };
+            assert!(difference <= AGREEMENT_MM, "{a:?} and {b:?} at {pose:?}");
+            seen.largest_mm = seen.largest_mm.max(difference);
+        }
+    }
+    seen.statuses[reference.status as usize] += 1;
+}
+
+#[test]
+fn the_fused_form_agrees_with_the_reference_over_the_workspace_and_at_its_edges() {
+    let g = Geometry::prototype();
+    let seen = RefCell::new(Seen::default());
+    proptest!(ProptestConfig::with_cases(64), |(
+        model_seed in any::<u64>(),
+        pose_seed in any::<u64>(),
+        coupled in any::<bool>(),
+        input_scale in prop::sample::select(vec![0.3, 2.0, 20.0]),
+    )| {
+        let model = random_model(&g, model_seed, coupled, input_scale);
+        let fused = FusedModel::new(&model);
+        let poses = WorkspaceSampler::new(&g, pose_seed, SamplerOptions { stroke_margin_mm: 0.0, ..SamplerOptions::default() })
+            .unwrap()
+            .samples(50)
+            .unwrap();
+        for pose in &poses {
+            for p in std::iter::once(*pose).chain(edge_poses(&g, pose)) {
+                check(
+                    &seen,
+                    &compensate_pose(&g, Some(&model), &p),
+                    &compensate_pose(&g, Some(&fused), &p),
+                    &p,
+                );
+            }
+        }
+    });
+    let seen = seen.into_inner();
+    eprintln!(
+        "largest difference {:e} mm; statuses {:?}",
+        seen.largest_mm, seen.statuses
+    );
+    // The scenario happened: points of every status a model decides were compared.
+    for status in [
+        PointStatus::Ok,
+        PointStatus::Clamped,
+        PointStatus::OutsideTrainedRange,
+        PointStatus::OutOfStroke,
+    ] {
+        assert!(
+            seen.statuses[status as usize] > 0,
+            "no point was {status:?}"
+        );
+    }
+}
