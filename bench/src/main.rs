@@ -9,6 +9,7 @@ mod commands;
 mod echo;
 mod path;
 mod report;
+mod roofline;
 mod session;
 mod stream;
 mod uds;
@@ -44,6 +45,7 @@ enum Command {
     Path(commands::path::PathCommand),
     Compare(commands::compare::CompareCommand),
     Batches(commands::batches::BatchesCommand),
+    Compute(commands::compute::ComputeCommand),
     Swap(commands::swap::SwapCommand),
     /// The hexacomp service (as `hexacomp-service`), started by the other commands.
     #[command(hide = true)]
@@ -72,6 +74,7 @@ fn main() -> ExitCode {
         Command::Path(c) => commands::path::run(&c),
         Command::Compare(c) => commands::compare::run(&c),
         Command::Batches(c) => commands::batches::run(&c),
+        Command::Compute(c) => commands::compute::run(&c),
         Command::Swap(c) => commands::swap::run(&c),
         Command::Service(args) => {
             hexacomp_service::cli::init_logging();

@@ -33,6 +33,16 @@ const RANGE_TOLERANCE_MM: f64 = 1e-6;
 pub trait Corrections {
     /// The raw corrections `Δq = N(q, w)` (mm) at network input legs `q` (mm), before clamping.
     fn raw_corrections(&self, q: &[f64; LEGS]) -> [f64; LEGS];
+    /// How far [`Corrections::raw_corrections`] may lie from the model's reference evaluation
+    /// [`Model::raw_corrections`], mm (0: it is the reference).
+    fn error_bound_mm(&self) -> f64 {
+        0.0
+    }
+    /// The reference evaluation's raw corrections, mm: what decides a status that
+    /// [`Corrections::raw_corrections`] lies too close to decide.
+    fn reference_corrections(&self, q: &[f64; LEGS]) -> [f64; LEGS] {
+        self.raw_corrections(q)
+    }
     /// `[min, max]` of each nominal leg answered without `outside_trained_range`, mm.
     fn training_range(&self) -> &[[f64; 2]; LEGS];
     /// `[min, max]` of each correction that may be returned, mm.
@@ -57,11 +67,17 @@ impl Corrections for FusedModel {
     fn raw_corrections(&self, q: &[f64; LEGS]) -> [f64; LEGS] {
         FusedModel::raw_corrections(self, q)
     }
+    fn error_bound_mm(&self) -> f64 {
+        FusedModel::error_bound_mm(self)
+    }
+    fn reference_corrections(&self, q: &[f64; LEGS]) -> [f64; LEGS] {
+        self.reference().raw_corrections(q)
+    }
     fn training_range(&self) -> &[[f64; 2]; LEGS] {
-        FusedModel::training_range(self)
+        &self.reference().training_range
     }
     fn correction_bounds(&self) -> &[[f64; 2]; LEGS] {
-        FusedModel::correction_bounds(self)
+        &self.reference().correction_bounds
     }
 }
 
@@ -91,7 +107,19 @@ pub fn compensate_legs<M: Corrections>(
     };
     // Whatever the networks were fitted to (see `NetworkInput`), at run time their input is the
     // nominal legs.
-    let raw = model.raw_corrections(q);
+    let mut raw = model.raw_corrections(q);
+    let bound = model.error_bound_mm();
+    if bound > 0.0
+        && undecided(
+            &raw,
+            q,
+            model.correction_bounds(),
+            geometry.leg_range,
+            bound,
+        )
+    {
+        raw = model.reference_corrections(q);
+    }
     let mut status = PointStatus::Ok;
     let outside = (0..LEGS).any(|i| {
         let [lo, hi] = model.training_range()[i];
@@ -123,6 +151,30 @@ pub fn compensate_legs<M: Corrections>(
         corrections,
         status,
     }
+}
+
+/// Whether corrections `raw` (mm), each within `bound` mm of the reference's, might decide a
+/// status otherwise than the reference's would: one is not finite (the reference's may be), or
+/// lies within the bound (twice it, and 1e-12 mm for the rounding of `q + Δq` of legs up to
+/// about 4 m) of its correction bound, or its corrected leg of a stroke end.
+fn undecided(
+    raw: &[f64; LEGS],
+    q: &[f64; LEGS],
+    bounds: &[[f64; 2]; LEGS],
+    [min, max]: [f64; 2],
+    bound: f64,
+) -> bool {
+    let near = 2.0 * bound + 1e-12;
+    (0..LEGS).any(|i| {
+        let [lo, hi] = bounds[i];
+        let c = raw[i];
+        let leg = q[i] + c.clamp(lo, hi);
+        !c.is_finite()
+            || (c - lo).abs() <= near
+            || (c - hi).abs() <= near
+            || (leg - min).abs() <= near
+            || (leg - max).abs() <= near
+    })
 }
 
 /// Compensates a pose (mm, rad): nominal inverse kinematics, then [`compensate_legs`].

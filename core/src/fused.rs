@@ -15,9 +15,12 @@
 //! - each output sums its hidden nodes in [`LANES`] partial sums, added pairwise at the end,
 //!   instead of one after the other.
 //!
-//! A correction therefore differs from the reference by a few units in its last place plus at
-//! most `TANH_MAX_ERROR · Σ|w2|` (a property test checks ≤ 1 nm over the workspace and its edges;
-//! the figures it sees are far smaller).
+//! [`FusedModel::error_bound_mm`] bounds the difference for every input, from the weights
+//! (about 1e-14 mm for the models trained here; the property test sees 5.7e-14 mm at most in
+//! the legs, one ulp of a 400 mm leg). A model whose bound would exceed [`MAX_ERROR_MM`] (1 nm)
+//! is evaluated by the reference. The statuses are the reference's at every point: where a
+//! fused correction lies within twice its bound of a correction bound or of a stroke end, or is
+//! not finite, the compensation asks the reference (`compensator::compensate_legs`).
 //!
 //! The evaluation picks, once at construction, the AVX2 build of the same code when the CPU has
 //! it (standard library detection, no nightly features); both builds compute each lane with the
@@ -26,7 +29,14 @@
 use crate::activation::{LANES, TANH_MAX_ERROR, tanh_lanes};
 use crate::geometry::LEGS;
 use crate::model::{Model, Networks};
-use crate::network::{Network, Normalisation};
+use crate::network::Network;
+
+/// Vector operations ([`LANES`] wide) one block costs: the hidden sums 12 (6 multiplies, 5 adds
+/// and the bias), the activation 43 (absolute value, cap: 2; `−2|z|`: 1; rounding to `n`: 3;
+/// reduction: 4; Taylor polynomial: 24; `2ⁿ` and its product: 3; `(1 − e)/(1 + e)`: 3; sign: 2)
+/// and the six corrections 12 (6 multiplies, 6 adds). The arithmetic floor of `hexacomp-bench
+/// compute` counts with it.
+pub const OPERATIONS_PER_BLOCK: usize = 67;
 
 /// [`LANES`] hidden nodes of the fused layer, stored lane by lane.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -60,22 +70,30 @@ impl Kernel {
     }
 }
 
-/// A model's networks fused for serving, with the ranges its statuses are decided by. Built once
-/// when a model is loaded; evaluating it allocates nothing.
+/// A model's networks fused for serving, with the model itself (its ranges decide the statuses,
+/// and its reference evaluation answers where the fused one could decide a status otherwise).
+/// Built once when a model is loaded; evaluating it allocates nothing.
 #[derive(Debug, Clone, PartialEq)]
 pub struct FusedModel {
     blocks: Vec<Block>,
     /// `b2[k]`: the output bias of correction `k` (mm).
     output_biases: [f64; LEGS],
-    normalisation: Normalisation,
-    training_range: [[f64; 2]; LEGS],
-    correction_bounds: [[f64; 2]; LEGS],
     kernel: Kernel,
+    /// The model, evaluated by [`Model::raw_corrections`] where the fused form cannot stand in.
+    reference: Model,
+    /// [`FusedModel::error_bound_mm`] of the fused evaluation, mm.
+    error_bound_mm: f64,
 }
 
+/// The largest difference from the reference a fused model may have, mm: above it (output
+/// weights of 1e7 and more, which training never makes) the model is evaluated by the reference.
+pub const MAX_ERROR_MM: f64 = 1e-6;
+
 impl FusedModel {
-    /// The serving form of `model` (which [`Model::validate`] has accepted).
+    /// The serving form of `model`, which [`Model::validate`] has accepted (the model file's
+    /// reader validates every model it returns).
     pub fn new(model: &Model) -> Self {
+        debug_assert!(model.validate().is_ok(), "a fused form of an invalid model");
         let mut nodes = Vec::new();
         let mut output_biases = [0.0; LEGS];
         match &model.networks {
@@ -104,22 +122,27 @@ impl FusedModel {
                 block
             })
             .collect();
-        Self {
+        let mut fused = Self {
             blocks,
             output_biases,
-            normalisation: model.normalisation,
-            training_range: model.training_range,
-            correction_bounds: model.correction_bounds,
             kernel: Kernel::detect(),
-        }
+            reference: model.clone(),
+            error_bound_mm: 0.0,
+        };
+        fused.error_bound_mm = fused.fused_error_bound();
+        fused
     }
 
     /// The raw corrections `Δq = N(q, w)` (mm) for network input legs `q` (mm), before
-    /// clamping: [`Model::raw_corrections`] to within a few ulp plus
-    /// `TANH_MAX_ERROR · Σ|w2|` (see the module documentation). Allocation-free.
+    /// clamping: [`Model::raw_corrections`] to within [`FusedModel::error_bound_mm`] where
+    /// those are finite (a non-finite output of one decoupled network may make all six
+    /// non-finite here; compensation then asks the reference). Allocation-free.
     #[inline]
     pub fn raw_corrections(&self, q: &[f64; LEGS]) -> [f64; LEGS] {
-        let x = self.normalisation.apply(q);
+        if self.error_bound_mm > MAX_ERROR_MM {
+            return self.reference.raw_corrections(q);
+        }
+        let x = self.reference.normalisation.apply(q);
         let sums = match self.kernel {
             Kernel::Portable => hidden_sums(&self.blocks, &x),
             #[cfg(target_arch = "x86_64")]
@@ -132,29 +155,59 @@ impl FusedModel {
         })
     }
 
-    /// `[min, max]` of each nominal leg the model was trained over, mm (the model's).
-    pub fn training_range(&self) -> &[[f64; 2]; LEGS] {
-        &self.training_range
+    /// Blocks of [`LANES`] hidden nodes evaluated per point (the last one perhaps padded).
+    pub fn blocks(&self) -> usize {
+        self.blocks.len()
     }
 
-    /// `[min, max]` of each correction the model may return, mm (the model's).
-    pub fn correction_bounds(&self) -> &[[f64; 2]; LEGS] {
-        &self.correction_bounds
+    /// The instruction set the evaluation runs with: `"avx2"` or `"baseline"`.
+    pub fn instruction_set(&self) -> &'static str {
+        match self.kernel {
+            Kernel::Portable => "baseline",
+            #[cfg(target_arch = "x86_64")]
+            Kernel::Avx2 => "avx2",
+        }
     }
 
-    /// The largest change of any correction a change of the activation by [`TANH_MAX_ERROR`]
-    /// at every hidden node can cause: `TANH_MAX_ERROR · max_k Σ_j |w2_kj|`, mm.
-    pub fn activation_error_bound(&self) -> f64 {
+    /// The model this is the serving form of.
+    pub fn reference(&self) -> &Model {
+        &self.reference
+    }
+
+    /// A bound, valid for every input, on how far each raw correction of this form lies from
+    /// [`Model::raw_corrections`], mm; 0 when the model's weights are so large that the bound
+    /// would exceed [`MAX_ERROR_MM`] and the reference is evaluated instead.
+    pub fn error_bound_mm(&self) -> f64 {
+        if self.error_bound_mm > MAX_ERROR_MM {
+            0.0
+        } else {
+            self.error_bound_mm
+        }
+    }
+
+    /// The fused evaluation's bound against the reference, mm. The hidden sums are the same bits
+    /// in both; the activations differ by at most `TANH_MAX_ERROR` (this form's, against the
+    /// exact `tanh`) plus one ulp of 1 (the C library's `tanh`), each weighted by `|w2|`; and
+    /// each form's sum of `n` products and the bias is within `γₙ·(Σ|w2| + |b2|)` of its exact
+    /// value, `γₙ = n·u/(1 − n·u)`, `u = 2⁻⁵³`, in any order of summation (the activations are
+    /// at most 1 in magnitude). `n` counts this form's padded nodes and the bias, at least the
+    /// reference's.
+    fn fused_error_bound(&self) -> f64 {
+        let unit = f64::EPSILON / 2.0;
+        let n = (self.blocks.len() * LANES + 2) as f64;
+        let gamma = n * unit / (1.0 - n * unit);
         (0..LEGS)
             .map(|k| {
-                self.blocks
+                let weights: f64 = self
+                    .blocks
                     .iter()
                     .flat_map(|b| b.output_weights[k])
                     .map(f64::abs)
-                    .sum::<f64>()
+                    .sum();
+                (TANH_MAX_ERROR + f64::EPSILON) * weights
+                    + 2.0 * gamma * (weights + self.output_biases[k].abs())
             })
             .fold(0.0, f64::max)
-            * TANH_MAX_ERROR
     }
 }
 
@@ -225,6 +278,7 @@ fn hidden_sums_avx2(blocks: &[Block], x: &[f64; LEGS]) -> [[f64; LANES]; LEGS] {
 mod tests {
     use super::*;
     use crate::model::{NetworkInput, Provenance};
+    use crate::network::Normalisation;
 
     /// A decoupled model of irregular sizes (so blocks mix networks and the last is padded)
     /// with weights that drive the activations over their whole range.
@@ -276,6 +330,36 @@ mod tests {
         }
     }
 
+    #[test]
+    fn the_fused_forms_error_bound_covers_it_and_beyond_a_nanometre_the_reference_answers() {
+        let model = decoupled();
+        let fused = FusedModel::new(&model);
+        let bound = fused.error_bound_mm();
+        assert!(bound > 0.0 && bound < 1e-12, "{bound:e}");
+        // Output weights of 1e9 whose sum the bias cancels (the corrections stay small): the
+        // fused sums could be far more than a nanometre off, so the reference answers.
+        let mut large = model.clone();
+        if let Networks::Decoupled(networks) = &mut large.networks {
+            let h = networks[2].hidden();
+            let mut w = networks[2].weights().to_vec();
+            let count = w.len();
+            for (j, v) in w[h * LEGS + h..count - 1].iter_mut().enumerate() {
+                *v = if j % 2 == 0 { 1e9 } else { -1e9 };
+            }
+            networks[2] = Network::from_weights(h, 1, w).unwrap();
+        }
+        let fused_large = FusedModel::new(&large);
+        assert_eq!(fused_large.error_bound_mm(), 0.0);
+        for i in 0..1000 {
+            let q = legs(i);
+            assert_eq!(fused_large.raw_corrections(&q), large.raw_corrections(&q));
+            let (got, want) = (fused.raw_corrections(&q), model.raw_corrections(&q));
+            for k in 0..LEGS {
+                assert!((got[k] - want[k]).abs() <= bound, "{q:?}");
+            }
+        }
+    }
+
     #[cfg(target_arch = "x86_64")]
     #[test]
     fn the_avx2_and_portable_builds_give_the_same_bits() {
@@ -285,7 +369,7 @@ mod tests {
         }
         let fused = FusedModel::new(&decoupled());
         for i in 0..10_000 {
-            let x = fused.normalisation.apply(&legs(i));
+            let x = fused.reference.normalisation.apply(&legs(i));
             let portable = hidden_sums(&fused.blocks, &x);
             // SAFETY: AVX2 was detected above.
             let avx2 = unsafe { hidden_sums_avx2(&fused.blocks, &x) };

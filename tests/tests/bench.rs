@@ -203,6 +203,58 @@ fn batches_report_throughput_for_every_size_and_variant() {
 }
 
 #[test]
+fn compute_compares_both_forms_of_the_model_beside_the_arithmetic_floor() {
+    let dir = tempfile::tempdir().unwrap();
+    let summary = dir.path().join("compute.json");
+    // The command itself fails when the two forms disagree on a pose of the path.
+    let stdout = bench(&[
+        "compute",
+        "--model",
+        p(&model()),
+        "--points",
+        "3000",
+        "--shape",
+        "line",
+        "--json",
+        p(&summary),
+        "--out-dir",
+        p(dir.path()),
+    ]);
+    let json = json(&summary);
+    let hidden = hexacomp_core::model::Model::load(&model(), &hexacomp_core::Geometry::prototype())
+        .unwrap()
+        .hidden_nodes();
+    let hidden_json: Vec<usize> = json["hidden_nodes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_u64().unwrap() as usize)
+        .collect();
+    assert_eq!(hidden_json, hidden);
+    assert_eq!(
+        json["fused_blocks"].as_u64().unwrap() as usize,
+        hidden.iter().sum::<usize>().div_ceil(4)
+    );
+    assert!(json["points"].as_u64().unwrap() >= 3000);
+    let difference = json["largest_difference_mm"].as_f64().unwrap();
+    assert!((0.0..=1e-6).contains(&difference), "{difference}");
+    for form in ["reference", "fused"] {
+        let f = &json[form];
+        assert!(f["single_p50_ns"].as_u64().unwrap() > 0, "{form}");
+        assert!(f["networks_mean_ns"].as_f64().unwrap() > 0.0, "{form}");
+        let rates = f["batch_points_per_second"].as_array().unwrap();
+        assert_eq!(rates.len(), json["batch_sizes"].as_array().unwrap().len());
+        assert!(
+            rates.iter().all(|r| r.as_f64().unwrap() > 0.0),
+            "{form}: {rates:?}"
+        );
+    }
+    let floor = json["networks_floor_ns"].as_f64().unwrap();
+    assert!(floor.is_finite() && floor > 0.0, "{floor}");
+    assert!(stdout.contains("arithmetic floor"), "{stdout}");
+}
+
+#[test]
 fn hot_swaps_under_load_lose_nothing() {
     let _one = exclusive();
     let dir = tempfile::tempdir().unwrap();
