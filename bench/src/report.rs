@@ -65,10 +65,15 @@ pub struct JsonSummary {
 impl JsonSummary {
     /// Writes the summary to `path`.
     pub fn write(&self, path: &Path) -> anyhow::Result<()> {
-        let text = serde_json::to_string_pretty(self)?;
-        replace_file(path, (text + "\n").as_bytes())
-            .with_context(|| format!("writing {}", path.display()))
+        write_json(path, self)
     }
+}
+
+/// Writes `value` to `path` as indented JSON, whole or not at all.
+pub fn write_json(path: &Path, value: &impl Serialize) -> anyhow::Result<()> {
+    let text = serde_json::to_string_pretty(value)?;
+    replace_file(path, (text + "\n").as_bytes())
+        .with_context(|| format!("writing {}", path.display()))
 }
 
 fn micros(ns: u64) -> String {

@@ -155,8 +155,8 @@ pub fn compensate_legs<M: Corrections>(
 
 /// Whether corrections `raw` (mm), each within `bound` mm of the reference's, might decide a
 /// status otherwise than the reference's would: one is not finite (the reference's may be), or
-/// lies within the bound (twice it, and 1e-12 mm for the rounding of `q + Δq` of legs up to
-/// about 4 m) of its correction bound, or its corrected leg of a stroke end.
+/// lies within twice the bound of its correction bound, or its corrected leg within twice the
+/// bound and four ulp of the stroke's ends (the rounding of `q + Δq`) of a stroke end.
 fn undecided(
     raw: &[f64; LEGS],
     q: &[f64; LEGS],
@@ -164,11 +164,19 @@ fn undecided(
     [min, max]: [f64; 2],
     bound: f64,
 ) -> bool {
-    let near = 2.0 * bound + 1e-12;
+    let near = 2.0 * bound + 4.0 * f64::EPSILON * min.abs().max(max.abs());
     (0..LEGS).any(|i| {
         let [lo, hi] = bounds[i];
         let c = raw[i];
-        let leg = q[i] + c.clamp(lo, hi);
+        // Not `f64::clamp`, which panics on a NaN bound.
+        let clamped = if c < lo {
+            lo
+        } else if c > hi {
+            hi
+        } else {
+            c
+        };
+        let leg = q[i] + clamped;
         !c.is_finite()
             || (c - lo).abs() <= near
             || (c - hi).abs() <= near

@@ -76,14 +76,23 @@ fn inference_and_compensation_allocate_nothing() {
         .samples(1000)
         .unwrap();
     for m in &models {
-        // The serving form is built once at load (that allocates); evaluating it must not.
+        // The serving form is built once at load (that allocates); evaluating it must not, nor
+        // its way back to the reference at a point whose correction sits on a bound.
         let fused = FusedModel::new(m);
+        let at_a_bound = {
+            let q = hexacomp_core::inverse_kinematics(&g, &poses[0]).lengths;
+            let c = m.raw_corrections(&q)[0];
+            let mut bounded = m.clone();
+            bounded.correction_bounds[0] = [c - 1.0, c];
+            FusedModel::new(&bounded)
+        };
         let before = allocations();
         let mut checksum = 0.0;
         for pose in &poses {
             checksum += compensate_pose(&g, Some(m), pose).legs[0];
             checksum += compensate_pose(&g, Some(&fused), pose).legs[0];
         }
+        checksum += compensate_pose(&g, Some(&at_a_bound), &poses[0]).legs[0];
         let after = allocations();
         assert!(checksum.is_finite());
         assert_eq!(

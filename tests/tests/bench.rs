@@ -60,6 +60,26 @@ fn json(path: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
 }
 
+/// Runs `command` with the demo's model on 3000 points of a line, reports into `dir`: what it
+/// printed and its JSON summary.
+fn on_a_short_line(command: &str, dir: &Path) -> (String, serde_json::Value) {
+    let summary = dir.join(format!("{command}.json"));
+    let stdout = bench(&[
+        command,
+        "--model",
+        p(&model()),
+        "--points",
+        "3000",
+        "--shape",
+        "line",
+        "--json",
+        p(&summary),
+        "--out-dir",
+        p(dir),
+    ]);
+    (stdout, json(&summary))
+}
+
 /// Parses the first number after `label` in `text`.
 fn number_after(text: &str, label: &str) -> f64 {
     let rest = &text[text
@@ -169,21 +189,7 @@ fn compare_reports_all_four_variants_in_the_json_summary() {
 fn batches_report_throughput_for_every_size_and_variant() {
     let _one = exclusive();
     let dir = tempfile::tempdir().unwrap();
-    let summary = dir.path().join("batches.json");
-    bench(&[
-        "batches",
-        "--model",
-        p(&model()),
-        "--points",
-        "3000",
-        "--shape",
-        "line",
-        "--json",
-        p(&summary),
-        "--out-dir",
-        p(dir.path()),
-    ]);
-    let json = json(&summary);
+    let (_, json) = on_a_short_line("batches", dir.path());
     let sizes: Vec<u64> = json["batch_sizes"]
         .as_array()
         .unwrap()
@@ -205,22 +211,8 @@ fn batches_report_throughput_for_every_size_and_variant() {
 #[test]
 fn compute_compares_both_forms_of_the_model_beside_the_arithmetic_floor() {
     let dir = tempfile::tempdir().unwrap();
-    let summary = dir.path().join("compute.json");
     // The command itself fails when the two forms disagree on a pose of the path.
-    let stdout = bench(&[
-        "compute",
-        "--model",
-        p(&model()),
-        "--points",
-        "3000",
-        "--shape",
-        "line",
-        "--json",
-        p(&summary),
-        "--out-dir",
-        p(dir.path()),
-    ]);
-    let json = json(&summary);
+    let (stdout, json) = on_a_short_line("compute", dir.path());
     let hidden = hexacomp_core::model::Model::load(&model(), &hexacomp_core::Geometry::prototype())
         .unwrap()
         .hidden_nodes();

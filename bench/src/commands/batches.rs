@@ -2,13 +2,11 @@
 
 use std::path::PathBuf;
 
-use anyhow::Context;
-
 use hexacomp_client::wire::MAX_BATCH;
 use hexacomp_trainer::svg::{Chart, Series};
 
 use crate::path::interpolate;
-use crate::report::write_into;
+use crate::report::{write_into, write_json};
 use crate::session::{PathArgs, Session, SetupArgs, VariantKind};
 use crate::stream::{Pacing, StreamOptions, stream};
 
@@ -107,11 +105,7 @@ pub fn run(command: &BatchesCommand) -> anyhow::Result<()> {
         let rates: std::collections::BTreeMap<&str, &Vec<f64>> =
             curves.iter().map(|(k, r)| (k.name(), r)).collect();
         let json = serde_json::json!({ "batch_sizes": sizes, "points_per_second": rates });
-        hexacomp_core::durable::replace_file(
-            file,
-            (serde_json::to_string_pretty(&json)? + "\n").as_bytes(),
-        )
-        .with_context(|| format!("writing {}", file.display()))?;
+        write_json(file, &json)?;
         println!("wrote {}", file.display());
     }
     Ok(())

@@ -6,7 +6,6 @@ use std::hint::black_box;
 use std::path::PathBuf;
 use std::time::Instant;
 
-use anyhow::Context;
 use hdrhistogram::Histogram;
 use hexacomp_core::compensator::{Compensated, Corrections, compensate_pose};
 use hexacomp_core::fused::{FusedModel, OPERATIONS_PER_BLOCK};
@@ -14,6 +13,7 @@ use hexacomp_core::{Geometry, Pose, inverse_kinematics};
 use serde::Serialize;
 
 use crate::path::interpolate;
+use crate::report::write_json;
 use crate::roofline::{networks_floor_ns, peak_operations_per_ns};
 use crate::session::{PathArgs, Session, SetupArgs};
 use crate::stream::new_histogram;
@@ -128,11 +128,7 @@ pub fn run(command: &ComputeCommand) -> anyhow::Result<()> {
     };
     print(&report);
     if let Some(file) = &command.json {
-        hexacomp_core::durable::replace_file(
-            file,
-            (serde_json::to_string_pretty(&report)? + "\n").as_bytes(),
-        )
-        .with_context(|| format!("writing {}", file.display()))?;
+        write_json(file, &report)?;
         println!("wrote {}", file.display());
     }
     Ok(())
@@ -204,14 +200,13 @@ fn points_per_second(
     poses.len() as f64 / (nanoseconds.max(1) as f64 * 1e-9)
 }
 
-/// The mean time of `f` over `inputs`, timed as a whole, ns.
-fn mean_ns<T>(inputs: &[T], f: &dyn Fn(&T) -> f64) -> f64 {
+/// The mean time of `f` over `inputs`, timed as a whole, ns; every result is kept (through
+/// `black_box`), so no part of it can be left uncomputed.
+fn mean_ns<T, R>(inputs: &[T], f: &dyn Fn(&T) -> R) -> f64 {
     let start = Instant::now();
-    let mut sum = 0.0;
     for input in inputs {
-        sum += f(black_box(input));
+        black_box(f(black_box(input)));
     }
-    black_box(sum);
     start.elapsed().as_nanos() as f64 / inputs.len() as f64
 }
 
