@@ -331,38 +331,35 @@ mod tests {
         }
     }
 
+    /// `model` (decoupled) with network 3's output weights at `±magnitude`, alternating in sign.
+    fn with_output_weights_of(model: &Model, magnitude: f64) -> Model {
+        let mut changed = model.clone();
+        if let Networks::Decoupled(networks) = &mut changed.networks {
+            let h = networks[2].hidden();
+            let mut w = networks[2].weights().to_vec();
+            let count = w.len();
+            for (j, v) in w[h * LEGS + h..count - 1].iter_mut().enumerate() {
+                *v = if j % 2 == 0 { magnitude } else { -magnitude };
+            }
+            networks[2] = Network::from_weights(h, 1, w).unwrap();
+        }
+        changed
+    }
+
     #[test]
     fn the_fused_forms_error_bound_covers_it_and_beyond_a_nanometre_the_reference_answers() {
         let model = decoupled();
         let fused = FusedModel::new(&model);
         let bound = fused.error_bound_mm();
         assert!(bound > 0.0 && bound < 1e-12, "{bound:e}");
-        // Output weights of 1e9 whose sum the bias cancels (the corrections stay small): the
-        // fused sums could be far more than a nanometre off, so the reference answers.
-        let mut large = model.clone();
-        if let Networks::Decoupled(networks) = &mut large.networks {
-            let h = networks[2].hidden();
-            let mut w = networks[2].weights().to_vec();
-            let count = w.len();
-            for (j, v) in w[h * LEGS + h..count - 1].iter_mut().enumerate() {
-                *v = if j % 2 == 0 { 1e9 } else { -1e9 };
-            }
-            networks[2] = Network::from_weights(h, 1, w).unwrap();
-        }
+        // Network 3's output weights at ±1e9, alternating in sign so that they largely cancel:
+        // the fused sums could be far more than a nanometre off, so the reference answers.
+        let large = with_output_weights_of(&model, 1e9);
         let fused_large = FusedModel::new(&large);
         assert_eq!(fused_large.error_bound_mm(), 0.0);
-        // The same at 1e6: the bound stays under a nanometre, the fused form answers, and its
+        // The same at ±1e6: the bound stays under a nanometre, the fused form answers, and its
         // cancelling sums (the summation term of the bound at work) stay within it.
-        let mut cancelling = model.clone();
-        if let Networks::Decoupled(networks) = &mut cancelling.networks {
-            let h = networks[2].hidden();
-            let mut w = networks[2].weights().to_vec();
-            let count = w.len();
-            for (j, v) in w[h * LEGS + h..count - 1].iter_mut().enumerate() {
-                *v = if j % 2 == 0 { 1e6 } else { -1e6 };
-            }
-            networks[2] = Network::from_weights(h, 1, w).unwrap();
-        }
+        let cancelling = with_output_weights_of(&model, 1e6);
         let fused_cancelling = FusedModel::new(&cancelling);
         let cancelling_bound = fused_cancelling.error_bound_mm();
         assert!(
