@@ -28,8 +28,9 @@ pub struct Compensated {
 /// Tolerance on the trained range before a point counts as outside it, mm.
 const RANGE_TOLERANCE_MM: f64 = 1e-6;
 
-/// What compensation needs of a model: its raw corrections and the ranges its statuses are
-/// decided by.
+/// What compensation needs of a model: its raw corrections, how far they may lie from the
+/// reference evaluation's, and the model itself (its ranges decide the statuses, its reference
+/// evaluation the points the raw corrections lie too close to a threshold to decide).
 pub trait Corrections {
     /// The raw corrections `Δq = N(q, w)` (mm) at network input legs `q` (mm), before clamping.
     fn raw_corrections(&self, q: &[f64; LEGS]) -> [f64; LEGS];
@@ -38,15 +39,8 @@ pub trait Corrections {
     fn error_bound_mm(&self) -> f64 {
         0.0
     }
-    /// The reference evaluation's raw corrections, mm: what decides a status that
-    /// [`Corrections::raw_corrections`] lies too close to decide.
-    fn reference_corrections(&self, q: &[f64; LEGS]) -> [f64; LEGS] {
-        self.raw_corrections(q)
-    }
-    /// `[min, max]` of each nominal leg answered without `outside_trained_range`, mm.
-    fn training_range(&self) -> &[[f64; 2]; LEGS];
-    /// `[min, max]` of each correction that may be returned, mm.
-    fn correction_bounds(&self) -> &[[f64; 2]; LEGS];
+    /// The model these corrections are of.
+    fn reference(&self) -> &Model;
 }
 
 impl Corrections for Model {
@@ -54,11 +48,8 @@ impl Corrections for Model {
     fn raw_corrections(&self, q: &[f64; LEGS]) -> [f64; LEGS] {
         Model::raw_corrections(self, q)
     }
-    fn training_range(&self) -> &[[f64; 2]; LEGS] {
-        &self.training_range
-    }
-    fn correction_bounds(&self) -> &[[f64; 2]; LEGS] {
-        &self.correction_bounds
+    fn reference(&self) -> &Model {
+        self
     }
 }
 
@@ -70,14 +61,8 @@ impl Corrections for FusedModel {
     fn error_bound_mm(&self) -> f64 {
         FusedModel::error_bound_mm(self)
     }
-    fn reference_corrections(&self, q: &[f64; LEGS]) -> [f64; LEGS] {
-        self.reference().raw_corrections(q)
-    }
-    fn training_range(&self) -> &[[f64; 2]; LEGS] {
-        &self.reference().training_range
-    }
-    fn correction_bounds(&self) -> &[[f64; 2]; LEGS] {
-        &self.reference().correction_bounds
+    fn reference(&self) -> &Model {
+        FusedModel::reference(self)
     }
 }
 
@@ -108,21 +93,22 @@ pub fn compensate_legs<M: Corrections>(
     // Whatever the networks were fitted to (see `NetworkInput`), at run time their input is the
     // nominal legs.
     let mut raw = model.raw_corrections(q);
+    let reference = model.reference();
     let bound = model.error_bound_mm();
     if bound > 0.0
         && undecided(
             &raw,
             q,
-            model.correction_bounds(),
+            &reference.correction_bounds,
             geometry.leg_range,
             bound,
         )
     {
-        raw = model.reference_corrections(q);
+        raw = reference.raw_corrections(q);
     }
     let mut status = PointStatus::Ok;
     let outside = (0..LEGS).any(|i| {
-        let [lo, hi] = model.training_range()[i];
+        let [lo, hi] = reference.training_range[i];
         q[i] < lo - RANGE_TOLERANCE_MM || q[i] > hi + RANGE_TOLERANCE_MM
     });
     if outside {
@@ -130,7 +116,7 @@ pub fn compensate_legs<M: Corrections>(
     }
     let mut corrections = raw;
     for (i, c) in corrections.iter_mut().enumerate() {
-        let [lo, hi] = model.correction_bounds()[i];
+        let [lo, hi] = reference.correction_bounds[i];
         if !c.is_finite() {
             return unchanged(PointStatus::InvalidInput);
         }

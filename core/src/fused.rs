@@ -81,8 +81,9 @@ pub struct FusedModel {
     kernel: Kernel,
     /// The model, evaluated by [`Model::raw_corrections`] where the fused form cannot stand in.
     reference: Model,
-    /// [`FusedModel::error_bound_mm`] of the fused evaluation, mm.
-    error_bound_mm: f64,
+    /// The fused evaluation's bound against the reference, mm; `None` when it would exceed
+    /// [`MAX_ERROR_MM`] and the reference is evaluated instead.
+    error_bound_mm: Option<f64>,
 }
 
 /// The largest difference from the reference a fused model may have, mm: above it (`Σ|w2|` of
@@ -109,7 +110,7 @@ impl FusedModel {
                 }
             }
         }
-        let blocks = nodes
+        let blocks: Vec<Block> = nodes
             .chunks(LANES)
             .map(|chunk| {
                 let mut block = Block::default();
@@ -123,15 +124,14 @@ impl FusedModel {
                 block
             })
             .collect();
-        let mut fused = Self {
+        let bound = fused_error_bound(&blocks, &output_biases);
+        Self {
             blocks,
             output_biases,
             kernel: Kernel::detect(),
             reference: model.clone(),
-            error_bound_mm: 0.0,
-        };
-        fused.error_bound_mm = fused.fused_error_bound();
-        fused
+            error_bound_mm: Some(bound).filter(|b| *b <= MAX_ERROR_MM),
+        }
     }
 
     /// The raw corrections `Δq = N(q, w)` (mm) for network input legs `q` (mm), before
@@ -140,7 +140,7 @@ impl FusedModel {
     /// non-finite here; compensation then asks the reference). Allocation-free.
     #[inline]
     pub fn raw_corrections(&self, q: &[f64; LEGS]) -> [f64; LEGS] {
-        if self.error_bound_mm > MAX_ERROR_MM {
+        if self.error_bound_mm.is_none() {
             return self.reference.raw_corrections(q);
         }
         let x = self.reference.normalisation.apply(q);
@@ -179,37 +179,32 @@ impl FusedModel {
     /// [`Model::raw_corrections`], mm; 0 when the model's weights are so large that the bound
     /// would exceed [`MAX_ERROR_MM`] and the reference is evaluated instead.
     pub fn error_bound_mm(&self) -> f64 {
-        if self.error_bound_mm > MAX_ERROR_MM {
-            0.0
-        } else {
-            self.error_bound_mm
-        }
+        self.error_bound_mm.unwrap_or(0.0)
     }
+}
 
-    /// The fused evaluation's bound against the reference, mm. The hidden sums are the same bits
-    /// in both; the activations differ by at most `TANH_MAX_ERROR` (this form's, against the
-    /// exact `tanh`) plus one ulp of 1 (the C library's `tanh`), each weighted by `|w2|`; and
-    /// each form's sum of `n` products and the bias is within `γₙ·(Σ|w2| + |b2|)` of its exact
-    /// value, `γₙ = n·u/(1 − n·u)`, `u = 2⁻⁵³`, in any order of summation (the activations are
-    /// at most 1 in magnitude). `n` counts this form's padded nodes and the bias, at least the
-    /// reference's.
-    fn fused_error_bound(&self) -> f64 {
-        let unit = f64::EPSILON / 2.0;
-        let n = (self.blocks.len() * LANES + 2) as f64;
-        let gamma = n * unit / (1.0 - n * unit);
-        (0..LEGS)
-            .map(|k| {
-                let weights: f64 = self
-                    .blocks
-                    .iter()
-                    .flat_map(|b| b.output_weights[k])
-                    .map(f64::abs)
-                    .sum();
-                (TANH_MAX_ERROR + f64::EPSILON) * weights
-                    + 2.0 * gamma * (weights + self.output_biases[k].abs())
-            })
-            .fold(0.0, f64::max)
-    }
+/// The fused evaluation's bound against the reference, mm, of the layer `blocks` with output
+/// biases `output_biases`. The hidden sums are the same bits in both; the activations differ by
+/// at most `TANH_MAX_ERROR` (this form's, against the exact `tanh`) plus one ulp of 1 (the C
+/// library's `tanh`), each weighted by `|w2|`; and each form's sum of `n` products and the bias
+/// is within `γₙ·(Σ|w2| + |b2|)` of its exact value, `γₙ = n·u/(1 − n·u)`, `u = 2⁻⁵³`, in any
+/// order of summation (the activations are at most 1 in magnitude). `n` counts this form's
+/// padded nodes and the bias, at least the reference's.
+fn fused_error_bound(blocks: &[Block], output_biases: &[f64; LEGS]) -> f64 {
+    let unit = f64::EPSILON / 2.0;
+    let n = (blocks.len() * LANES + 2) as f64;
+    let gamma = n * unit / (1.0 - n * unit);
+    (0..LEGS)
+        .map(|k| {
+            let weights: f64 = blocks
+                .iter()
+                .flat_map(|b| b.output_weights[k])
+                .map(f64::abs)
+                .sum();
+            (TANH_MAX_ERROR + f64::EPSILON) * weights
+                + 2.0 * gamma * (weights + output_biases[k].abs())
+        })
+        .fold(0.0, f64::max)
 }
 
 /// One hidden node of the fused layer.
