@@ -7,7 +7,7 @@ use anyhow::Context;
 use hexacomp_client::CompensatedPoint;
 use hexacomp_core::stats::{PoseErrorNorm, PoseErrorStats};
 use hexacomp_core::{Pose, inverse_kinematics};
-use hexacomp_trainer::svg::{Chart, Series};
+use hexacomp_trainer::chart::{Axis, Chart, Series};
 use hexacomp_virtual::VirtualPlatform;
 
 /// The path errors before and after compensation, and at the floor.
@@ -108,8 +108,8 @@ pub fn chart(accuracy: &PathAccuracy, seconds_per_point: f64, title: &str) -> Ch
     };
     Chart {
         title: title.to_string(),
-        x_label: "time along the path (s)".into(),
-        y_label: "position error ‖δ_A‖ (mm)".into(),
+        x: Axis::linear("time along the path (s)"),
+        y: Axis::linear("position error ‖δ_A‖ (mm)"),
         series: vec![
             series("uncompensated", &accuracy.before),
             series("compensated", &accuracy.after),

@@ -170,7 +170,7 @@ impl ChildServer {
     /// Warns, naming the child and its log, that it `happened`.
     fn warn(&self, happened: &str) {
         eprintln!(
-            "warning: the {} {happened} (its log: {})",
+            "warning: {} {happened} (its log: {})",
             self.what,
             self.log.display()
         );

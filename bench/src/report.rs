@@ -8,7 +8,7 @@ use std::path::Path;
 use anyhow::Context;
 use hdrhistogram::Histogram;
 use hexacomp_core::durable::replace_file;
-use hexacomp_trainer::svg::{Chart, Series};
+use hexacomp_trainer::chart::{Axis, Chart, Series};
 use serde::Serialize;
 
 use crate::stream::StreamRun;
@@ -156,52 +156,67 @@ pub fn percentile_distribution(histogram: &Histogram<u64>) -> String {
     text
 }
 
-/// The latency percentile curve of several histograms: x = number of nines of the percentile
-/// (1 = 90 %, 2 = 99 %, 3 = 99.9 %), y = round trip in µs.
+/// The latency percentile curves of several histograms on the usual axes: the percentile on a
+/// log scale of 1/(1−p) (90 %, 99 %, 99.9 % equally spaced) and the round trip (µs) on a log
+/// scale. Each curve ends at its maximum, placed at the percentile of its last recorded value
+/// (1 − 1/count).
 pub fn percentile_chart(title: &str, curves: &[(&str, &Histogram<u64>)]) -> Chart {
     let series = curves
         .iter()
         .map(|(name, histogram)| {
-            let points = (0..=40)
-                .map(|k| {
-                    let nines = k as f64 * 0.1;
-                    let quantile = 1.0 - 10f64.powf(-nines);
-                    (nines, histogram.value_at_quantile(quantile) as f64 / 1e3)
+            let last = 1.0 - 1.0 / histogram.len().max(1) as f64;
+            let points = (0..)
+                .map(|k| 1.0 - 10f64.powf(-0.1 * f64::from(k)))
+                .take_while(|&quantile| quantile < last)
+                .map(|quantile| {
+                    let us = histogram.value_at_quantile(quantile) as f64 / 1e3;
+                    (quantile, us)
                 })
-                .chain(std::iter::once((4.5, histogram.max() as f64 / 1e3)))
+                .chain(std::iter::once((last, histogram.max() as f64 / 1e3)))
                 .collect();
             Series::line(*name, points)
         })
         .collect();
     Chart {
         title: title.to_string(),
-        x_label: "percentile (1 = 90 %, 2 = 99 %, 3 = 99.9 %, 4 = 99.99 %, 4.5 = max)".into(),
-        y_label: "round trip (µs)".into(),
+        x: Axis::percentile("percentile (the last point of a curve is its maximum)"),
+        y: Axis::log("round trip (µs)"),
         series,
     }
 }
 
-/// Round trip along the path: the median and the maximum of each of about 500 stretches of the
-/// stream, against the time along the path (s).
-pub fn along_path_chart(title: &str, latencies_ns: &[u32], period_s: f64) -> Chart {
-    let stretch = latencies_ns.len().div_ceil(500).max(1);
-    let mut medians = Vec::new();
-    let mut maxima = Vec::new();
-    for (k, chunk) in latencies_ns.chunks(stretch).enumerate() {
-        let mut sorted = chunk.to_vec();
-        sorted.sort_unstable();
-        let t = (k * stretch) as f64 * period_s;
-        medians.push((t, sorted[sorted.len() / 2] as f64 / 1e3));
-        maxima.push((t, *sorted.last().expect("non-empty") as f64 / 1e3));
+/// Round trip along the path of each variant (`(name, latencies in ns)`, every variant
+/// streamed along the same path): the maximum of each of about 500 stretches of the stream,
+/// and the median of the first variant's, against the time along the path (s); log scale in µs.
+pub fn along_path_chart(title: &str, runs: &[(&str, &[u32])], period_s: f64) -> Chart {
+    let mut series = Vec::new();
+    for (index, (name, latencies_ns)) in runs.iter().enumerate() {
+        let stretch = latencies_ns.len().div_ceil(500).max(1);
+        let mut medians = Vec::new();
+        let mut maxima = Vec::new();
+        for (k, chunk) in latencies_ns.chunks(stretch).enumerate() {
+            let mut sorted = chunk.to_vec();
+            sorted.sort_unstable();
+            let t = (k * stretch) as f64 * period_s;
+            medians.push((t, f64::from(sorted[sorted.len() / 2]) / 1e3));
+            maxima.push((
+                t,
+                f64::from(*sorted.last().expect("chunks are not empty")) / 1e3,
+            ));
+        }
+        series.push(Series::line(format!("{name}: max of {stretch}"), maxima));
+        if index == 0 {
+            series.push(Series::line(
+                format!("{name}: median of {stretch}"),
+                medians,
+            ));
+        }
     }
     Chart {
         title: title.to_string(),
-        x_label: "time along the path (s)".into(),
-        y_label: "round trip (µs)".into(),
-        series: vec![
-            Series::line(format!("max of {stretch}"), maxima),
-            Series::line(format!("median of {stretch}"), medians),
-        ],
+        x: Axis::linear("time along the path (s)"),
+        y: Axis::log("round trip (µs)"),
+        series,
     }
 }
 
@@ -245,6 +260,34 @@ mod tests {
         assert_eq!(json["variants"]["hexacomp"]["deadline_misses"], 3);
         assert_eq!(json["variants"]["hexacomp"]["points"], 10_000);
         assert!(json["variants"]["hexacomp"]["p9999_ns"].is_u64());
+    }
+
+    #[test]
+    fn percentile_curves_climb_the_nines_and_end_at_each_maximum() {
+        let mut small = new_histogram();
+        for ns in [1000, 2000, 3000, 4000] {
+            small.record(ns).unwrap();
+        }
+        let chart = percentile_chart("t", &[("a", &known_histogram()), ("b", &small)]);
+        assert_eq!(chart.series.len(), 2);
+        let a = &chart.series[0].points;
+        // 10 000 values: quantiles up to 99.9 %, every tenth of a nine, then the maximum at
+        // 1 − 1/10 000.
+        assert_eq!(a.len(), 41, "{a:?}");
+        assert!((a[10].0 - 0.9).abs() < 1e-12 && (a[10].1 - 900.0).abs() <= 0.9);
+        assert!((a[30].0 - 0.999).abs() < 1e-12 && (a[30].1 - 999.0).abs() <= 1.0);
+        assert_eq!(
+            *a.last().unwrap(),
+            (0.9999, known_histogram().max() as f64 / 1e3)
+        );
+        let b = &chart.series[1].points;
+        // Four values: 0 %, 10 %…, 68 % (below 1 − 1/4), then the maximum at 75 %.
+        assert_eq!(b.last().unwrap().0, 0.75, "{b:?}");
+        assert!((b.last().unwrap().1 - 4.0).abs() < 0.01, "{b:?}");
+        assert!(
+            b.windows(2).all(|w| w[1].0 > w[0].0 && w[1].1 >= w[0].1),
+            "{b:?}"
+        );
     }
 
     #[test]

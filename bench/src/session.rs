@@ -101,7 +101,7 @@ impl PathArgs {
 }
 
 /// The variants a benchmark compares.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, clap::ValueEnum)]
 pub enum VariantKind {
     /// Compensation by the hexacomp service over iceoryx2.
     Hexacomp,
@@ -110,10 +110,15 @@ pub enum VariantKind {
     /// The compensation over a Unix domain socket.
     Uds,
     /// The compensation called directly.
+    #[value(name = "inprocess")]
     InProcess,
 }
 
 impl VariantKind {
+    /// The three baselines, in report order.
+    pub const BASELINES: [VariantKind; 3] =
+        [VariantKind::Echo, VariantKind::Uds, VariantKind::InProcess];
+
     /// All four, in report order.
     pub const ALL: [VariantKind; 4] = [
         VariantKind::Hexacomp,

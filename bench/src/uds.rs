@@ -9,6 +9,7 @@
 use std::io::{Read, Write};
 use std::os::unix::net::{UnixListener, UnixStream};
 use std::path::Path;
+use std::time::Duration;
 
 use anyhow::{Context, ensure};
 use hexacomp_client::wire::{MAX_BATCH, PointRequest, PointResponse, RequestKind};
@@ -16,26 +17,41 @@ use hexacomp_client::{CompensatedPoint, PointStatus};
 use hexacomp_core::Geometry;
 use hexacomp_service::Generation;
 use hexacomp_service::serving::compute_point;
+use hexacomp_service::termination::TerminationSignals;
 
 const HEADER_BYTES: usize = 8;
 const POINT_BYTES: usize = 48;
 const RESPONSE_BYTES: usize = 112;
 
-/// Serves compensation on a socket at `path` until killed.
+/// Serves compensation on a socket at `path` until SIGTERM or SIGINT, then removes the socket
+/// file and returns.
 pub fn serve(path: &Path, geometry: Geometry, model: Option<Generation>) -> anyhow::Result<()> {
+    // Blocked before any thread starts: every thread inherits the mask, and the signal waits
+    // for this thread.
+    let termination = TerminationSignals::block()?;
     let _ = std::fs::remove_file(path);
     let listener =
         UnixListener::bind(path).with_context(|| format!("binding {}", path.display()))?;
     let shared = std::sync::Arc::new((geometry, model));
-    for stream in listener.incoming() {
-        let stream = stream.context("accepting a connection")?;
-        let shared = shared.clone();
-        std::thread::spawn(move || {
-            let (geometry, model) = &*shared;
-            // A client that hangs up ends its thread; nothing to report.
-            let _ = serve_connection(stream, geometry, model.as_ref());
-        });
-    }
+    std::thread::spawn(move || {
+        for stream in listener.incoming() {
+            let stream = match stream {
+                Ok(stream) => stream,
+                Err(e) => {
+                    eprintln!("error: accepting a connection: {e}");
+                    std::process::exit(1);
+                }
+            };
+            let shared = shared.clone();
+            std::thread::spawn(move || {
+                let (geometry, model) = &*shared;
+                // A client that hangs up ends its thread; nothing to report.
+                let _ = serve_connection(stream, geometry, model.as_ref());
+            });
+        }
+    });
+    while termination.wait(Duration::from_secs(1)).is_none() {}
+    let _ = std::fs::remove_file(path);
     Ok(())
 }
 

@@ -24,6 +24,15 @@ pub enum Error {
     #[error("drift: {0}")]
     Drift(String),
 
+    /// A chart could not be drawn.
+    #[error("drawing the chart \"{title}\": {message}")]
+    Chart {
+        /// The chart's title.
+        title: String,
+        /// What went wrong.
+        message: String,
+    },
+
     /// A setting is out of its valid range.
     #[error("invalid setting: {0}")]
     InvalidSetting(String),

@@ -16,7 +16,7 @@
 //! - [`train`], [`evaluate`]: the networks and their check on the virtual platform;
 //! - [`pipeline`]: the calibration pipeline (plan → acquire → solve → train) as one type, which
 //!   every command, the bench and the tests run;
-//! - [`svg`], [`table`]: plots and terminal tables for reports;
+//! - [`chart`], [`table`]: plots and terminal tables for reports;
 //! - [`identify`]: the model-based baseline — identification of the geometric parameters by
 //!   iterative least squares, compensation by the identified inverse kinematics; [`physical`]:
 //!   the model shaped further like the machine (lead-screw curves, compliance under the
@@ -35,6 +35,7 @@
 
 pub mod acquire;
 pub mod campaign;
+pub mod chart;
 pub mod check;
 pub mod command_instrument;
 pub mod corrections;
@@ -55,7 +56,6 @@ pub mod pipeline;
 pub mod plan;
 pub mod registration;
 pub mod screening;
-pub mod svg;
 pub mod table;
 pub mod train;
 pub mod verify;

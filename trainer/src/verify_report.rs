@@ -4,9 +4,9 @@
 
 use std::fmt::Write;
 
+use crate::chart::{Axis, Chart, Series};
 use crate::error::{Error, Result};
 use crate::iso9283::{PoseCharacteristics, TestCube, TestPose};
-use crate::svg::{Chart, Series};
 use crate::verify::{Attained, Missed};
 
 /// The conditions of a test, as ISO 9283 asks them reported.
@@ -214,7 +214,7 @@ pub fn raw_csv(attained: &[Attained]) -> String {
 
 /// The chart of one pose's attained positions around the commanded one: `x–y` and `x–z`
 /// deviations in µm, and their barycentre.
-fn pose_chart(pose: &PoseReport, run: &str) -> String {
+fn pose_chart(pose: &PoseReport, run: &str) -> Result<String> {
     let deviation = |p: &[f64; 6], k: usize| (p[k] - pose.commanded[k]) * 1000.0;
     let scatter = |label: &str, points: Vec<(f64, f64)>| Series {
         label: label.into(),
@@ -230,8 +230,8 @@ fn pose_chart(pose: &PoseReport, run: &str) -> String {
             pose.figures.ap_p_mm * 1000.0,
             pose.figures.rp_l_mm * 1000.0
         ),
-        x_label: "Δx, µm".into(),
-        y_label: "Δy or Δz, µm".into(),
+        x: Axis::linear("Δx, µm"),
+        y: Axis::linear("Δy or Δz, µm"),
         series: vec![
             scatter(
                 "attained (Δx, Δy)",
@@ -299,7 +299,10 @@ fn deg(value: f64) -> String {
 }
 
 /// The readable report of `after`, with `before` beside it when given.
-pub fn html(after: &VerifyReport, before: Option<&VerifyReport>) -> String {
+///
+/// # Errors
+/// [`Error::Chart`] when a pose's chart cannot be drawn.
+pub fn html(after: &VerifyReport, before: Option<&VerifyReport>) -> Result<String> {
     let mut page = String::new();
     let _ = write!(
         page,
@@ -390,15 +393,15 @@ pub fn html(after: &VerifyReport, before: Option<&VerifyReport>) -> String {
     for (k, pose) in after.poses.iter().enumerate() {
         page.push_str("<tr>");
         if let Some(before) = before {
-            let _ = write!(page, "<td>{}</td>", pose_chart(&before.poses[k], "before"));
+            let _ = write!(page, "<td>{}</td>", pose_chart(&before.poses[k], "before")?);
         }
         let _ = write!(
             page,
             "<td>{}</td>",
-            pose_chart(pose, if before.is_some() { "after" } else { "" })
+            pose_chart(pose, if before.is_some() { "after" } else { "" })?
         );
         page.push_str("</tr>\n");
     }
     page.push_str("</table>\n</body></html>\n");
-    page
+    Ok(page)
 }

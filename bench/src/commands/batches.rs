@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 
 use hexacomp_client::wire::MAX_BATCH;
-use hexacomp_trainer::svg::{Chart, Series};
+use hexacomp_trainer::chart::{Axis, Chart, Series};
 
 use crate::path::interpolate;
 use crate::report::{write_into, write_json};
@@ -83,23 +83,23 @@ pub fn run(command: &BatchesCommand) -> anyhow::Result<()> {
     );
     let chart = Chart {
         title: "Throughput against batch size".into(),
-        x_label: "log₂ of the batch size (0 = 1 point, 10 = 1024 points per request)".into(),
-        y_label: "million points per second".into(),
+        x: Axis::log("points per request"),
+        y: Axis::log("million points per second"),
         series: curves
             .iter()
             .map(|(kind, rates)| {
                 Series::line(
                     kind.name(),
-                    rates
+                    sizes
                         .iter()
-                        .enumerate()
-                        .map(|(k, r)| (k as f64, r / 1e6))
+                        .zip(rates)
+                        .map(|(&batch, rate)| (batch as f64, rate / 1e6))
                         .collect(),
                 )
             })
             .collect(),
     };
-    let svg = write_into(session.out_dir(), "batches.svg", &chart.to_svg())?;
+    let svg = write_into(session.out_dir(), "batches.svg", &chart.to_svg()?)?;
     println!("wrote {}", svg.display());
     if let Some(file) = &command.json {
         let rates: std::collections::BTreeMap<&str, &Vec<f64>> =

@@ -153,7 +153,8 @@ pub fn run(command: &CompareCommand) -> anyhow::Result<()> {
     let mut written = vec![write_into(
         dir,
         "compare-percentiles.svg",
-        &report::percentile_chart("Round trip per point: hexacomp and baselines", &curves).to_svg(),
+        &report::percentile_chart("Round trip per point: hexacomp and baselines", &curves)
+            .to_svg()?,
     )?];
     for (kind, histogram, ..) in &merged {
         written.push(write_into(

@@ -6,7 +6,6 @@ use hexacomp_client::{Client, ClientOptions, DeployOutcome};
 
 use crate::accuracy::PathStats;
 use crate::path::interpolate;
-use crate::report::{self, Summary};
 use crate::session::{PathArgs, Session, SetupArgs, VariantKind};
 use crate::stream::{Pacing, StreamOptions, stream};
 
@@ -14,19 +13,17 @@ use crate::stream::{Pacing, StreamOptions, stream};
 /// joint corrections, decoupled networks), start the service without a model, hot-swap the
 /// calibrated model in, stream an interpolated path at the interpolation rate through it, and
 /// print the path accuracy of the virtual machine before and after compensation and the latency
-/// next to the baselines. Nothing to prepare; reports go to --out-dir.
+/// next to the baselines streamed along the same path at the same rate. Nothing to prepare;
+/// reports go to --out-dir.
 #[derive(Debug, clap::Args)]
 pub struct DemoCommand {
     #[command(flatten)]
     setup: SetupArgs,
     #[command(flatten)]
     path: PathArgs,
-    /// Duration of the path, s.
+    /// Duration of the path, s (hexacomp and each of the three baselines stream it once).
     #[arg(long, default_value_t = 10.0)]
     duration: f64,
-    /// Points per baseline in the latency comparison.
-    #[arg(long, default_value_t = 20_000)]
-    compare_points: usize,
 }
 
 pub fn run(command: &DemoCommand) -> anyhow::Result<()> {
@@ -64,50 +61,27 @@ pub fn run(command: &DemoCommand) -> anyhow::Result<()> {
         spec.rate_hz
     );
     let mut hexacomp = crate::variant::OverIceoryx::connect(&instance)?;
-    let run = stream(
-        &mut hexacomp,
-        &path.poses,
-        &StreamOptions {
-            pacing: Pacing::Period(path.period_s),
-            batch: 1,
-            keep_points: true,
-            swapping: None,
-            deadline_s: path.period_s,
-        },
-    )?;
-    drop(hexacomp);
-    let report = super::path::report_path(&session, &path, &run, "demo")?;
-    drop(_service);
-
-    println!(
-        "\n4. latency next to the baselines ({} points each, free running)",
-        command.compare_points
-    );
-    // The same path, lap after lap, for as many points as asked.
-    let poses: Vec<[f64; 6]> = path
-        .poses
-        .iter()
-        .cycle()
-        .take(command.compare_points.max(1))
-        .copied()
-        .collect();
     let options = StreamOptions {
-        pacing: Pacing::FreeRunning,
+        pacing: Pacing::Period(path.period_s),
         batch: 1,
-        keep_points: false,
+        keep_points: true,
         swapping: None,
         deadline_s: path.period_s,
     };
-    let mut rows = Vec::new();
-    for kind in VariantKind::ALL {
-        let (mut variant, child) = session.variant(kind)?;
-        stream(variant.as_mut(), &poses[..poses.len().min(2000)], &options)?;
-        let run = stream(variant.as_mut(), &poses, &options)?;
-        drop(variant);
-        drop(child);
-        rows.push((kind.name(), Summary::of_run(&run), run.points_per_second()));
-    }
-    println!("{}", report::latency_table(&rows));
+    let run = stream(&mut hexacomp, &path.poses, &options)?;
+    drop(hexacomp);
+    drop(_service);
+
+    println!("\n4. the same path through the baselines, at the same rate");
+    let mut runs = vec![(VariantKind::Hexacomp, run)];
+    runs.extend(super::path::stream_baselines(
+        &session,
+        &path,
+        &VariantKind::BASELINES,
+        &options,
+    )?);
+    let report = super::path::report_path(&session, &path, &runs, "demo")?;
+    let hexacomp = report.summaries[0].1;
 
     let accuracy = match report.accuracy {
         Some(PathStats {
@@ -129,11 +103,11 @@ pub fn run(command: &DemoCommand) -> anyhow::Result<()> {
     println!(
         "\nSummary: {accuracy}; round trip p50 {:.2} µs, p99.9 {:.2} µs, deadline misses at {} \
          Hz: {}; {:.1} s in all.",
-        report.summary.p50_ns as f64 / 1e3,
-        report.summary.p999_ns as f64 / 1e3,
+        hexacomp.p50_ns as f64 / 1e3,
+        hexacomp.p999_ns as f64 / 1e3,
         spec.rate_hz,
-        report.summary.deadline_misses,
+        hexacomp.deadline_misses,
         total.elapsed().as_secs_f64()
     );
-    run.ensure_no_failures("the path")
+    runs[0].1.ensure_no_failures("the path")
 }

@@ -10,8 +10,9 @@ use crate::session::{PathArgs, Session, SetupArgs, VariantKind};
 use crate::stream::{Pacing, StreamOptions, StreamRun, stream};
 
 /// Stream an interpolated path through the hexacomp service, one request per interpolation
-/// period (1 kHz by default), and report each point's round trip: percentiles, deadline misses,
-/// the `.hgrm` distribution and SVG plots, then the path error of the virtual machine before and
+/// period (1 kHz by default), then through the baselines along the same path at the same rate,
+/// and report each point's round trip: percentiles, deadline misses, the `.hgrm` distribution
+/// and SVG plots with every variant, then the path error of the virtual machine before and
 /// after compensation.
 ///
 /// Starts a service (and calibrates the virtual platform for a model) unless --instance and
@@ -32,6 +33,14 @@ pub struct PathCommand {
     /// Points per request.
     #[arg(long, default_value_t = 1)]
     batch: usize,
+    /// Baselines streamed along the same path at the same rate after hexacomp, each for
+    /// --duration: echo (the iceoryx2 transport floor), uds (the same compensation over a Unix
+    /// domain socket), inprocess (the computation called directly).
+    #[arg(long, value_delimiter = ',', default_value = "echo,uds,inprocess")]
+    baselines: Vec<VariantKind>,
+    /// Stream hexacomp alone, without baselines.
+    #[arg(long, conflicts_with = "baselines")]
+    no_baselines: bool,
     /// Write the JSON summary here.
     #[arg(long, value_name = "FILE")]
     json: Option<PathBuf>,
@@ -40,14 +49,23 @@ pub struct PathCommand {
 /// What one streamed path gave.
 #[derive(Debug)]
 pub struct PathReport {
-    /// The latency figures.
-    pub summary: Summary,
+    /// The latency figures of each variant, hexacomp first.
+    pub summaries: Vec<(VariantKind, Summary)>,
     /// Accuracy before and after compensation and at the floor; `None` when not every point was
     /// answered (the path was not driven).
     pub accuracy: Option<PathStats>,
 }
 
 pub fn run(command: &PathCommand) -> anyhow::Result<()> {
+    let baselines: &[VariantKind] = if command.no_baselines {
+        &[]
+    } else {
+        &command.baselines
+    };
+    anyhow::ensure!(
+        !baselines.contains(&VariantKind::Hexacomp),
+        "--baselines: hexacomp is what is measured; the baselines are echo, uds and inprocess"
+    );
     let session = Session::prepare(&command.setup)?;
     let spec = command.path.spec(command.duration);
     let path = interpolate(&session.geometry, &spec)?;
@@ -70,41 +88,75 @@ pub fn run(command: &PathCommand) -> anyhow::Result<()> {
             Pacing::Period(p) => format!("one request every {:.3} ms", p * 1e3),
         }
     );
-    let run = stream(
-        &mut variant,
-        &path.poses,
-        &StreamOptions {
-            pacing,
-            batch: command.batch,
-            keep_points: true,
-            swapping: None,
-            deadline_s: path.period_s * command.batch as f64,
-        },
-    )?;
-    let report = report_path(&session, &path, &run, "path")?;
+    let options = StreamOptions {
+        pacing,
+        batch: command.batch,
+        keep_points: true,
+        swapping: None,
+        deadline_s: path.period_s * command.batch as f64,
+    };
+    let run = stream(&mut variant, &path.poses, &options)?;
+    drop(variant);
+    drop(_service);
+    let mut runs = vec![(VariantKind::Hexacomp, run)];
+    runs.extend(stream_baselines(&session, &path, baselines, &options)?);
+    let report = report_path(&session, &path, &runs, "path")?;
     if let Some(file) = &command.json {
         let mut json = JsonSummary::default();
-        json.variants
-            .insert(VariantKind::Hexacomp.name().into(), report.summary);
+        for (kind, summary) in &report.summaries {
+            json.variants.insert(kind.name().into(), *summary);
+        }
         json.write(file)?;
     }
-    run.ensure_no_failures("the path")
+    runs[0].1.ensure_no_failures("the path")
 }
 
-/// Prints and writes the reports of a path streamed through hexacomp: latency table, `.hgrm`,
-/// percentile and along-the-path plots, and the accuracy along the path. Files are named
+/// Streams `path` through each of `baselines` in turn, one server at a time, with `options`
+/// (the points are not kept: the accuracy is hexacomp's).
+pub fn stream_baselines(
+    session: &Session,
+    path: &Path,
+    baselines: &[VariantKind],
+    options: &StreamOptions,
+) -> anyhow::Result<Vec<(VariantKind, StreamRun)>> {
+    let options = StreamOptions {
+        keep_points: false,
+        ..options.clone()
+    };
+    let mut runs = Vec::new();
+    for &kind in baselines {
+        println!("streaming the same path through {}…", kind.name());
+        let (mut variant, child) = session.variant(kind)?;
+        let run = stream(variant.as_mut(), &path.poses, &options)?;
+        drop(variant);
+        drop(child);
+        run.ensure_no_failures(kind.name())?;
+        runs.push((kind, run));
+    }
+    Ok(runs)
+}
+
+/// Prints and writes the reports of a path streamed through hexacomp (the first of `runs`) and
+/// the baselines (the others): latency table, hexacomp's `.hgrm`, percentile and along-the-path
+/// plots of every variant, and hexacomp's accuracy along the path. Files are named
 /// `<stem>-*.{hgrm,svg}` in the output folder.
 pub fn report_path(
     session: &Session,
     path: &Path,
-    run: &StreamRun,
+    runs: &[(VariantKind, StreamRun)],
     stem: &str,
 ) -> anyhow::Result<PathReport> {
-    let summary = Summary::of_run(run);
-    println!(
-        "\n{}",
-        report::latency_table(&[("hexacomp", summary, run.points_per_second())])
-    );
+    let run = &runs[0].1;
+    let summaries: Vec<(VariantKind, Summary)> = runs
+        .iter()
+        .map(|(kind, run)| (*kind, Summary::of_run(run)))
+        .collect();
+    let rows: Vec<(&str, Summary, f64)> = summaries
+        .iter()
+        .zip(runs)
+        .map(|((kind, summary), (_, run))| (kind.name(), *summary, run.points_per_second()))
+        .collect();
+    println!("\n{}", report::latency_table(&rows));
     if run.failures > 0 {
         println!(
             "{} requests failed; the first: {}",
@@ -133,20 +185,26 @@ pub fn report_path(
             dir,
             &format!("{stem}-percentiles.svg"),
             &report::percentile_chart(
-                "Round trip per point, hexacomp over iceoryx2",
-                &[("hexacomp", &run.histogram)],
+                "Round trip per point along the path",
+                &runs
+                    .iter()
+                    .map(|(kind, run)| (kind.name(), &run.histogram))
+                    .collect::<Vec<_>>(),
             )
-            .to_svg(),
+            .to_svg()?,
         )?,
         write_into(
             dir,
             &format!("{stem}-latency-along-path.svg"),
             &report::along_path_chart(
                 "Round trip along the path",
-                &run.latencies_ns,
+                &runs
+                    .iter()
+                    .map(|(kind, run)| (kind.name(), run.latencies_ns.as_slice()))
+                    .collect::<Vec<_>>(),
                 path.period_s * (run.points as f64 / run.latencies_ns.len() as f64),
             )
-            .to_svg(),
+            .to_svg()?,
         )?,
     ];
     // Forward kinematics of the virtual machine at up to 6000 points of each run.
@@ -191,13 +249,13 @@ pub fn report_path(
                 path.period_s * stride as f64,
                 "Path error of the virtual machine",
             )
-            .to_svg(),
+            .to_svg()?,
         )?);
     }
     let names: Vec<String> = written.iter().map(|p| p.display().to_string()).collect();
     println!("wrote {}", names.join(", "));
     Ok(PathReport {
-        summary,
+        summaries,
         accuracy: (!accuracy.before.is_empty()).then_some(stats),
     })
 }

@@ -138,7 +138,7 @@ pub fn run(command: &SwapCommand) -> anyhow::Result<()> {
             "Round trip during hot swaps and in steady state",
             &[("steady", &steady), ("during swaps", &during)],
         )
-        .to_svg(),
+        .to_svg()?,
     )?;
     println!("wrote {}", svg.display());
     if let Some(file) = &command.json {

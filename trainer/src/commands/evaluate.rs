@@ -4,11 +4,11 @@ use std::path::{Path, PathBuf};
 
 use hexacomp_core::Geometry;
 use hexacomp_core::stats::{ErrorStats, PoseErrorStats};
+use hexacomp_trainer::chart::{Axis, Chart, Series};
 use hexacomp_trainer::distill::DistillOptions;
 use hexacomp_trainer::evaluate::{
     Evaluation, EvaluationOptions, Method, Protocol, SizeResult, evaluate,
 };
-use hexacomp_trainer::svg::{Chart, Series};
 use hexacomp_trainer::train::TrainOptions;
 use hexacomp_virtual::{DEFAULT_MACHINE_SEED, ErrorModel, ErrorVariant};
 
@@ -314,8 +314,8 @@ pub fn write_figures(evaluation: &Evaluation, dir: &Path) -> anyhow::Result<()> 
             .collect();
         let chart = Chart {
             title: format!("{title} ({} training configurations)", last.configurations),
-            x_label: "validation pose".into(),
-            y_label: unit.into(),
+            x: Axis::linear("validation pose"),
+            y: Axis::linear(unit),
             series,
         };
         write(dir, file, &chart)?;
@@ -368,8 +368,8 @@ pub fn write_figures(evaluation: &Evaluation, dir: &Path) -> anyhow::Result<()> 
             file,
             &Chart {
                 title: title.into(),
-                x_label: "training configurations".into(),
-                y_label: unit.into(),
+                x: Axis::linear("training configurations"),
+                y: Axis::linear(unit),
                 series,
             },
         )?;
@@ -379,5 +379,5 @@ pub fn write_figures(evaluation: &Evaluation, dir: &Path) -> anyhow::Result<()> 
 
 fn write(dir: &Path, file: &str, chart: &Chart) -> anyhow::Result<()> {
     let path = dir.join(file);
-    Ok(super::write_bytes(&path, chart.to_svg().as_bytes())?)
+    Ok(super::write_bytes(&path, chart.to_svg()?.as_bytes())?)
 }

@@ -10,7 +10,7 @@ use hexacomp_formats::read_corrections;
 use hexacomp_trainer::pipeline::Pipeline;
 
 use super::solve::{ScreeningArgs, screen_corrections_file};
-use hexacomp_trainer::svg::{Chart, Series};
+use hexacomp_trainer::chart::{Axis, Chart, Series};
 use hexacomp_trainer::train::{Architecture, Selection, TrainOptions, Trained, training_work};
 use indicatif::{ProgressBar, ProgressStyle};
 
@@ -317,9 +317,9 @@ pub fn write_selection_plot(
                 Architecture::Decoupled => "Eq. 21 for the totals",
             }
         ),
-        x_label: "hidden nodes".into(),
-        y_label: "RMSE (mm)".into(),
+        x: Axis::linear("hidden nodes"),
+        y: Axis::linear("RMSE (mm)"),
         series,
     };
-    Ok(super::write_bytes(path, chart.to_svg().as_bytes())?)
+    Ok(super::write_bytes(path, chart.to_svg()?.as_bytes())?)
 }

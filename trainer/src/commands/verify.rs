@@ -251,7 +251,7 @@ pub fn run(geometry: &Geometry, args: &VerifyArgs) -> anyhow::Result<()> {
     );
     print_figures(&report, before.as_ref());
     super::write_bytes(&json_path, report.to_json().as_bytes())?;
-    super::write_bytes(&report_path, html(&report, before.as_ref()).as_bytes())?;
+    super::write_bytes(&report_path, html(&report, before.as_ref())?.as_bytes())?;
     eprintln!(
         "wrote {}, {} and {}",
         args.out.display(),
