@@ -4,11 +4,11 @@
 
 use std::path::Path;
 
-use hexacomp_client::wire::{PointRequest, RequestKind};
+use hexacomp_client::wire::{PointRequest, PointResponse, RequestKind};
 use hexacomp_client::{Client, ClientOptions, CompensatedPoint, PointStatus};
 use hexacomp_core::Geometry;
 use hexacomp_service::Generation;
-use hexacomp_service::serving::compute_point;
+use hexacomp_service::serving::{compute_pair, compute_point};
 
 use crate::uds::UdsClient;
 
@@ -91,20 +91,39 @@ impl Variant for InProcess {
         poses: &[[f64; 6]],
         out: &mut [CompensatedPoint],
     ) -> anyhow::Result<()> {
-        for (pose, slot) in poses.iter().zip(out.iter_mut()) {
-            let point = compute_point(
-                &self.geometry,
-                self.model.as_ref(),
-                RequestKind::Poses,
-                &PointRequest { values: *pose },
-            );
-            *slot = CompensatedPoint {
-                legs: point.legs,
-                corrections: point.corrections,
-                status: PointStatus::from_u8(point.status).unwrap_or(PointStatus::InvalidInput),
-                generation: point.generation,
-            };
+        let (geometry, model) = (&self.geometry, self.model.as_ref());
+        let request = |pose: &[f64; 6]| PointRequest { values: *pose };
+        // Two at a time, as the service computes a request's points.
+        for (poses, out) in poses.chunks(2).zip(out.chunks_mut(2)) {
+            match (poses, out) {
+                ([p0, p1], [o0, o1]) => {
+                    let [r0, r1] = compute_pair(
+                        geometry,
+                        model,
+                        RequestKind::Poses,
+                        [&request(p0), &request(p1)],
+                    );
+                    (*o0, *o1) = (answered(&r0), answered(&r1));
+                }
+                (poses, out) => {
+                    for (pose, slot) in poses.iter().zip(out) {
+                        let point =
+                            compute_point(geometry, model, RequestKind::Poses, &request(pose));
+                        *slot = answered(&point);
+                    }
+                }
+            }
         }
         Ok(())
+    }
+}
+
+/// A computed point as the client reports it.
+fn answered(point: &PointResponse) -> CompensatedPoint {
+    CompensatedPoint {
+        legs: point.legs,
+        corrections: point.corrections,
+        status: PointStatus::from_u8(point.status).unwrap_or(PointStatus::InvalidInput),
+        generation: point.generation,
     }
 }

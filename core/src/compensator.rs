@@ -39,6 +39,10 @@ pub trait Corrections {
     fn error_bound_mm(&self) -> f64 {
         0.0
     }
+    /// [`Corrections::raw_corrections`] of several points (each the same bits as alone).
+    fn raw_corrections_of<const N: usize>(&self, q: [&[f64; LEGS]; N]) -> [[f64; LEGS]; N] {
+        q.map(|q| self.raw_corrections(q))
+    }
     /// The model these corrections are of.
     fn reference(&self) -> &Model;
 }
@@ -58,6 +62,10 @@ impl Corrections for FusedModel {
     fn raw_corrections(&self, q: &[f64; LEGS]) -> [f64; LEGS] {
         FusedModel::raw_corrections(self, q)
     }
+    #[inline]
+    fn raw_corrections_of<const N: usize>(&self, q: [&[f64; LEGS]; N]) -> [[f64; LEGS]; N] {
+        FusedModel::raw_corrections_of(self, q)
+    }
     fn error_bound_mm(&self) -> f64 {
         FusedModel::error_bound_mm(self)
     }
@@ -74,25 +82,76 @@ pub fn compensate_legs<M: Corrections>(
     model: Option<&M>,
     q: &[f64; LEGS],
 ) -> Compensated {
+    match needs_model(geometry, model, q) {
+        Ok(model) => corrected(geometry, model, q, model.raw_corrections(q)),
+        Err(unchanged) => unchanged,
+    }
+}
+
+/// [`compensate_legs`] of two points, their corrections computed together
+/// ([`Corrections::raw_corrections_of`]): the same results as one at a time.
+pub fn compensate_legs_pair<M: Corrections>(
+    geometry: &Geometry,
+    model: Option<&M>,
+    [q0, q1]: [&[f64; LEGS]; 2],
+) -> [Compensated; 2] {
+    match (
+        needs_model(geometry, model, q0),
+        needs_model(geometry, model, q1),
+    ) {
+        (Ok(model), Ok(_)) => {
+            let [raw0, raw1] = model.raw_corrections_of([q0, q1]);
+            [
+                corrected(geometry, model, q0, raw0),
+                corrected(geometry, model, q1, raw1),
+            ]
+        }
+        _ => [
+            compensate_legs(geometry, model, q0),
+            compensate_legs(geometry, model, q1),
+        ],
+    }
+}
+
+/// The model, when legs `q` (mm) are to be corrected by it; otherwise the point as it is
+/// answered unchanged: invalid, out of stroke, or without a model.
+fn needs_model<'m, M: Corrections>(
+    geometry: &Geometry,
+    model: Option<&'m M>,
+    q: &[f64; LEGS],
+) -> Result<&'m M, Compensated> {
     let unchanged = |status| Compensated {
         legs: *q,
         corrections: [0.0; LEGS],
         status,
     };
     if q.iter().any(|v| !v.is_finite()) {
-        return unchanged(PointStatus::InvalidInput);
+        return Err(unchanged(PointStatus::InvalidInput));
     }
     if q.iter()
         .any(|v| stroke_status(*v, geometry.leg_range) != LegStatus::Ok)
     {
-        return unchanged(PointStatus::OutOfStroke);
+        return Err(unchanged(PointStatus::OutOfStroke));
     }
-    let Some(model) = model else {
-        return unchanged(PointStatus::NoModel);
+    model.ok_or_else(|| unchanged(PointStatus::NoModel))
+}
+
+/// Legs `q` (mm) corrected by `model`, whose raw corrections there are `raw` (mm): where they lie
+/// too close to a threshold to decide a status, the reference's corrections instead; then the
+/// trained range, the correction bounds and the stroke decide the status.
+fn corrected<M: Corrections>(
+    geometry: &Geometry,
+    model: &M,
+    q: &[f64; LEGS],
+    mut raw: [f64; LEGS],
+) -> Compensated {
+    let unchanged = |status| Compensated {
+        legs: *q,
+        corrections: [0.0; LEGS],
+        status,
     };
     // Whatever the networks were fitted to (see `NetworkInput`), at run time their input is the
     // nominal legs.
-    let mut raw = model.raw_corrections(q);
     let reference = model.reference();
     let bound = model.error_bound_mm();
     if bound > 0.0
@@ -177,12 +236,59 @@ pub fn compensate_pose<M: Corrections>(
     model: Option<&M>,
     pose: &Pose,
 ) -> Compensated {
+    match nominal_legs(geometry, pose) {
+        Ok(q) => compensate_legs(geometry, model, &q),
+        Err(invalid) => invalid,
+    }
+}
+
+/// [`compensate_pose`] of two poses, their corrections computed together
+/// ([`compensate_legs_pair`]): the same results as one at a time.
+pub fn compensate_pose_pair<M: Corrections>(
+    geometry: &Geometry,
+    model: Option<&M>,
+    [p0, p1]: [&Pose; 2],
+) -> [Compensated; 2] {
+    match (nominal_legs(geometry, p0), nominal_legs(geometry, p1)) {
+        (Ok(q0), Ok(q1)) => compensate_legs_pair(geometry, model, [&q0, &q1]),
+        _ => [
+            compensate_pose(geometry, model, p0),
+            compensate_pose(geometry, model, p1),
+        ],
+    }
+}
+
+/// Compensates `poses` (mm, rad) into `out`, `out[i]` for `poses[i]` (as many as the shorter
+/// of the two holds), two at a time ([`compensate_pose_pair`]): the same results as
+/// [`compensate_pose`] one by one. Allocation-free.
+pub fn compensate_poses<M: Corrections>(
+    geometry: &Geometry,
+    model: Option<&M>,
+    poses: &[Pose],
+    out: &mut [Compensated],
+) {
+    for (poses, out) in poses.chunks(2).zip(out.chunks_mut(2)) {
+        match (poses, out) {
+            ([p0, p1], [o0, o1]) => {
+                [*o0, *o1] = compensate_pose_pair(geometry, model, [p0, p1]);
+            }
+            (poses, out) => {
+                for (pose, slot) in poses.iter().zip(out) {
+                    *slot = compensate_pose(geometry, model, pose);
+                }
+            }
+        }
+    }
+}
+
+/// The nominal legs of `pose` (mm), or the answer to a pose that is not finite.
+fn nominal_legs(geometry: &Geometry, pose: &Pose) -> Result<[f64; LEGS], Compensated> {
     if !pose.is_finite() {
-        return Compensated {
+        return Err(Compensated {
             legs: [f64::NAN; LEGS],
             corrections: [0.0; LEGS],
             status: PointStatus::InvalidInput,
-        };
+        });
     }
-    compensate_legs(geometry, model, &inverse_kinematics(geometry, pose).lengths)
+    Ok(inverse_kinematics(geometry, pose).lengths)
 }

@@ -140,19 +140,30 @@ impl FusedModel {
     /// non-finite here; compensation then asks the reference). Allocation-free.
     #[inline]
     pub fn raw_corrections(&self, q: &[f64; LEGS]) -> [f64; LEGS] {
+        let [corrections] = self.raw_corrections_of([q]);
+        corrections
+    }
+
+    /// [`FusedModel::raw_corrections`] of several points at once: the blocks' weights are loaded
+    /// once for all of them, and their activations overlap in the pipeline. Each point's
+    /// corrections are the same bits as [`FusedModel::raw_corrections`] gives it alone.
+    #[inline]
+    pub fn raw_corrections_of<const N: usize>(&self, q: [&[f64; LEGS]; N]) -> [[f64; LEGS]; N] {
         if self.error_bound_mm.is_none() {
-            return self.reference.raw_corrections(q);
+            return q.map(|q| self.reference.raw_corrections(q));
         }
-        let x = self.reference.normalisation.apply(q);
+        let x = q.map(|q| self.reference.normalisation.apply(q));
         let sums = match self.kernel {
             Kernel::Portable => hidden_sums(&self.blocks, &x),
             #[cfg(target_arch = "x86_64")]
             // SAFETY: `Kernel::Avx2` is only chosen when the CPU reports AVX2.
             Kernel::Avx2 => unsafe { hidden_sums_avx2(&self.blocks, &x) },
         };
-        std::array::from_fn(|k| {
-            let [a, b, c, d] = sums[k];
-            self.output_biases[k] + ((a + b) + (c + d))
+        sums.map(|sums| {
+            std::array::from_fn(|k| {
+                let [a, b, c, d] = sums[k];
+                self.output_biases[k] + ((a + b) + (c + d))
+            })
         })
     }
 
@@ -240,33 +251,44 @@ fn output_bias(network: &Network, k: usize) -> f64 {
 }
 
 /// Each correction's [`LANES`] partial sums `Σ w2·tanh(b1 + Σ w1·x)` over the blocks, for
-/// normalised input `x`.
+/// each of `N` normalised inputs `x`; a point's sums are the same bits whatever `N`.
 #[inline(always)]
-fn hidden_sums_inline(blocks: &[Block], x: &[f64; LEGS]) -> [[f64; LANES]; LEGS] {
-    let mut sums = [[0.0; LANES]; LEGS];
+fn hidden_sums_inline<const N: usize>(
+    blocks: &[Block],
+    x: &[[f64; LEGS]; N],
+) -> [[[f64; LANES]; LEGS]; N] {
+    let mut sums = [[[0.0; LANES]; LEGS]; N];
     for block in blocks {
-        // Input 0 first, then 1…5: the reference's order, so `z` is the same bits.
-        let mut z: [f64; LANES] = std::array::from_fn(|l| block.input_weights[0][l] * x[0]);
-        for (weights, xi) in block.input_weights.iter().zip(x).skip(1) {
-            z = std::array::from_fn(|l| z[l] + weights[l] * xi);
-        }
-        let activation = tanh_lanes(std::array::from_fn(|l| block.biases[l] + z[l]));
-        for (sum, weights) in sums.iter_mut().zip(&block.output_weights) {
-            *sum = std::array::from_fn(|l| sum[l] + weights[l] * activation[l]);
+        for (sums, x) in sums.iter_mut().zip(x) {
+            // Input 0 first, then 1…5: the reference's order, so `z` is the same bits.
+            let mut z: [f64; LANES] = std::array::from_fn(|l| block.input_weights[0][l] * x[0]);
+            for (weights, xi) in block.input_weights.iter().zip(x).skip(1) {
+                z = std::array::from_fn(|l| z[l] + weights[l] * xi);
+            }
+            let activation = tanh_lanes(std::array::from_fn(|l| block.biases[l] + z[l]));
+            for (sum, weights) in sums.iter_mut().zip(&block.output_weights) {
+                *sum = std::array::from_fn(|l| sum[l] + weights[l] * activation[l]);
+            }
         }
     }
     sums
 }
 
 /// [`hidden_sums_inline`] for the target's baseline instruction set.
-fn hidden_sums(blocks: &[Block], x: &[f64; LEGS]) -> [[f64; LANES]; LEGS] {
+fn hidden_sums<const N: usize>(
+    blocks: &[Block],
+    x: &[[f64; LEGS]; N],
+) -> [[[f64; LANES]; LEGS]; N] {
     hidden_sums_inline(blocks, x)
 }
 
 /// [`hidden_sums_inline`] compiled for AVX2.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-fn hidden_sums_avx2(blocks: &[Block], x: &[f64; LEGS]) -> [[f64; LANES]; LEGS] {
+fn hidden_sums_avx2<const N: usize>(
+    blocks: &[Block],
+    x: &[[f64; LEGS]; N],
+) -> [[[f64; LANES]; LEGS]; N] {
     hidden_sums_inline(blocks, x)
 }
 
@@ -385,14 +407,44 @@ mod tests {
         }
         let fused = FusedModel::new(&decoupled());
         for i in 0..10_000 {
-            let x = fused.reference.normalisation.apply(&legs(i));
+            // One point, and two together.
+            let x = [fused.reference.normalisation.apply(&legs(i))];
             let portable = hidden_sums(&fused.blocks, &x);
             // SAFETY: AVX2 was detected above.
             let avx2 = unsafe { hidden_sums_avx2(&fused.blocks, &x) };
             assert_eq!(
-                portable.map(|s| s.map(f64::to_bits)),
-                avx2.map(|s| s.map(f64::to_bits))
+                portable.map(|p| p.map(|s| s.map(f64::to_bits))),
+                avx2.map(|p| p.map(|s| s.map(f64::to_bits)))
             );
+            let x = [x[0], fused.reference.normalisation.apply(&legs(i + 1))];
+            let portable = hidden_sums(&fused.blocks, &x);
+            // SAFETY: AVX2 was detected above.
+            let avx2 = unsafe { hidden_sums_avx2(&fused.blocks, &x) };
+            assert_eq!(
+                portable.map(|p| p.map(|s| s.map(f64::to_bits))),
+                avx2.map(|p| p.map(|s| s.map(f64::to_bits)))
+            );
+        }
+    }
+
+    #[test]
+    fn points_evaluated_together_get_the_bits_they_get_alone() {
+        let model = decoupled();
+        // The fused evaluation, and a model beyond the bound (the reference for every point).
+        for fused in [
+            FusedModel::new(&model),
+            FusedModel::new(&with_output_weights_of(&model, 1e9)),
+        ] {
+            for i in 0..5_000 {
+                let (a, b, c) = (legs(i), legs(i + 7919), legs(i + 104_729));
+                let bits = |corrections: [f64; LEGS]| corrections.map(f64::to_bits);
+                let alone = [a, b, c].map(|q| bits(fused.raw_corrections(&q)));
+                assert_eq!(
+                    fused.raw_corrections_of([&a, &b]).map(bits),
+                    [alone[0], alone[1]]
+                );
+                assert_eq!(fused.raw_corrections_of([&a, &b, &c]).map(bits), alone);
+            }
         }
     }
 }

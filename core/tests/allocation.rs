@@ -5,7 +5,7 @@ use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
 
 use hexacomp_core::Geometry;
-use hexacomp_core::compensator::compensate_pose;
+use hexacomp_core::compensator::{compensate_pose, compensate_poses};
 use hexacomp_core::fused::FusedModel;
 use hexacomp_core::model::{Model, NetworkInput, Networks, Provenance};
 use hexacomp_core::network::{Network, Normalisation};
@@ -93,6 +93,12 @@ fn inference_and_compensation_allocate_nothing() {
             checksum += compensate_pose(&g, Some(&fused), pose).legs[0];
         }
         checksum += compensate_pose(&g, Some(&at_a_bound), &poses[0]).legs[0];
+        // In pairs, as the service computes a batch.
+        let mut batch = [compensate_pose(&g, Some(&fused), &poses[0]); 8];
+        for chunk in poses.chunks(8) {
+            compensate_poses(&g, Some(&fused), chunk, &mut batch);
+            checksum += batch[0].legs[0];
+        }
         let after = allocations();
         assert!(checksum.is_finite());
         assert_eq!(

@@ -19,13 +19,15 @@ use iceoryx2::prelude::*;
 
 use crate::admission::Admission;
 use crate::fair_queue::FairQueue;
-use crate::serving::{CompensationServer, check_header, compute_point};
+use crate::serving::{CompensationServer, check_header, compute_pair, compute_point};
 use crate::{Counters, Generation};
 
 /// Points of a large batch computed between two looks for small requests (about 30 µs of
 /// compute on the development machines); requests of at most this many points are the small
 /// ones that a large batch steps aside for.
 pub const STEP_POINTS: usize = 64;
+// Points are computed in pairs from even indices: a step boundary must fall between two pairs.
+const _: () = assert!(STEP_POINTS.is_multiple_of(2));
 
 type ActiveRequest = iceoryx2::active_request::ActiveRequest<
     ipc::Service,
@@ -127,16 +129,30 @@ impl<'a> Answerer<'a> {
             Err(outcome) => (outcome, None),
         };
         let geometry = self.geometry;
+        // The second point of the pair computed with the previous one.
+        let mut computed_ahead = None;
         let sent = match active.loan_slice_uninit(if kind.is_some() { count } else { 0 }) {
-            // `write_from_fn` fills the points in index order: every STEP_POINTS of them, the
-            // small requests that arrived meanwhile are answered first.
+            // `write_from_fn` fills the points in index order, two at a time where it can (the
+            // second kept until its index comes); every STEP_POINTS of them (an even number),
+            // the small requests that arrived meanwhile are answered first.
             Ok(loan) => {
                 let mut response = loan.write_from_fn(|i| match kind {
                     Some(kind) => {
+                        if let Some(point) = computed_ahead.take() {
+                            return point;
+                        }
                         if i > 0 && i % STEP_POINTS == 0 {
                             self.answer_small_waiting(model);
                         }
-                        compute_point(geometry, model, kind, &points[i])
+                        match points.get(i + 1) {
+                            Some(next) => {
+                                let [point, next] =
+                                    compute_pair(geometry, model, kind, [&points[i], next]);
+                                computed_ahead = Some(next);
+                                point
+                            }
+                            None => compute_point(geometry, model, kind, &points[i]),
+                        }
                     }
                     None => PointResponse::default(),
                 });

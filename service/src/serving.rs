@@ -7,7 +7,9 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
 use crossbeam_channel::{Receiver, Sender};
-use hexacomp_core::compensator::{compensate_legs, compensate_pose};
+use hexacomp_core::compensator::{
+    Compensated, compensate_legs, compensate_legs_pair, compensate_pose, compensate_pose_pair,
+};
 use hexacomp_core::{Geometry, Pose};
 use hexacomp_protocol::endpoints::{self, Role};
 use hexacomp_protocol::{
@@ -32,6 +34,32 @@ pub fn compute_point(
         RequestKind::Poses => compensate_pose(geometry, m, &Pose::from_mm_deg(request.values)),
         RequestKind::Joints => compensate_legs(geometry, m, &request.values),
     };
+    response(point, model)
+}
+
+/// [`compute_point`] of two points of a request, their corrections computed together: the
+/// same answers as one at a time. Allocation-free.
+#[inline]
+pub fn compute_pair(
+    geometry: &Geometry,
+    model: Option<&Generation>,
+    kind: RequestKind,
+    [r0, r1]: [&PointRequest; 2],
+) -> [PointResponse; 2] {
+    let m = model.map(|g| &g.model);
+    let points = match kind {
+        RequestKind::Poses => compensate_pose_pair(
+            geometry,
+            m,
+            [&Pose::from_mm_deg(r0.values), &Pose::from_mm_deg(r1.values)],
+        ),
+        RequestKind::Joints => compensate_legs_pair(geometry, m, [&r0.values, &r1.values]),
+    };
+    points.map(|point| response(point, model))
+}
+
+/// The wire form of a compensated point, answered by `model`'s generation.
+fn response(point: Compensated, model: Option<&Generation>) -> PointResponse {
     PointResponse {
         legs: point.legs,
         corrections: point.corrections,

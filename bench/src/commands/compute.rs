@@ -7,7 +7,9 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use hdrhistogram::Histogram;
-use hexacomp_core::compensator::{Compensated, Corrections, compensate_pose};
+use hexacomp_core::compensator::{
+    Compensated, Corrections, PointStatus, compensate_pose, compensate_poses,
+};
 use hexacomp_core::fused::{FusedModel, OPERATIONS_PER_BLOCK};
 use hexacomp_core::{Geometry, Pose, inverse_kinematics};
 use serde::Serialize;
@@ -93,21 +95,26 @@ pub fn run(command: &ComputeCommand) -> anyhow::Result<()> {
         .map(|p| inverse_kinematics(geometry, p).lengths)
         .collect();
 
-    let figures =
-        |model: &dyn Fn(&Pose) -> Compensated, networks: &dyn Fn(&[f64; 6]) -> f64| FormFigures {
-            single_p50_ns: single_p50_ns(&poses, model),
-            batch_points_per_second: BATCHES
-                .iter()
-                .map(|&batch| points_per_second(&poses, batch, model))
-                .collect(),
-            networks_mean_ns: mean_ns(&legs, networks),
-        };
-    let reference_figures = figures(&|p| compensate_pose(geometry, Some(reference), p), &|q| {
-        Corrections::raw_corrections(reference, q)[0]
-    });
-    let fused_figures = figures(&|p| compensate_pose(geometry, Some(&fused), p), &|q| {
-        fused.raw_corrections(q)[0]
-    });
+    let figures = |model: &dyn Fn(&Pose) -> Compensated,
+                   batch: &dyn Fn(&[Pose], &mut [Compensated]),
+                   networks: &dyn Fn(&[f64; 6]) -> f64| FormFigures {
+        single_p50_ns: single_p50_ns(&poses, model),
+        batch_points_per_second: BATCHES
+            .iter()
+            .map(|&size| points_per_second(&poses, size, batch))
+            .collect(),
+        networks_mean_ns: mean_ns(&legs, networks),
+    };
+    let reference_figures = figures(
+        &|p| compensate_pose(geometry, Some(reference), p),
+        &|poses, out| compensate_poses(geometry, Some(reference), poses, out),
+        &|q| Corrections::raw_corrections(reference, q)[0],
+    );
+    let fused_figures = figures(
+        &|p| compensate_pose(geometry, Some(&fused), p),
+        &|poses, out| compensate_poses(geometry, Some(&fused), poses, out),
+        &|q| fused.raw_corrections(q)[0],
+    );
     let inverse_kinematics_mean_ns =
         mean_ns(&poses, &|p| inverse_kinematics(geometry, p).lengths[0]);
     let peak = peak_operations_per_ns(&fused);
@@ -181,19 +188,23 @@ fn single_p50_ns(poses: &[Pose], compensate: &dyn Fn(&Pose) -> Compensated) -> u
     histogram.value_at_quantile(0.5)
 }
 
-/// Points per second compensating `poses` in batches of `batch`, each batch timed.
+/// Points per second compensating `poses` in batches of `batch` (by `compensate`, which fills
+/// one result per pose), each batch timed.
 fn points_per_second(
     poses: &[Pose],
     batch: usize,
-    compensate: &dyn Fn(&Pose) -> Compensated,
+    compensate: &dyn Fn(&[Pose], &mut [Compensated]),
 ) -> f64 {
-    let mut out = vec![None; batch];
+    let unset = Compensated {
+        legs: [f64::NAN; 6],
+        corrections: [f64::NAN; 6],
+        status: PointStatus::InvalidInput,
+    };
+    let mut out = vec![unset; batch];
     let mut nanoseconds = 0u128;
     for chunk in poses.chunks(batch) {
         let start = Instant::now();
-        for (pose, slot) in chunk.iter().zip(out.iter_mut()) {
-            *slot = Some(compensate(pose));
-        }
+        compensate(chunk, &mut out[..chunk.len()]);
         nanoseconds += start.elapsed().as_nanos();
         black_box(&out);
     }
