@@ -223,6 +223,41 @@ impl Session {
         Ok(())
     }
 
+    /// Runs `stream` with the calling thread pinned to --client-cpu (if given), then gives the
+    /// thread its CPU set back, so that the servers it starts afterwards (children inherit the
+    /// affinity of the thread that starts them) are not put on the client's CPU.
+    pub fn with_client_pinned<T>(&self, stream: impl FnOnce() -> T) -> anyhow::Result<T> {
+        let Some(cpu) = self.args.client_cpu else {
+            return Ok(stream());
+        };
+        // SAFETY: a zeroed cpu_set_t is a valid empty set; sched_getaffinity fills it for the
+        // calling thread (pid 0) and is given its size.
+        let previous = unsafe {
+            let mut set: libc::cpu_set_t = std::mem::zeroed();
+            let failed =
+                libc::sched_getaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &mut set);
+            anyhow::ensure!(
+                failed == 0,
+                "reading the client's CPU set: {}",
+                std::io::Error::last_os_error()
+            );
+            set
+        };
+        hexacomp_service::realtime::pin_to_cpu(cpu)
+            .map_err(|e| anyhow::anyhow!("pinning the client to CPU {cpu}: {e}"))?;
+        let result = stream();
+        // SAFETY: `previous` is the set read above, valid for its size; for the calling thread.
+        let failed = unsafe {
+            libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &previous)
+        };
+        anyhow::ensure!(
+            failed == 0,
+            "giving the client its CPU set back: {}",
+            std::io::Error::last_os_error()
+        );
+        Ok(result)
+    }
+
     /// The output folder.
     pub fn out_dir(&self) -> &Path {
         &self.args.out_dir

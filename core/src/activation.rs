@@ -74,7 +74,7 @@ fn exp_lanes(u: [f64; LANES]) -> [f64; LANES] {
 }
 
 /// The Taylor polynomial `Σ rᵏ/k!`, k = 0..=12, of each lane by Estrin's scheme: pairs of
-/// coefficients combined with `r`, pairs of those with `r²`, then `r⁴` and `r⁸` — eight
+/// coefficients combined with `r`, pairs of those with `r²`, then `r⁴` and `r⁸` — seven
 /// dependent operations where Horner's rule has twenty-four, so that the blocks of a model
 /// overlap in the pipeline. Lane by lane, as the compiler vectorises it.
 #[inline(always)]

@@ -40,7 +40,10 @@ pub trait Corrections {
         0.0
     }
     /// [`Corrections::raw_corrections`] of several points (each the same bits as alone).
-    fn raw_corrections_of<const N: usize>(&self, q: [&[f64; LEGS]; N]) -> [[f64; LEGS]; N] {
+    fn raw_corrections_of<const N: usize>(&self, q: [&[f64; LEGS]; N]) -> [[f64; LEGS]; N]
+    where
+        Self: Sized,
+    {
         q.map(|q| self.raw_corrections(q))
     }
     /// The model these corrections are of.
@@ -63,7 +66,10 @@ impl Corrections for FusedModel {
         FusedModel::raw_corrections(self, q)
     }
     #[inline]
-    fn raw_corrections_of<const N: usize>(&self, q: [&[f64; LEGS]; N]) -> [[f64; LEGS]; N] {
+    fn raw_corrections_of<const N: usize>(&self, q: [&[f64; LEGS]; N]) -> [[f64; LEGS]; N]
+    where
+        Self: Sized,
+    {
         FusedModel::raw_corrections_of(self, q)
     }
     fn error_bound_mm(&self) -> f64 {

@@ -93,12 +93,17 @@ fn inference_and_compensation_allocate_nothing() {
             checksum += compensate_pose(&g, Some(&fused), pose).legs[0];
         }
         checksum += compensate_pose(&g, Some(&at_a_bound), &poses[0]).legs[0];
-        // In pairs, as the service computes a batch.
+        // In pairs, as the service computes a batch: by the fused form, by the reference, and
+        // by the way back to the reference.
         let mut batch = [compensate_pose(&g, Some(&fused), &poses[0]); 8];
         for chunk in poses.chunks(8) {
             compensate_poses(&g, Some(&fused), chunk, &mut batch);
             checksum += batch[0].legs[0];
+            compensate_poses(&g, Some(m), chunk, &mut batch);
+            checksum += batch[1].legs[0];
         }
+        compensate_poses(&g, Some(&at_a_bound), &[poses[0], poses[0]], &mut batch);
+        checksum += batch[1].legs[0];
         let after = allocations();
         assert!(checksum.is_finite());
         assert_eq!(

@@ -129,8 +129,8 @@ impl<'a> Answerer<'a> {
             Err(outcome) => (outcome, None),
         };
         let geometry = self.geometry;
-        // The second point of the pair computed with the previous one.
-        let mut computed_ahead = None;
+        // The second point of a pair, computed with the first: its index and its answer.
+        let mut computed_ahead: Option<(usize, PointResponse)> = None;
         let sent = match active.loan_slice_uninit(if kind.is_some() { count } else { 0 }) {
             // `write_from_fn` fills the points in index order, two at a time where it can (the
             // second kept until its index comes); every STEP_POINTS of them (an even number),
@@ -138,7 +138,9 @@ impl<'a> Answerer<'a> {
             Ok(loan) => {
                 let mut response = loan.write_from_fn(|i| match kind {
                     Some(kind) => {
-                        if let Some(point) = computed_ahead.take() {
+                        // `write_from_fn` visits the indices in order; the index is checked all the
+                        // same, so that another order could only cost a computation.
+                        if let Some((_, point)) = computed_ahead.take().filter(|(at, _)| *at == i) {
                             return point;
                         }
                         if i > 0 && i % STEP_POINTS == 0 {
@@ -148,7 +150,7 @@ impl<'a> Answerer<'a> {
                             Some(next) => {
                                 let [point, next] =
                                     compute_pair(geometry, model, kind, [&points[i], next]);
-                                computed_ahead = Some(next);
+                                computed_ahead = Some((i + 1, next));
                                 point
                             }
                             None => compute_point(geometry, model, kind, &points[i]),

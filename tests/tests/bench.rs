@@ -72,6 +72,23 @@ fn on_a_short_line(command: &str, dir: &Path) -> (String, serde_json::Value) {
     (stdout, json(&summary))
 }
 
+/// The curves of a chart that have at least two points: its coloured lines (the axes and the
+/// mesh are black) with more than one point, left of the legend (x < 600).
+fn drawn_curves(svg: &str) -> usize {
+    svg.split("<polyline")
+        .skip(1)
+        .filter(|line| !line.contains("stroke=\"#000000\""))
+        .filter(|line| {
+            let points = &line[line.find("points=\"").unwrap() + 8..];
+            let xs: Vec<f64> = points[..points.find('"').unwrap()]
+                .split_whitespace()
+                .map(|p| p.split(',').next().unwrap().parse().unwrap())
+                .collect();
+            xs.len() > 1 && xs.iter().all(|x| *x < 600.0)
+        })
+        .count()
+}
+
 /// Parses the first number after `label` in `text`.
 fn number_after(text: &str, label: &str) -> f64 {
     let rest = &text[text
@@ -130,12 +147,17 @@ fn demo_calibrates_hot_swaps_streams_and_compensates_the_path() {
     ] {
         assert!(dir.path().join(file).exists(), "{file}");
     }
-    // Every variant streamed the same path: in both latency charts.
-    for chart in ["demo-percentiles.svg", "demo-latency-along-path.svg"] {
+    // Every variant streamed the same path: in both latency charts, named in the legend and
+    // drawn (a curve per variant; along the path, hexacomp's median too).
+    for (chart, curves) in [
+        ("demo-percentiles.svg", 4),
+        ("demo-latency-along-path.svg", 5),
+    ] {
         let svg = std::fs::read_to_string(dir.path().join(chart)).unwrap();
         for variant in ["hexacomp", "echo", "uds", "inprocess"] {
             assert!(svg.contains(variant), "{variant} in {chart}");
         }
+        assert_eq!(drawn_curves(&svg), curves, "{chart}");
     }
     // 2 s at 1 kHz: 2001 round trips in the histogram.
     let hgrm = std::fs::read_to_string(dir.path().join("demo-latency.hgrm")).unwrap();

@@ -113,13 +113,18 @@ const COLOURS: [RGBColor; 8] = [
 /// Series with at most this many points get a marker at each point.
 const MARKED_UP_TO: usize = 60;
 
-/// A series' points where the axes place them: `(x, y, (bar low, bar high))`.
-type Placed = Vec<(f64, f64, Option<(f64, f64)>)>;
+/// The largest magnitude an axis places (and the smallest positive value a log axis does):
+/// beyond it the axis's range and ticks could not be computed.
+const LARGEST: f64 = 1e300;
+
+/// A series' points where the axes place them: `(x, y, (bar low, bar high))`, a bar's low end
+/// `None` where the axis cannot place it (below zero on a log axis: drawn to the axis's bottom).
+type Placed = Vec<(f64, f64, Option<(Option<f64>, f64)>)>;
 type Drawn = Result<(), DrawingAreaErrorKind<std::io::Error>>;
 
 impl Chart {
-    /// The chart as an SVG document. Points an axis cannot place (not finite, ≤ 0 on a log
-    /// axis, outside [0, 1) on a percentile axis) are left out.
+    /// The chart as an SVG document. Points an axis cannot place (not finite, beyond 1e300 in
+    /// magnitude, ≤ 1e-300 on a log axis, outside [0, 1) on a percentile axis) are left out.
     pub fn to_svg(&self) -> Result<String, Error> {
         let mut svg = String::new();
         {
@@ -143,16 +148,18 @@ impl Chart {
             placed
                 .iter()
                 .flatten()
-                .flat_map(|p| [Some(p.1), p.2.map(|b| b.0), p.2.map(|b| b.1)])
+                .flat_map(|p| [Some(p.1), p.2.and_then(|b| b.0), p.2.map(|b| b.1)])
                 .flatten(),
             true,
         );
+        let bottom = y_range.start;
         let (plot, legend) = root.split_horizontally(WIDTH - LEGEND_WIDTH);
+        let placed = (placed.as_slice(), bottom);
         match (self.x.scale, self.y.scale) {
-            (Scale::Linear, Scale::Linear) => self.draw_in(&plot, x_range, y_range, &placed),
-            (Scale::Linear, _) => self.draw_in(&plot, x_range, y_range.log_scale(), &placed),
-            (_, Scale::Linear) => self.draw_in(&plot, x_range.log_scale(), y_range, &placed),
-            (_, _) => self.draw_in(&plot, x_range.log_scale(), y_range.log_scale(), &placed),
+            (Scale::Linear, Scale::Linear) => self.draw_in(&plot, x_range, y_range, placed),
+            (Scale::Linear, _) => self.draw_in(&plot, x_range, y_range.log_scale(), placed),
+            (_, Scale::Linear) => self.draw_in(&plot, x_range.log_scale(), y_range, placed),
+            (_, _) => self.draw_in(&plot, x_range.log_scale(), y_range.log_scale(), placed),
         }?;
         self.draw_legend(&legend)
     }
@@ -163,14 +170,14 @@ impl Chart {
             .points
             .iter()
             .enumerate()
-            .filter_map(|(i, &(x, y))| {
+            .filter_map(|(i, &(x, value))| {
                 let x = position(self.x.scale, x)?;
-                let y = position(self.y.scale, y)?;
+                let y = position(self.y.scale, value)?;
                 let bar = series.error_bars.as_ref().and_then(|bars| {
-                    let half = *bars.get(i)?;
+                    let half = bars.get(i)?.abs();
                     half.is_finite().then(|| {
-                        let low = position(self.y.scale, y - half.abs());
-                        (low.unwrap_or(y), y + half.abs())
+                        let low = position(self.y.scale, value - half);
+                        (low, position(self.y.scale, value + half).unwrap_or(y))
                     })
                 });
                 Some((x, y, bar))
@@ -183,7 +190,7 @@ impl Chart {
         area: &DrawingArea<SVGBackend<'_>, Shift>,
         x_range: X,
         y_range: Y,
-        placed: &[Placed],
+        (placed, bottom): (&[Placed], f64),
     ) -> Drawn
     where
         X: AsRangedCoord<Value = f64>,
@@ -224,6 +231,7 @@ impl Chart {
             }
             chart.draw_series(points.iter().filter_map(|&(x, y, bar)| {
                 let (low, high) = bar?;
+                let low = low.unwrap_or(bottom);
                 Some(ErrorBar::new_vertical(
                     x,
                     low,
@@ -258,8 +266,8 @@ impl Chart {
 /// Where an axis of `scale` places `value`, if it can.
 fn position(scale: Scale, value: f64) -> Option<f64> {
     match scale {
-        Scale::Linear => value.is_finite().then_some(value),
-        Scale::Log => (value.is_finite() && value > 0.0).then_some(value),
+        Scale::Linear => (value.abs() <= LARGEST).then_some(value),
+        Scale::Log => (1.0 / LARGEST..=LARGEST).contains(&value).then_some(value),
         Scale::Percentile => (0.0..1.0).contains(&value).then(|| 1.0 / (1.0 - value)),
     }
 }
@@ -310,11 +318,24 @@ fn nice_range(lo: f64, hi: f64) -> std::ops::Range<f64> {
     (lo / step).floor() * step..(hi / step).ceil() * step
 }
 
-/// How an axis of `scale` labels its ticks.
+/// How an axis of `scale` labels its ticks: numbers with as many decimals as their magnitude
+/// needs; percentiles with one decimal more than their nines need (99.99999 % stays that).
 fn tick_label(scale: Scale) -> impl Fn(&f64) -> String {
     move |&value| match scale {
-        Scale::Percentile => format!("{}%", trimmed(100.0 * (1.0 - 1.0 / value), 4)),
-        Scale::Linear | Scale::Log => trimmed(value, 6),
+        Scale::Percentile => {
+            let nines = value.log10().ceil().max(0.0) as usize;
+            let decimals = nines.saturating_sub(2) + 1;
+            format!("{}%", trimmed(100.0 * (1.0 - 1.0 / value), decimals))
+        }
+        Scale::Linear | Scale::Log => {
+            let magnitude = value.abs().log10().floor();
+            let decimals = if magnitude.is_finite() {
+                (3.0 - magnitude).clamp(6.0, 320.0) as usize
+            } else {
+                0
+            };
+            trimmed(value, decimals)
+        }
     }
 }
 
@@ -399,6 +420,38 @@ mod tests {
         ] {
             assert!(texts.iter().any(|t| t == label), "{label} in {texts:?}");
         }
+    }
+
+    #[test]
+    fn extreme_values_are_left_out_and_ticks_keep_their_digits() {
+        let chart = Chart {
+            title: "tiny and huge".into(),
+            x: Axis::percentile("percentile"),
+            y: Axis::log("value"),
+            series: vec![Series {
+                label: "values".into(),
+                points: vec![(0.0, 1e-7), (0.9, 1e-5), (0.99, 1e308), (0.9999999, 1e-6)],
+                // The second point's bar reaches below zero: drawn to the axis's bottom.
+                error_bars: Some(vec![0.0, 1.0, 0.0, 0.0]),
+                markers_only: false,
+            }],
+        };
+        let svg = chart.to_svg().unwrap();
+        let texts = texts(&svg);
+        for label in ["0.0000001", "0.00001", "90%", "99.99999%"] {
+            assert!(texts.iter().any(|t| t == label), "{label} in {texts:?}");
+        }
+        assert_eq!(series_lines(&svg)[0].len(), 3, "1e308 left out");
+        let huge = Chart {
+            title: "huge".into(),
+            x: Axis::linear("x"),
+            y: Axis::linear("y"),
+            series: vec![Series::line(
+                "h",
+                vec![(-1e308, 0.0), (1e308, 1.0), (0.0, 2.0)],
+            )],
+        };
+        assert_eq!(series_lines(&huge.to_svg().unwrap())[0].len(), 1);
     }
 
     #[test]

@@ -109,5 +109,5 @@ pub fn run(command: &DemoCommand) -> anyhow::Result<()> {
         hexacomp.deadline_misses,
         total.elapsed().as_secs_f64()
     );
-    runs[0].1.ensure_no_failures("the path")
+    super::path::ensure_no_failures(&runs)
 }
