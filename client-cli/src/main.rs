@@ -1,11 +1,15 @@
-//! `hexacomp-client`: a small CLI over the client library: the service's status, and the
-//! compensation of a CSV file of poses or legs through the service (the same file formats as
-//! `hexacomp-trainer predict`, which is why this binary, unlike the library, links core).
+//! `hexacomp-client`: a small CLI over the client library: the service's status (for people,
+//! as JSON, as Prometheus metrics), and the compensation of a CSV file of poses or legs through
+//! the service (the same file formats as `hexacomp-trainer predict`, which is why this binary,
+//! unlike the library, links core).
+
+mod metrics;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Duration;
 
+use anyhow::Context;
 use clap::{Parser, Subcommand};
 use hexacomp_client::{
     Client, ClientOptions, CompensatedPoint, DEFAULT_INSTANCE, MAX_BATCH, PointStatus, RequestKind,
@@ -32,7 +36,26 @@ struct Cli {
 enum Command {
     /// Show the service's geometry, model generation and provenance, requests served, errors
     /// and uptime.
-    Status,
+    Status {
+        /// Print one JSON object instead (`instance`, `geometry_name`, `geometry_fingerprint`,
+        /// `generation`, `model`, `requests`, `points`, `errors`, `overloaded`,
+        /// `persist_failures`, `uptime_s`, `wait_mode`).
+        #[arg(long)]
+        json: bool,
+    },
+    /// Print the service's counters in the Prometheus text format, for a node-exporter
+    /// textfile collector or a timer (the service runs no network listener; only its status
+    /// endpoint is asked, never the serving thread). A service that is absent or does not
+    /// answer is reported as `hexacomp_up 0` (and why, on standard error) with exit status 0, so
+    /// that a collector's file says so instead of keeping old values; an invalid instance name,
+    /// a service of another user or of another protocol version is an error. Run it as the
+    /// service's user.
+    Metrics {
+        /// Write the metrics to FILE, whole or not at all (a collector never reads half a
+        /// file), instead of standard output.
+        #[arg(long, value_name = "FILE")]
+        output: Option<PathBuf>,
+    },
     /// Compensate a poses CSV (`id,x,y,z,a,b,c`, mm and degrees) or, with --joints, a CSV of
     /// nominal leg lengths (`id,q1..q6`, mm), in batches of up to 1024; writes
     /// `id,q1..q6,dq1..dq6,status`: exactly the numbers of `hexacomp-trainer predict`.
@@ -64,13 +87,36 @@ fn run(cli: Cli) -> anyhow::Result<()> {
     let options = ClientOptions {
         timeout: Duration::from_millis(cli.timeout_ms),
     };
-    if let Command::Compensate { input, output, .. } = &cli.command {
-        hexacomp_formats::refuse_same_file(output, &[input])?;
-    }
-    let mut client = Client::connect(&cli.instance, &options)?;
     match cli.command {
-        Command::Status => {
-            let s = client.status()?;
+        Command::Metrics { output } => {
+            // A service that is not there or does not answer is what `hexacomp_up 0` says; a
+            // wrong instance name, another user's service or another protocol are errors of
+            // the setup, which the timer running this must show.
+            let status = match hexacomp_client::status_of(&cli.instance, &options) {
+                Ok(status) => Some(status),
+                Err(
+                    e @ (hexacomp_client::Error::ServiceAbsent { .. }
+                    | hexacomp_client::Error::Timeout { .. }
+                    | hexacomp_client::Error::Transport(_)),
+                ) => {
+                    eprintln!("hexacomp_up 0: instance {}: {e}", cli.instance);
+                    None
+                }
+                Err(e) => return Err(e.into()),
+            };
+            let text = metrics::prometheus_text(&cli.instance, status.as_ref());
+            match output {
+                Some(file) => hexacomp_core::durable::replace_file(&file, text.as_bytes())
+                    .with_context(|| format!("writing {}", file.display()))?,
+                None => print!("{text}"),
+            }
+        }
+        Command::Status { json: true } => {
+            let status = hexacomp_client::status_of(&cli.instance, &options)?;
+            println!("{}", metrics::status_json(&cli.instance, &status));
+        }
+        Command::Status { json: false } => {
+            let s = hexacomp_client::status_of(&cli.instance, &options)?;
             println!("instance      {}", cli.instance);
             println!(
                 "geometry      {} ({})",
@@ -101,6 +147,8 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             output,
             joints,
         } => {
+            hexacomp_formats::refuse_same_file(&output, &[&input])?;
+            let mut client = Client::connect(&cli.instance, &options)?;
             let (file, kind) = if joints {
                 (PointsFile::Joints(&input), RequestKind::Joints)
             } else {

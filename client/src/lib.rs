@@ -215,6 +215,89 @@ pub enum DeployOutcome {
 type CompensatePort =
     Port<ipc::Service, [PointRequest], RequestHeader, [PointResponse], ResponseHeader>;
 
+/// The status of the service of `instance`, asked through its status endpoint alone: unlike
+/// [`Client::connect`], this opens no compensation or deploy port, so the serving thread never
+/// sees the connection (for monitoring that asks often). Fails as [`Client::connect`] does.
+pub fn status_of(instance: &str, options: &ClientOptions) -> Result<Status, Error> {
+    let node = client_node()?;
+    let endpoint = endpoints::status(&node, instance, Role::Use)?;
+    let port = endpoint.client_builder().create().map_err(transport)?;
+    Ok(Status::from_report(&request_status(
+        &port,
+        options.timeout,
+    )?))
+}
+
+/// This process's iceoryx2 node for a client: no signal handling (the program's own), and
+/// iceoryx2's log at errors only unless the user sets its level in the environment (it warns on
+/// stderr when no config file exists).
+fn client_node() -> Result<Node<ipc::Service>, Error> {
+    set_log_level_from_env_or(LogLevel::Error);
+    NodeBuilder::new()
+        .signal_handling_mode(SignalHandlingMode::Disabled)
+        .create::<ipc::Service>()
+        .map_err(transport)
+}
+
+/// Asks `port`'s service for its status report, waiting up to `timeout` (at least
+/// [`MIN_CONTROL_DEADLINE`]).
+fn request_status(
+    port: &Port<ipc::Service, u64, (), StatusReport, ()>,
+    timeout: Duration,
+) -> Result<StatusReport, Error> {
+    let timeout = timeout.max(MIN_CONTROL_DEADLINE);
+    let deadline = Instant::now() + timeout;
+    let pending = loop {
+        let pending = port.send_copy(0).map_err(transport)?;
+        if pending.number_of_server_connections() > 0 {
+            break pending;
+        }
+        let now = Instant::now();
+        if now >= deadline {
+            return Err(Error::Timeout { timeout });
+        }
+        std::thread::sleep(Duration::from_millis(1).min(deadline - now));
+    };
+    let remaining = deadline.saturating_duration_since(Instant::now());
+    let report = Waiter::default()
+        .wait_for(remaining, || {
+            pending.receive().map(|r| r.map(|r| *r.payload()))
+        })
+        .map_err(|e| match e {
+            Error::Timeout { .. } => Error::Timeout { timeout },
+            other => other,
+        })?;
+    if report.protocol != PROTOCOL_VERSION {
+        return Err(Error::ProtocolMismatch {
+            service: report.protocol,
+        });
+    }
+    Ok(report)
+}
+
+impl Status {
+    /// The status a report on the wire says.
+    fn from_report(report: &StatusReport) -> Self {
+        Status {
+            wait_mode: match report.wait_mode {
+                wire::WAIT_SPIN => "spin",
+                wire::WAIT_SLEEP => "sleep",
+                _ => "event",
+            },
+            geometry_fingerprint: format!("{:016x}", report.geometry_fingerprint),
+            geometry_name: wire::field_text(&report.geometry_name),
+            generation: report.generation,
+            model: wire::field_text(&report.model),
+            requests: report.requests,
+            points: report.points,
+            errors: report.errors,
+            overloaded: report.overloaded,
+            persist_failures: report.persist_failures,
+            uptime: Duration::from_nanos(report.uptime_ns),
+        }
+    }
+}
+
 /// A connection to one service instance.
 pub struct Client {
     compensate: CompensatePort,
@@ -244,13 +327,7 @@ impl Client {
     /// [`Error::PermissionDenied`] when it runs as a user this process may not reach, and
     /// [`Error::Transport`] with iceoryx2's reason otherwise.
     pub fn connect(instance: &str, options: &ClientOptions) -> Result<Self, Error> {
-        // iceoryx2 warns on stderr when no config file exists; keep errors only unless the user
-        // sets its log level in the environment.
-        set_log_level_from_env_or(LogLevel::Error);
-        let node = NodeBuilder::new()
-            .signal_handling_mode(SignalHandlingMode::Disabled)
-            .create::<ipc::Service>()
-            .map_err(transport)?;
+        let node = client_node()?;
         let compensate_factory = endpoints::compensate(&node, instance, Role::Use)?;
         let status_factory = endpoints::status(&node, instance, Role::Use)?;
         let deploy_factory = endpoints::deploy(&node, instance, Role::Use)?;
@@ -403,56 +480,12 @@ impl Client {
     /// be answered: it is sent again, every millisecond, until one receives it or the deadline
     /// passes.
     fn status_report(&mut self) -> Result<StatusReport, Error> {
-        let timeout = self.timeout.max(MIN_CONTROL_DEADLINE);
-        let deadline = Instant::now() + timeout;
-        let pending = loop {
-            let pending = self.status.send_copy(0).map_err(transport)?;
-            if pending.number_of_server_connections() > 0 {
-                break pending;
-            }
-            let now = Instant::now();
-            if now >= deadline {
-                return Err(Error::Timeout { timeout });
-            }
-            std::thread::sleep(Duration::from_millis(1).min(deadline - now));
-        };
-        let remaining = deadline.saturating_duration_since(Instant::now());
-        let report = Waiter::default()
-            .wait_for(remaining, || {
-                pending.receive().map(|r| r.map(|r| *r.payload()))
-            })
-            .map_err(|e| match e {
-                Error::Timeout { .. } => Error::Timeout { timeout },
-                other => other,
-            })?;
-        if report.protocol != PROTOCOL_VERSION {
-            return Err(Error::ProtocolMismatch {
-                service: report.protocol,
-            });
-        }
-        Ok(report)
+        request_status(&self.status, self.timeout)
     }
 
     /// The service's status.
     pub fn status(&mut self) -> Result<Status, Error> {
-        let report = self.status_report()?;
-        Ok(Status {
-            wait_mode: match report.wait_mode {
-                wire::WAIT_SPIN => "spin",
-                wire::WAIT_SLEEP => "sleep",
-                _ => "event",
-            },
-            geometry_fingerprint: format!("{:016x}", report.geometry_fingerprint),
-            geometry_name: wire::field_text(&report.geometry_name),
-            generation: report.generation,
-            model: wire::field_text(&report.model),
-            requests: report.requests,
-            points: report.points,
-            errors: report.errors,
-            overloaded: report.overloaded,
-            persist_failures: report.persist_failures,
-            uptime: Duration::from_nanos(report.uptime_ns),
-        })
+        Ok(Status::from_report(&self.status_report()?))
     }
 
     /// Hands a model file's bytes to the service, which validates it off its serving thread and

@@ -249,3 +249,107 @@ fn client_compensate_summarises_the_statuses_it_wrote() {
         stderr(&output)
     );
 }
+
+#[test]
+fn client_status_json_and_metrics_give_the_services_counters() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_, model) = hexacomp_tests::save_smooth_model(dir.path(), 4);
+    let instance = hexacomp_tests::unique_instance("metrics");
+    let service =
+        hexacomp_tests::ServiceProcess::with_model(&instance, &dir.path().join("state"), &model);
+    let poses = dir.path().join("poses.csv");
+    std::fs::write(&poses, "id,x,y,z,a,b,c\n1,0,0,300,0,0,0\n2,5,0,310,0,0,0\n").unwrap();
+    let out = dir.path().join("out.csv");
+    let client = |args: &[&str]| {
+        let mut all = vec!["--instance", &instance];
+        all.extend_from_slice(args);
+        run("hexacomp-client", &all)
+    };
+    let compensated = client(&[
+        "compensate",
+        "--input",
+        poses.to_str().unwrap(),
+        "--output",
+        out.to_str().unwrap(),
+    ]);
+    assert!(compensated.status.success(), "{}", stderr(&compensated));
+
+    // One request of two points served: the JSON says so, with every field.
+    let status = client(&["status", "--json"]);
+    assert!(status.status.success(), "{}", stderr(&status));
+    let json: serde_json::Value = serde_json::from_slice(&status.stdout).unwrap();
+    assert_eq!(json["instance"], instance.as_str());
+    assert_eq!(json["generation"], 1);
+    assert_eq!(
+        (json["requests"].as_u64(), json["points"].as_u64()),
+        (Some(1), Some(2))
+    );
+    assert_eq!(json["errors"], 0);
+    assert!(json["uptime_s"].as_f64().unwrap() > 0.0, "{json}");
+
+    // The same counters as metrics, into a file a collector reads.
+    let file = dir.path().join("hexacomp.prom");
+    let metrics = client(&["metrics", "--output", file.to_str().unwrap()]);
+    assert!(metrics.status.success(), "{}", stderr(&metrics));
+    let text = std::fs::read_to_string(&file).unwrap();
+    let sample = |name: &str| -> f64 {
+        let line = text
+            .lines()
+            .find(|l| l.starts_with(&format!("{name}{{hexacomp_instance=\"{instance}\"")))
+            .unwrap_or_else(|| panic!("no {name} in\n{text}"));
+        line.rsplit(' ').next().unwrap().parse().unwrap()
+    };
+    assert_eq!(sample("hexacomp_up"), 1.0);
+    assert_eq!(sample("hexacomp_model_generation"), 1.0);
+    // The status request above is not a compensation request: still one, of two points.
+    assert_eq!(sample("hexacomp_requests_total"), 1.0);
+    assert_eq!(sample("hexacomp_points_total"), 2.0);
+    assert_eq!(sample("hexacomp_request_errors_total"), 0.0);
+
+    // The status as text says what the JSON said.
+    let text_status = client(&["status"]);
+    let text_status = String::from_utf8_lossy(&text_status.stdout).to_string();
+    assert!(
+        text_status.contains("requests      1 (2 points), 0 errors"),
+        "{text_status}"
+    );
+
+    // Gone: the collector's file is replaced by `hexacomp_up 0` alone, the reason on standard
+    // error, and still exit status 0.
+    drop(service);
+    let down = client(&[
+        "--timeout-ms",
+        "200",
+        "metrics",
+        "--output",
+        file.to_str().unwrap(),
+    ]);
+    assert!(down.status.success(), "{}", stderr(&down));
+    let text = std::fs::read_to_string(&file).unwrap();
+    assert!(
+        text.contains(&format!(
+            "hexacomp_up{{hexacomp_instance=\"{instance}\"}} 0"
+        )),
+        "{text}"
+    );
+    assert!(!text.contains("hexacomp_requests_total"), "{text}");
+    assert!(
+        stderr(&down).contains("hexacomp_up 0: instance"),
+        "{}",
+        stderr(&down)
+    );
+    // A name that cannot be an instance is the timer's mistake, not a service that is down.
+    let wrong = run("hexacomp-client", &["--instance", "a/b", "metrics"]);
+    assert_eq!(wrong.status.code(), Some(1), "{}", stderr(&wrong));
+    assert!(
+        stderr(&wrong).contains("invalid instance name"),
+        "{}",
+        stderr(&wrong)
+    );
+    // JSON status of a service that is gone is an error, not an empty object.
+    assert!(
+        !client(&["--timeout-ms", "200", "status", "--json"])
+            .status
+            .success()
+    );
+}
