@@ -1,7 +1,6 @@
 //! The `uds` baseline: the same compensation served over a Unix domain socket with blocking
 //! reads — what a user would otherwise build. One thread per connection; the server computes
-//! with the service's own [`compute_pair`] and [`compute_point`], two points at a time as the
-//! service does.
+//! with the service's own [`compute_points`], two points at a time as the service does.
 //!
 //! Frames, little-endian: a request is `count: u32, kind: u32` and `count` points of six `f64`;
 //! the response is `count` points of `legs: 6 × f64, corrections: 6 × f64, generation: u64,
@@ -17,7 +16,7 @@ use hexacomp_client::wire::{MAX_BATCH, PointRequest, PointResponse, RequestKind}
 use hexacomp_client::{CompensatedPoint, PointStatus};
 use hexacomp_core::Geometry;
 use hexacomp_service::Generation;
-use hexacomp_service::serving::{compute_pair, compute_point};
+use hexacomp_service::serving::compute_points;
 use hexacomp_service::termination::TerminationSignals;
 
 const HEADER_BYTES: usize = 8;
@@ -77,21 +76,16 @@ fn serve_connection(
             return Err(std::io::Error::other("batch too large"));
         }
         stream.read_exact(&mut request[..count * POINT_BYTES])?;
-        let point = |i: usize| PointRequest {
-            values: read_f64s::<6>(&request[i * POINT_BYTES..]),
-        };
-        // Two at a time where it can, as the service computes a request's points.
-        for i in (0..count).step_by(2) {
-            if i + 1 < count {
-                let pair = compute_pair(geometry, model, kind, [&point(i), &point(i + 1)]);
-                for (k, answer) in pair.iter().enumerate() {
-                    write_response(&mut response[(i + k) * RESPONSE_BYTES..], answer);
-                }
-            } else {
-                let answer = compute_point(geometry, model, kind, &point(i));
-                write_response(&mut response[i * RESPONSE_BYTES..], &answer);
-            }
-        }
+        compute_points(
+            geometry,
+            model,
+            kind,
+            count,
+            |i| PointRequest {
+                values: read_f64s::<6>(&request[i * POINT_BYTES..]),
+            },
+            |i, answer| write_response(&mut response[i * RESPONSE_BYTES..], &answer),
+        );
         stream.write_all(&response[..count * RESPONSE_BYTES])?;
     }
 }

@@ -8,7 +8,7 @@ use hexacomp_client::wire::{PointRequest, PointResponse, RequestKind};
 use hexacomp_client::{Client, ClientOptions, CompensatedPoint, PointStatus};
 use hexacomp_core::Geometry;
 use hexacomp_service::Generation;
-use hexacomp_service::serving::{compute_pair, compute_point};
+use hexacomp_service::serving::compute_points;
 
 use crate::uds::UdsClient;
 
@@ -69,7 +69,7 @@ impl Variant for OverSocket {
     }
 }
 
-/// The `inprocess` baseline: the service's own per-point computation, called directly.
+/// The `inprocess` baseline: the service's own computation (`compute_points`), called directly.
 pub struct InProcess {
     geometry: Geometry,
     model: Option<Generation>,
@@ -91,29 +91,15 @@ impl Variant for InProcess {
         poses: &[[f64; 6]],
         out: &mut [CompensatedPoint],
     ) -> anyhow::Result<()> {
-        let (geometry, model) = (&self.geometry, self.model.as_ref());
-        let request = |pose: &[f64; 6]| PointRequest { values: *pose };
-        // Two at a time, as the service computes a request's points.
-        for (poses, out) in poses.chunks(2).zip(out.chunks_mut(2)) {
-            match (poses, out) {
-                ([p0, p1], [o0, o1]) => {
-                    let [r0, r1] = compute_pair(
-                        geometry,
-                        model,
-                        RequestKind::Poses,
-                        [&request(p0), &request(p1)],
-                    );
-                    (*o0, *o1) = (answered(&r0), answered(&r1));
-                }
-                (poses, out) => {
-                    for (pose, slot) in poses.iter().zip(out) {
-                        let point =
-                            compute_point(geometry, model, RequestKind::Poses, &request(pose));
-                        *slot = answered(&point);
-                    }
-                }
-            }
-        }
+        let count = poses.len().min(out.len());
+        compute_points(
+            &self.geometry,
+            self.model.as_ref(),
+            RequestKind::Poses,
+            count,
+            |i| PointRequest { values: poses[i] },
+            |i, point| out[i] = answered(&point),
+        );
         Ok(())
     }
 }

@@ -88,9 +88,19 @@ pub fn compensate_legs<M: Corrections>(
     model: Option<&M>,
     q: &[f64; LEGS],
 ) -> Compensated {
-    match needs_model(geometry, model, q) {
+    finished(geometry, needs_model(geometry, model, q), q)
+}
+
+/// The answer for legs `q` (mm) once [`needs_model`] has decided: the point unchanged, or
+/// corrected by the model alone.
+fn finished<M: Corrections>(
+    geometry: &Geometry,
+    decided: Result<&M, Compensated>,
+    q: &[f64; LEGS],
+) -> Compensated {
+    match decided {
         Ok(model) => corrected(geometry, model, q, model.raw_corrections(q)),
-        Err(unchanged) => unchanged,
+        Err(answer) => answer,
     }
 }
 
@@ -112,9 +122,9 @@ pub fn compensate_legs_pair<M: Corrections>(
                 corrected(geometry, model, q1, raw1),
             ]
         }
-        _ => [
-            compensate_legs(geometry, model, q0),
-            compensate_legs(geometry, model, q1),
+        (decided0, decided1) => [
+            finished(geometry, decided0, q0),
+            finished(geometry, decided1, q1),
         ],
     }
 }
@@ -126,20 +136,24 @@ fn needs_model<'m, M: Corrections>(
     model: Option<&'m M>,
     q: &[f64; LEGS],
 ) -> Result<&'m M, Compensated> {
-    let unchanged = |status| Compensated {
-        legs: *q,
-        corrections: [0.0; LEGS],
-        status,
-    };
     if q.iter().any(|v| !v.is_finite()) {
-        return Err(unchanged(PointStatus::InvalidInput));
+        return Err(unchanged(q, PointStatus::InvalidInput));
     }
     if q.iter()
         .any(|v| stroke_status(*v, geometry.leg_range) != LegStatus::Ok)
     {
-        return Err(unchanged(PointStatus::OutOfStroke));
+        return Err(unchanged(q, PointStatus::OutOfStroke));
     }
-    model.ok_or_else(|| unchanged(PointStatus::NoModel))
+    model.ok_or_else(|| unchanged(q, PointStatus::NoModel))
+}
+
+/// Legs `q` (mm) answered as they are, without corrections, with `status`.
+fn unchanged(q: &[f64; LEGS], status: PointStatus) -> Compensated {
+    Compensated {
+        legs: *q,
+        corrections: [0.0; LEGS],
+        status,
+    }
 }
 
 /// Legs `q` (mm) corrected by `model`, whose raw corrections there are `raw` (mm): where they lie
@@ -151,11 +165,6 @@ fn corrected<M: Corrections>(
     q: &[f64; LEGS],
     mut raw: [f64; LEGS],
 ) -> Compensated {
-    let unchanged = |status| Compensated {
-        legs: *q,
-        corrections: [0.0; LEGS],
-        status,
-    };
     // Whatever the networks were fitted to (see `NetworkInput`), at run time their input is the
     // nominal legs.
     let reference = model.reference();
@@ -183,7 +192,7 @@ fn corrected<M: Corrections>(
     for (i, c) in corrections.iter_mut().enumerate() {
         let [lo, hi] = reference.correction_bounds[i];
         if !c.is_finite() {
-            return unchanged(PointStatus::InvalidInput);
+            return unchanged(q, PointStatus::InvalidInput);
         }
         if *c < lo || *c > hi {
             *c = c.clamp(lo, hi);
@@ -195,7 +204,7 @@ fn corrected<M: Corrections>(
         .iter()
         .any(|v| stroke_status(*v, geometry.leg_range) != LegStatus::Ok)
     {
-        return unchanged(PointStatus::OutOfStroke);
+        return unchanged(q, PointStatus::OutOfStroke);
     }
     Compensated {
         legs,
@@ -242,7 +251,17 @@ pub fn compensate_pose<M: Corrections>(
     model: Option<&M>,
     pose: &Pose,
 ) -> Compensated {
-    match nominal_legs(geometry, pose) {
+    legs_compensated(geometry, model, nominal_legs(geometry, pose))
+}
+
+/// The answer for a pose once its nominal legs are known ([`compensate_legs`]), or the answer to
+/// a pose that is not finite.
+fn legs_compensated<M: Corrections>(
+    geometry: &Geometry,
+    model: Option<&M>,
+    legs: Result<[f64; LEGS], Compensated>,
+) -> Compensated {
+    match legs {
         Ok(q) => compensate_legs(geometry, model, &q),
         Err(invalid) => invalid,
     }
@@ -257,10 +276,7 @@ pub fn compensate_pose_pair<M: Corrections>(
 ) -> [Compensated; 2] {
     match (nominal_legs(geometry, p0), nominal_legs(geometry, p1)) {
         (Ok(q0), Ok(q1)) => compensate_legs_pair(geometry, model, [&q0, &q1]),
-        _ => [
-            compensate_pose(geometry, model, p0),
-            compensate_pose(geometry, model, p1),
-        ],
+        (legs0, legs1) => [legs0, legs1].map(|legs| legs_compensated(geometry, model, legs)),
     }
 }
 

@@ -58,6 +58,29 @@ pub fn compute_pair(
     points.map(|point| response(point, model))
 }
 
+/// Computes the `count` points of a request as the service does, two at a time where it can
+/// ([`compute_pair`], the last one alone when `count` is odd): `request(i)` gives point `i`,
+/// and `answer(i, response)` takes its answer, in index order. Allocation-free.
+pub fn compute_points(
+    geometry: &Geometry,
+    model: Option<&Generation>,
+    kind: RequestKind,
+    count: usize,
+    request: impl Fn(usize) -> PointRequest,
+    mut answer: impl FnMut(usize, PointResponse),
+) {
+    for i in (0..count).step_by(2) {
+        if i + 1 < count {
+            let pair = compute_pair(geometry, model, kind, [&request(i), &request(i + 1)]);
+            for (k, response) in pair.into_iter().enumerate() {
+                answer(i + k, response);
+            }
+        } else {
+            answer(i, compute_point(geometry, model, kind, &request(i)));
+        }
+    }
+}
+
 /// The wire form of a compensated point, answered by `model`'s generation.
 fn response(point: Compensated, model: Option<&Generation>) -> PointResponse {
     PointResponse {
