@@ -35,8 +35,11 @@ use hexacomp_core::model::Model;
 #[derive(Debug, Parser)]
 #[command(name = "hexacomp-bench", version)]
 struct Cli {
+    #[command(flatten)]
+    generate: hexacomp_cli_docs::GenerateArgs,
+    /// Optional only so that --generate-man and --generate-completions can stand alone.
     #[command(subcommand)]
-    command: Command,
+    command: Option<Command>,
 }
 
 #[derive(Debug, Subcommand)]
@@ -69,7 +72,9 @@ enum Command {
 }
 
 fn main() -> ExitCode {
-    let result = match Cli::parse().command {
+    let cli = Cli::parse();
+    let command = cli.generate.subcommand_or_exit::<Cli, _>(cli.command);
+    let result = match command {
         Command::Demo(c) => commands::demo::run(&c),
         Command::Path(c) => commands::path::run(&c),
         Command::Compare(c) => commands::compare::run(&c),

@@ -28,8 +28,11 @@ struct Cli {
     #[arg(long, global = true, default_value_t = 500,
           value_parser = clap::value_parser!(u64).range(1..))]
     timeout_ms: u64,
+    #[command(flatten)]
+    generate: hexacomp_cli_docs::GenerateArgs,
+    /// Optional only so that --generate-man and --generate-completions can stand alone.
     #[command(subcommand)]
-    command: Command,
+    command: Option<Command>,
 }
 
 #[derive(Debug, Subcommand)]
@@ -74,7 +77,8 @@ enum Command {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
-    match run(cli) {
+    let command = cli.generate.subcommand_or_exit::<Cli, _>(cli.command);
+    match run(&cli.instance, cli.timeout_ms, command) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e:#}");
@@ -83,28 +87,28 @@ fn main() -> ExitCode {
     }
 }
 
-fn run(cli: Cli) -> anyhow::Result<()> {
+fn run(instance: &str, timeout_ms: u64, command: Command) -> anyhow::Result<()> {
     let options = ClientOptions {
-        timeout: Duration::from_millis(cli.timeout_ms),
+        timeout: Duration::from_millis(timeout_ms),
     };
-    match cli.command {
+    match command {
         Command::Metrics { output } => {
             // A service that is not there or does not answer is what `hexacomp_up 0` says; a
             // wrong instance name, another user's service or another protocol are errors of
             // the setup, which the timer running this must show.
-            let status = match hexacomp_client::status_of(&cli.instance, &options) {
+            let status = match hexacomp_client::status_of(instance, &options) {
                 Ok(status) => Some(status),
                 Err(
                     e @ (hexacomp_client::Error::ServiceAbsent { .. }
                     | hexacomp_client::Error::Timeout { .. }
                     | hexacomp_client::Error::Transport(_)),
                 ) => {
-                    eprintln!("hexacomp_up 0: instance {}: {e}", cli.instance);
+                    eprintln!("hexacomp_up 0: instance {}: {e}", instance);
                     None
                 }
                 Err(e) => return Err(e.into()),
             };
-            let text = metrics::prometheus_text(&cli.instance, status.as_ref());
+            let text = metrics::prometheus_text(instance, status.as_ref());
             match output {
                 Some(file) => hexacomp_core::durable::replace_file(&file, text.as_bytes())
                     .with_context(|| format!("writing {}", file.display()))?,
@@ -112,12 +116,12 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             }
         }
         Command::Status { json: true } => {
-            let status = hexacomp_client::status_of(&cli.instance, &options)?;
-            println!("{}", metrics::status_json(&cli.instance, &status));
+            let status = hexacomp_client::status_of(instance, &options)?;
+            println!("{}", metrics::status_json(instance, &status));
         }
         Command::Status { json: false } => {
-            let s = hexacomp_client::status_of(&cli.instance, &options)?;
-            println!("instance      {}", cli.instance);
+            let s = hexacomp_client::status_of(instance, &options)?;
+            println!("instance      {}", instance);
             println!(
                 "geometry      {} ({})",
                 s.geometry_name, s.geometry_fingerprint
@@ -148,7 +152,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             joints,
         } => {
             hexacomp_formats::refuse_same_file(&output, &[&input])?;
-            let mut client = Client::connect(&cli.instance, &options)?;
+            let mut client = Client::connect(instance, &options)?;
             let (file, kind) = if joints {
                 (PointsFile::Joints(&input), RequestKind::Joints)
             } else {

@@ -236,7 +236,7 @@ fn client_node() -> Result<Node<ipc::Service>, Error> {
     NodeBuilder::new()
         .signal_handling_mode(SignalHandlingMode::Disabled)
         .create::<ipc::Service>()
-        .map_err(transport)
+        .map_err(|e| transport(format!("{e}{}", hexacomp_protocol::foreign_root_hint())))
 }
 
 /// Asks `port`'s service for its status report, waiting up to `timeout` (at least

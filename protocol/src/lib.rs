@@ -19,8 +19,10 @@ pub mod endpoints;
 mod error;
 pub mod names;
 pub mod payloads;
+mod root;
 
 pub use error::Error;
 pub use hexacomp_point_status::PointStatus;
 pub use names::{DEFAULT_INSTANCE, Endpoint, iceoryx_name, service_name};
 pub use payloads::*;
+pub use root::foreign_root_hint;

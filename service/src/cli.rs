@@ -24,7 +24,9 @@ use crate::{Error, Service, ServiceOptions};
 /// served again after a restart. Stops cleanly on SIGINT/SIGTERM.
 ///
 /// Logs to standard error at the level RUST_LOG names (error, warn, info, debug, trace or off;
-/// default info; target=level directives are not supported), in colour only on a terminal.
+/// default info; target=level directives are not supported), in colour only on a terminal; under
+/// systemd each line carries its priority for the journal, and readiness is notified
+/// (Type=notify).
 #[derive(Debug, Clone, Parser)]
 #[command(name = "hexacomp-service", version)]
 pub struct Args {
@@ -59,6 +61,8 @@ pub struct Args {
     /// one flooding client cannot hold the serving thread from the others. 0: unlimited.
     #[arg(long, value_name = "POINTS_PER_S", default_value_t = crate::admission::DEFAULT_POINTS_PER_SECOND)]
     client_budget: f64,
+    #[command(flatten)]
+    generate: hexacomp_cli_docs::GenerateArgs,
 }
 
 #[derive(Debug, Clone, Copy, clap::ValueEnum)]
@@ -72,7 +76,9 @@ enum WaitArg {
 /// `debug`, `trace`, `off`; `target=level` directives are not supported), at info when it is
 /// unset or empty, and when it names no single level, which the log then says. iceoryx2's own
 /// log at errors only unless its level is set in the environment. Colours only when standard
-/// error is a terminal and `NO_COLOR` is not set: a log file or the journal gets plain text.
+/// error is a terminal and `NO_COLOR` is not set: a log file gets plain text. When standard
+/// error is the journal's stream (systemd), each line starts with its syslog priority (`<4>`
+/// for a warning) and carries no timestamp: the journal keeps the level and its own time.
 pub fn init_logging() {
     use std::io::IsTerminal;
     let requested = std::env::var_os("RUST_LOG").filter(|v| !v.to_string_lossy().trim().is_empty());
@@ -81,11 +87,18 @@ pub fn init_logging() {
         .map(|value| single_level(&value.to_string_lossy()));
     let colour = std::io::stderr().is_terminal()
         && std::env::var_os("NO_COLOR").is_none_or(|v| v.is_empty());
-    tracing_subscriber::fmt()
+    let subscriber = tracing_subscriber::fmt()
         .with_writer(std::io::stderr)
-        .with_ansi(colour)
-        .with_max_level(level.flatten().unwrap_or(LevelFilter::INFO))
-        .init();
+        .with_max_level(level.flatten().unwrap_or(LevelFilter::INFO));
+    if crate::systemd::stderr_is_journal() {
+        let format = tracing_subscriber::fmt::format().without_time();
+        subscriber
+            .with_ansi(false)
+            .event_format(crate::systemd::PriorityPrefixed(format))
+            .init();
+    } else {
+        subscriber.with_ansi(colour).init();
+    }
     if let (Some(value), Some(None)) = (&requested, level) {
         tracing::warn!(
             "RUST_LOG={value:?} is not a single level (error, warn, info, debug, trace, off; \
@@ -119,6 +132,9 @@ fn default_state_dir(instance: &str) -> PathBuf {
 /// Serves until SIGINT/SIGTERM; an error when the service cannot start (bad geometry or model,
 /// state directory, instance already served).
 pub fn run(args: Args) -> Result<(), Error> {
+    if args.generate.run_if_asked::<Args>()? {
+        return Ok(());
+    }
     let geometry = match &args.geometry {
         Some(path) => Geometry::load(path).map_err(|cause| Error::Geometry {
             path: path.clone(),
@@ -144,6 +160,7 @@ pub fn run(args: Args) -> Result<(), Error> {
     // Before any thread starts, so that every thread inherits the blocked signals.
     let signals = TerminationSignals::block()?;
     let service = Service::start(options)?;
+    crate::systemd::notify_serving(&args.instance);
     while !service.is_finished() {
         if let Some(signal) = signals.wait(Duration::from_millis(200)) {
             tracing::info!(
@@ -155,6 +172,7 @@ pub fn run(args: Args) -> Result<(), Error> {
         }
     }
     // After a signal, or when a thread ended by itself (a panic): the other thread stops too.
+    crate::systemd::notify_stopping();
     service.stop();
     service.join()
 }

@@ -9,6 +9,10 @@ pub enum Error {
     /// An invalid instance name, or an endpoint that could not be opened or created.
     #[error(transparent)]
     Protocol(#[from] hexacomp_protocol::Error),
+    /// The manual pages or completions asked for (`--generate-man`, `--generate-completions`)
+    /// could not be written.
+    #[error(transparent)]
+    Generate(#[from] hexacomp_cli_docs::Error),
     /// The geometry file cannot be used.
     #[error("{cause}")]
     Geometry {

@@ -21,6 +21,7 @@ pub mod fair_queue;
 pub mod realtime;
 pub mod serving;
 pub mod state;
+pub mod systemd;
 pub mod termination;
 pub mod validate;
 

@@ -257,7 +257,12 @@ pub fn serve(setup: ServingSetup, ready: Sender<Result<WaitMode, Error>>) {
     let started = NodeBuilder::new()
         .signal_handling_mode(SignalHandlingMode::Disabled)
         .create::<ipc::Service>()
-        .map_err(|e| Error::Iceoryx(format!("creating the serving thread's node: {e}")))
+        .map_err(|e| {
+            Error::Iceoryx(format!(
+                "creating the serving thread's node: {e}{}",
+                hexacomp_protocol::foreign_root_hint()
+            ))
+        })
         .and_then(|node| Ok((compensation_endpoint(&node, &instance)?, node)));
     let ((_service, server), node) = match started {
         Ok(parts) => parts,

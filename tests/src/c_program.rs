@@ -78,7 +78,10 @@ fn libs_private() -> Vec<String> {
 /// Compiles the C test program `tests/c/<source>` into `out` against the static or the shared
 /// library, with the flags `hexacomp.pc` gives, and returns the executable's path.
 pub fn compile(source: &str, out: &Path, shared: bool) -> PathBuf {
-    write_pkg_config(out);
+    // Installed, the package's hexacomp.pc is on pkg-config's own path: `out` holds none.
+    if !crate::installed::installed() {
+        write_pkg_config(out);
+    }
     let stem = source.trim_end_matches(".c");
     let exe = out.join(if shared {
         format!("{stem}_shared")

@@ -7,6 +7,7 @@
 #![warn(missing_docs)]
 
 pub mod c_program;
+pub mod installed;
 pub mod linuxcnc;
 
 use std::path::PathBuf;
@@ -41,12 +42,23 @@ fn binary_dir() -> &'static PathBuf {
 
 /// The directory of the workspace's built libraries, among them the C client library
 /// (`libhexacomp.a`, `libhexacomp.so`).
+/// With the installed packages as the subject ([`installed::installed`]): `/usr/lib`.
 pub fn library_dir() -> &'static std::path::Path {
+    if installed::installed() {
+        return std::path::Path::new("/usr/lib");
+    }
     binary_dir()
 }
 
-/// The path of workspace binary `name` (e.g. `hexacomp-trainer`), built if needed.
+/// The path of workspace binary `name` (e.g. `hexacomp-trainer`), built if needed; with the
+/// installed packages as the subject ([`installed::installed`]), the installed command in
+/// `/usr/bin` for the package's commands ([`installed::PACKAGED_COMMANDS`]).
 pub fn binary(name: &str) -> PathBuf {
+    if installed::installed() && installed::PACKAGED_COMMANDS.contains(&name) {
+        let system = PathBuf::from("/usr/bin").join(name);
+        assert!(system.exists(), "{} is not installed", system.display());
+        return system;
+    }
     let path = binary_dir().join(name);
     assert!(path.exists(), "{} was not built", path.display());
     path

@@ -6,6 +6,11 @@
 //! geometry --from-linuxcnc`, writes a model for it, and gives iceoryx2 a root path inside the
 //! directory (`config/iceoryx2.toml`, which iceoryx2 reads from the working directory). LinuxCNC
 //! refuses to run as root: under root, LinuxCNC and the service run as [`LINUXCNC_USER`].
+//!
+//! With the installed packages as the subject ([`crate::installed`]) the component is the one
+//! the package `hexacomp-linuxcnc` installed (checked unmodified), the commands are those in
+//! `/usr/bin`, and the service is started as the unit `hexacomp@.service` starts it, as its
+//! user, for the instance [`INSTALLED_INSTANCE`]; LinuxCNC runs as that user too.
 
 use std::os::unix::process::CommandExt;
 use std::path::{Path, PathBuf};
@@ -16,10 +21,14 @@ use std::time::{Duration, Instant};
 use hexacomp_core::Geometry;
 use hexacomp_core::model::Model;
 
+use crate::installed::{ServiceUnit, installed};
 use crate::{binary, library_dir, smooth_model_for};
 
 /// The unprivileged user LinuxCNC runs as when the tests run as root (`.ci/run` creates it).
 pub const LINUXCNC_USER: &str = "hexacnc";
+/// The instance the installed unit serves in the tests (its geometry in
+/// `/etc/hexacomp/INSTANCE/`, its state in `/var/lib/hexacomp/INSTANCE/`, both removed after).
+pub const INSTALLED_INSTANCE: &str = "hexacomp-test";
 /// The component's longest wait for the service in the tests, µs (of the 1 ms servo period).
 pub const WAIT_US: u32 = 900;
 /// True on a PREEMPT_RT kernel (`/sys/kernel/realtime` reads 1), where LinuxCNC's servo thread
@@ -59,6 +68,11 @@ pub fn integration_dir() -> PathBuf {
 fn install_component() {
     static DONE: OnceLock<()> = OnceLock::new();
     DONE.get_or_init(|| {
+        if installed() {
+            check_packaged_component();
+            return;
+        }
+        refuse_to_replace_a_packaged_component();
         let out = std::env::temp_dir().join(format!("hexacomp-hal-{}", std::process::id()));
         let status = Command::new(integration_dir().join("build-component.sh"))
             .arg("--out")
@@ -84,24 +98,87 @@ fn install_component() {
     });
 }
 
-/// The user and group ids to run LinuxCNC and the service as: [`LINUXCNC_USER`] under root,
-/// else `None` (the current user).
-fn run_as() -> Option<(u32, u32)> {
+/// The module directory holds the component of the package `hexacomp-linuxcnc`, unmodified
+/// (`dpkg --verify` compares it with the package's checksums): not a build tree's copy.
+fn check_packaged_component() {
+    let module = "/usr/lib/linuxcnc/modules/hexacomp.so";
+    let owner = Command::new("dpkg-query")
+        .args(["-S", module])
+        .output()
+        .expect("dpkg-query");
+    assert!(
+        String::from_utf8_lossy(&owner.stdout).starts_with("hexacomp-linuxcnc: "),
+        "{module} is not the package hexacomp-linuxcnc's: {}",
+        String::from_utf8_lossy(&owner.stderr)
+    );
+    let verify = Command::new("dpkg")
+        .args(["--verify", "hexacomp-linuxcnc"])
+        .output()
+        .expect("dpkg");
+    assert!(
+        verify.status.success() && verify.stdout.is_empty(),
+        "the installed hexacomp-linuxcnc was changed since it was installed:\n{}",
+        String::from_utf8_lossy(&verify.stdout)
+    );
+}
+
+/// Fails when the module directory's `hexacomp.so` belongs to an installed package: the tests
+/// would replace a file dpkg owns with this build's.
+fn refuse_to_replace_a_packaged_component() {
+    let module = "/usr/lib/linuxcnc/modules/hexacomp.so";
+    let owner = Command::new("dpkg-query").args(["-S", module]).output();
+    if let Ok(owner) = owner
+        && owner.status.success()
+    {
+        panic!(
+            "{module} belongs to an installed package ({}): remove it (dpkg -r \
+             hexacomp-linuxcnc) or test the installed pieces (HEXACOMP_INSTALLED=1)",
+            String::from_utf8_lossy(&owner.stdout).trim()
+        );
+    }
+}
+
+/// The user LinuxCNC and the service run as, with its ids.
+#[derive(Debug, Clone)]
+struct RunAs {
+    name: String,
+    uid: u32,
+    gid: u32,
+}
+
+/// The user to run LinuxCNC and the service as under root: [`LINUXCNC_USER`], or, installed,
+/// the unit's `User=`; else `None` (the current user).
+fn run_as() -> Option<RunAs> {
     // SAFETY: geteuid has no preconditions.
     if unsafe { libc::geteuid() } != 0 {
         return None;
     }
-    let name = std::ffi::CString::new(LINUXCNC_USER).expect("a user name");
+    let user = if installed() {
+        ServiceUnit::installed().user().to_string()
+    } else {
+        LINUXCNC_USER.to_string()
+    };
+    let (uid, gid) = user_ids(&user);
+    Some(RunAs {
+        name: user,
+        uid,
+        gid,
+    })
+}
+
+/// The user and group ids of the user `user`; panics when there is no such user.
+pub fn user_ids(user: &str) -> (u32, u32) {
+    let name = std::ffi::CString::new(user).expect("a user name");
     // SAFETY: `name` is a valid C string; getpwnam returns null or a pointer to a static entry,
     // read at once on this thread.
     let entry = unsafe { libc::getpwnam(name.as_ptr()) };
     assert!(
         !entry.is_null(),
-        "LinuxCNC refuses root: create the user {LINUXCNC_USER} (useradd -m {LINUXCNC_USER})"
+        "no user {user} (LinuxCNC refuses root: useradd -m {LINUXCNC_USER}; the package \
+         hexacomp creates the unit's user)"
     );
     // SAFETY: checked non-null above.
-    let (uid, gid) = unsafe { ((*entry).pw_uid, (*entry).pw_gid) };
-    Some((uid, gid))
+    unsafe { ((*entry).pw_uid, (*entry).pw_gid) }
 }
 
 /// A prepared copy of the example configuration, removed when dropped.
@@ -112,7 +189,7 @@ pub struct SimConfig {
     pub geometry: Geometry,
     /// The model the service serves.
     pub model: Model,
-    user: Option<(u32, u32)>,
+    user: Option<RunAs>,
 }
 
 impl SimConfig {
@@ -120,6 +197,10 @@ impl SimConfig {
     /// `adapt_ini` may change the ini text (the display is already replaced).
     pub fn prepare(test: &str, adapt_ini: impl FnOnce(String) -> String) -> Self {
         install_component();
+        if installed() {
+            // What an earlier run left: this configuration's service starts afresh.
+            let _ = std::fs::remove_dir_all(ServiceUnit::installed().state_dir(INSTALLED_INSTANCE));
+        }
         let dir = std::env::temp_dir().join(format!("hexacomp-lcnc-{test}-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(dir.join("config")).expect("config directory");
@@ -133,8 +214,10 @@ impl SimConfig {
             dir.join("drive.py"),
         )
         .expect("copying drive.py");
-        std::fs::copy(binary("hexacomp-service"), dir.join("hexacomp-service"))
-            .expect("copying hexacomp-service");
+        if !installed() {
+            std::fs::copy(binary("hexacomp-service"), dir.join("hexacomp-service"))
+                .expect("copying hexacomp-service");
+        }
         let ini = dir.join("hexapod-hexacomp.ini");
         let text = std::fs::read_to_string(&ini).expect("reading the ini");
         let display = format!("DISPLAY = {}", dir.join("drive.py").display());
@@ -143,21 +226,30 @@ impl SimConfig {
         // hundreds of µs; a real machine keeps the example's 200 µs.
         let hal = dir.join("hexacomp.hal");
         let wiring = std::fs::read_to_string(&hal).expect("reading hexacomp.hal");
-        let wiring = wiring.replace(
+        let mut wiring = wiring.replace(
             "setp hexacomp.0.wait-us 200",
             &format!("setp hexacomp.0.wait-us {WAIT_US}"),
         );
+        if installed() {
+            wiring = wiring.replace(
+                "loadrt hexacomp instance=default",
+                &format!("loadrt hexacomp instance={INSTALLED_INSTANCE}"),
+            );
+        }
         std::fs::write(&hal, wiring).expect("writing hexacomp.hal");
         std::fs::write(&ini, text).expect("writing the ini");
-        std::fs::write(
-            dir.join("config/iceoryx2.toml"),
-            format!(
-                "[global]\nroot-path = \"{}/iceoryx2/\"\nprefix = \"{}\"\n",
-                dir.display(),
-                shm_prefix(&dir)
-            ),
-        )
-        .expect("writing the iceoryx2 config");
+        // Installed, everything uses iceoryx2's default root, as on the machine.
+        if !installed() {
+            std::fs::write(
+                dir.join("config/iceoryx2.toml"),
+                format!(
+                    "[global]\nroot-path = \"{}/iceoryx2/\"\nprefix = \"{}\"\n",
+                    dir.display(),
+                    shm_prefix(&dir)
+                ),
+            )
+            .expect("writing the iceoryx2 config");
+        }
 
         write_sampler_hal(&dir);
         let geometry_file = dir.join("geometry.toml");
@@ -180,7 +272,7 @@ impl SimConfig {
             .expect("saving the model");
 
         let user = run_as();
-        if let Some((uid, gid)) = user {
+        if let Some(RunAs { uid, gid, .. }) = user {
             let status = Command::new("chown")
                 .arg("-R")
                 .arg(format!("{uid}:{gid}"))
@@ -201,13 +293,13 @@ impl SimConfig {
     fn command(&self, program: impl AsRef<std::ffi::OsStr>) -> Command {
         let mut command = Command::new(program);
         command.current_dir(&self.dir).stdin(Stdio::null());
-        if let Some((uid, gid)) = self.user {
+        if let Some(user) = &self.user {
             command
-                .uid(uid)
-                .gid(gid)
+                .uid(user.uid)
+                .gid(user.gid)
                 .env("HOME", &self.dir)
-                .env("USER", LINUXCNC_USER)
-                .env("LOGNAME", LINUXCNC_USER);
+                .env("USER", &user.name)
+                .env("LOGNAME", &user.name);
         }
         command
     }
@@ -221,6 +313,9 @@ impl SimConfig {
     /// As [`SimConfig::start_service`], serving the model file `model` of the directory (which
     /// replaces the persisted one, as a new generation).
     pub fn start_service_with_model(&self, log: &str, model: &str) -> SimService {
+        if installed() {
+            return self.start_installed_service(log, model);
+        }
         let log_path = self.dir.join(log);
         let mut child = self
             .command(self.dir.join("hexacomp-service"))
@@ -317,6 +412,128 @@ impl SimConfig {
     }
 }
 
+impl SimConfig {
+    /// Starts the installed service as the unit `hexacomp@.service` starts it for
+    /// [`INSTALLED_INSTANCE`]: the geometry where the unit reads it, the state directory made as
+    /// systemd makes it (the unit's user's, the unit's mode), the unit's `ExecStart` line run
+    /// as the unit's user in `/` (systemd's working directory for it: iceoryx2's default
+    /// configuration and root, as LinuxCNC's), `NOTIFY_SOCKET` set. Waits for `READY=1`, checks
+    /// that the service answers then and that another user is refused, and deploys `model` with
+    /// the installed `hexacomp-trainer deploy`, which the service persists.
+    fn start_installed_service(&self, log: &str, model: &str) -> SimService {
+        let unit = ServiceUnit::installed();
+        let instance = INSTALLED_INSTANCE;
+        let config = installed_config_dir();
+        std::fs::create_dir_all(&config).expect("creating /etc/hexacomp/INSTANCE");
+        std::fs::copy(self.dir.join("geometry.toml"), config.join("geometry.toml"))
+            .expect("installing the geometry");
+        let state = unit.state_dir(instance);
+        let user = self
+            .user
+            .as_ref()
+            .expect("the installed service is started as root");
+        if !state.exists() {
+            std::fs::create_dir(&state).expect("creating the state directory");
+            let mode = unit.get("StateDirectoryMode").map_or(0o755, |m| {
+                u32::from_str_radix(m, 8).expect("StateDirectoryMode in octal")
+            });
+            std::fs::set_permissions(&state, std::os::unix::fs::PermissionsExt::from_mode(mode))
+                .expect("the state directory's mode");
+            std::os::unix::fs::chown(&state, Some(user.uid), Some(user.gid))
+                .expect("the state directory's owner");
+        }
+        let socket_path = self.dir.join("notify.sock");
+        let _ = std::fs::remove_file(&socket_path);
+        let socket =
+            std::os::unix::net::UnixDatagram::bind(&socket_path).expect("the notify socket");
+        std::os::unix::fs::chown(&socket_path, Some(user.uid), Some(user.gid))
+            .expect("the notify socket's owner");
+        socket
+            .set_read_timeout(Some(Duration::from_millis(200)))
+            .expect("a read timeout");
+        let line = unit.exec_start(instance);
+        eprintln!("the unit's ExecStart as {}: {}", user.name, line.join(" "));
+        let log_path = self.dir.join(log);
+        let mut child = self
+            .command(&line[0])
+            .args(&line[1..])
+            .env("NOTIFY_SOCKET", &socket_path)
+            .current_dir("/")
+            .stdout(Stdio::null())
+            .stderr(std::fs::File::create(&log_path).expect("service log"))
+            .spawn()
+            .unwrap_or_else(|e| panic!("starting {line:?}: {e}"));
+        let deadline = Instant::now() + Duration::from_secs(20);
+        let mut buffer = [0u8; 4096];
+        loop {
+            if let Ok(n) = socket.recv(&mut buffer) {
+                let message = String::from_utf8_lossy(&buffer[..n]);
+                if message.lines().any(|l| l == "READY=1") {
+                    break;
+                }
+            }
+            if let Ok(Some(status)) = child.try_wait() {
+                panic!(
+                    "{line:?} exited ({status}):\n{}",
+                    std::fs::read_to_string(&log_path).unwrap_or_default()
+                );
+            }
+            assert!(
+                Instant::now() < deadline,
+                "{line:?} never notified READY=1:\n{}",
+                std::fs::read_to_string(&log_path).unwrap_or_default()
+            );
+        }
+        let service = SimService(child);
+        let client = binary("hexacomp-client");
+        let status = self.run(&client, &["--instance", instance, "status"]);
+        assert!(
+            status.status.success(),
+            "READY=1, but the service does not answer: {}",
+            String::from_utf8_lossy(&status.stderr)
+        );
+        let (uid, gid) = user_ids(LINUXCNC_USER);
+        let other = Command::new(&client)
+            .args(["--instance", instance, "--timeout-ms", "200", "status"])
+            .current_dir("/")
+            .uid(uid)
+            .gid(gid)
+            .output()
+            .expect("running hexacomp-client as another user");
+        let refusal = String::from_utf8_lossy(&other.stderr);
+        assert!(
+            !other.status.success()
+                && refusal.contains(&format!(
+                    "belongs to user {} and this process runs as user {uid}",
+                    user.uid
+                )),
+            "{LINUXCNC_USER} was not refused access to the service of {}: {refusal}",
+            user.name
+        );
+        let deploy = self.run(
+            binary("hexacomp-trainer"),
+            &["deploy", "--instance", instance, "--model", model],
+        );
+        assert!(
+            deploy.status.success(),
+            "deploying {model}: {}",
+            String::from_utf8_lossy(&deploy.stderr)
+        );
+        let persisted = std::fs::metadata(state.join("model.hxm")).expect("the persisted model");
+        assert_eq!(
+            std::os::unix::fs::MetadataExt::uid(&persisted),
+            user.uid,
+            "the persisted model's owner"
+        );
+        service
+    }
+}
+
+/// Where the installed unit reads [`INSTALLED_INSTANCE`]'s geometry: `/etc/hexacomp/INSTANCE`.
+fn installed_config_dir() -> PathBuf {
+    Path::new("/etc/hexacomp").join(INSTALLED_INSTANCE)
+}
+
 /// Writes `sampling.hal`, the HAL file [`SimConfig::add_sampler`] names, into `dir`.
 fn write_sampler_hal(dir: &Path) {
     let mut hal = format!("loadrt sampler depth=8000 cfg={SAMPLER_CFG}\n");
@@ -365,6 +582,10 @@ impl Drop for SimConfig {
         }
         if !std::thread::panicking() {
             let _ = std::fs::remove_dir_all(&self.dir);
+        }
+        if installed() {
+            let _ = std::fs::remove_dir_all(installed_config_dir());
+            let _ = std::fs::remove_dir_all(ServiceUnit::installed().state_dir(INSTALLED_INSTANCE));
         }
     }
 }

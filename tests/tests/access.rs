@@ -3,6 +3,7 @@
 //! iceoryx2's one global id counter excepted). The permission model is in README.md.
 
 use std::os::unix::fs::MetadataExt;
+use std::os::unix::process::CommandExt;
 use std::path::{Path, PathBuf};
 
 use hexacomp_client::DeployOutcome;
@@ -86,5 +87,61 @@ fn state_directory_and_shared_memory_are_not_writable_by_other_users() {
          segments)",
         persisted.len(),
         files.len()
+    );
+}
+
+#[test]
+fn a_service_whose_iceoryx2_root_belongs_to_another_user_says_so() {
+    // SAFETY: geteuid has no preconditions.
+    if unsafe { libc::geteuid() } != 0 {
+        eprintln!("skipped: needs root, to run the service as another user");
+        return;
+    }
+    let user = hexacomp_tests::linuxcnc::LINUXCNC_USER;
+    let (uid, gid) = hexacomp_tests::linuxcnc::user_ids(user);
+    // A directory the other user can reach, holding the service and an iceoryx2 configuration
+    // (read from the working directory) whose root belongs to root, 0750, as iceoryx2 leaves
+    // it for the user that came first.
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::set_permissions(
+        dir.path(),
+        std::os::unix::fs::PermissionsExt::from_mode(0o755),
+    )
+    .unwrap();
+    let root = dir.path().join("iceoryx2");
+    std::fs::create_dir(&root).unwrap();
+    std::fs::set_permissions(&root, std::os::unix::fs::PermissionsExt::from_mode(0o750)).unwrap();
+    let work = dir.path().join("work");
+    std::fs::create_dir_all(work.join("config")).unwrap();
+    std::fs::write(
+        work.join("config/iceoryx2.toml"),
+        format!("[global]\nroot-path = \"{}/\"\n", root.display()),
+    )
+    .unwrap();
+    let service = work.join("hexacomp-service");
+    std::fs::copy(hexacomp_tests::binary("hexacomp-service"), &service).unwrap();
+    std::os::unix::fs::chown(&work, Some(uid), Some(gid)).unwrap();
+    std::os::unix::fs::chown(&service, Some(uid), Some(gid)).unwrap();
+    let output = std::process::Command::new(&service)
+        .args([
+            "--instance",
+            &unique_instance("root"),
+            "--state-dir",
+            "state",
+        ])
+        .current_dir(&work)
+        .env("HOME", &work)
+        .uid(uid)
+        .gid(gid)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains(&format!(
+            "iceoryx2's root {}/ belongs to user 0 and this process runs as user {uid}",
+            root.display()
+        )),
+        "{stderr}"
     );
 }

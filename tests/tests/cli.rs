@@ -353,3 +353,65 @@ fn client_status_json_and_metrics_give_the_services_counters() {
             .success()
     );
 }
+
+#[test]
+fn every_command_writes_its_manual_pages_and_completions_and_needs_a_subcommand_otherwise() {
+    for (name, other) in [
+        ("hexacomp-service", "--cpu=1"),
+        ("hexacomp-trainer", "plan"),
+        ("hexacomp-client", "status"),
+        ("hexacomp-bench", "demo"),
+    ] {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path().to_str().unwrap();
+        for option in ["--generate-man", "--generate-completions"] {
+            let output = run(name, &[option, d]);
+            assert!(
+                output.status.success(),
+                "{name} {option}: {}",
+                String::from_utf8_lossy(&output.stderr)
+            );
+        }
+        let page = std::fs::read_to_string(dir.path().join(format!("{name}.1"))).unwrap();
+        assert!(page.contains(&format!(".TH {name} 1")), "{page}");
+        for script in [name.to_string(), format!("_{name}"), format!("{name}.fish")] {
+            let text = std::fs::read_to_string(dir.path().join(&script)).unwrap();
+            assert!(text.contains(name), "{script}: {text}");
+        }
+        // Alone or not at all: with a subcommand or another option, clap refuses.
+        let mixed = run(name, &["--generate-man", d, other]);
+        assert_eq!(
+            mixed.status.code(),
+            Some(2),
+            "{name} --generate-man {other}"
+        );
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path().to_str().unwrap();
+    assert!(
+        run("hexacomp-trainer", &["--generate-man", d])
+            .status
+            .success()
+    );
+    let calibrate =
+        std::fs::read_to_string(dir.path().join("hexacomp-trainer-calibrate.1")).unwrap();
+    assert!(calibrate.contains("out\\-dir"), "{calibrate}");
+    assert!(
+        run("hexacomp-bench", &["--generate-man", d])
+            .status
+            .success()
+    );
+    assert!(dir.path().join("hexacomp-bench-demo.1").exists());
+    assert!(
+        !dir.path().join("hexacomp-bench-serve-echo.1").exists(),
+        "a page for a hidden command"
+    );
+    // Without a subcommand (the subcommand is optional only for the options above): clap's
+    // usage error and status 2, as before.
+    for name in ["hexacomp-trainer", "hexacomp-client", "hexacomp-bench"] {
+        let output = run(name, &[]);
+        assert_eq!(output.status.code(), Some(2), "{name}");
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert!(stderr.contains("a subcommand is required"), "{stderr}");
+    }
+}

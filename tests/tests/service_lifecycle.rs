@@ -1,6 +1,6 @@
 //! The service's life outside serving: what it does with a persisted model it cannot use, a
 //! `--model` that validation refuses, SIGTERM and SIGINT, its log (plain text in a file, at the
-//! level `RUST_LOG` names), and `--client-budget 0`.
+//! level `RUST_LOG` names), readiness and log priorities under systemd, and `--client-budget 0`.
 
 use std::path::Path;
 
@@ -269,4 +269,130 @@ fn an_event_mode_service_without_its_wake_up_says_it_sleeps() {
     client
         .compensate_pose([0.0, 0.0, 280.0, 0.0, 0.0, 0.0])
         .unwrap();
+}
+
+/// Starts the service for `instance` as systemd would with `Type=notify`: `NOTIFY_SOCKET` names
+/// `socket`, `JOURNAL_STREAM` is `journal_stream`; standard error goes to `log`; RUST_LOG=`level`.
+fn start_as_under_systemd(
+    instance: &str,
+    state: &Path,
+    socket: &Path,
+    log: &Path,
+    journal_stream: &str,
+    level: &str,
+) -> std::process::Child {
+    std::process::Command::new(binary("hexacomp-service"))
+        .args([
+            "--instance",
+            instance,
+            "--state-dir",
+            p(state),
+            "--wait",
+            "event",
+        ])
+        .env("NOTIFY_SOCKET", socket)
+        .env("JOURNAL_STREAM", journal_stream)
+        .env("RUST_LOG", level)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::fs::File::create(log).unwrap())
+        .spawn()
+        .unwrap()
+}
+
+/// The next notification on `socket` (20 s at most).
+fn next_notification(socket: &std::os::unix::net::UnixDatagram) -> String {
+    let mut buffer = [0u8; 4096];
+    let n = socket
+        .recv(&mut buffer)
+        .expect("a notification within 20 s");
+    String::from_utf8_lossy(&buffer[..n]).into_owned()
+}
+
+#[test]
+fn under_systemd_ready_is_notified_once_serving_and_log_lines_carry_the_journals_priorities() {
+    use std::os::unix::fs::MetadataExt;
+    let dir = tempfile::tempdir().unwrap();
+    let socket_path = dir.path().join("notify.sock");
+    let socket = std::os::unix::net::UnixDatagram::bind(&socket_path).unwrap();
+    socket
+        .set_read_timeout(Some(Duration::from_secs(20)))
+        .unwrap();
+    let log = dir.path().join("service.log");
+    // The journal's stream is standard error itself, named by device and inode (the file
+    // exists before the service opens it: `File::create` keeps its inode).
+    std::fs::write(&log, "").unwrap();
+    let metadata = std::fs::metadata(&log).unwrap();
+    let stream = format!("{}:{}", metadata.dev(), metadata.ino());
+    let instance = unique_instance("notify");
+    // A level that names none: the warning about it is logged at warning priority.
+    let mut child = start_as_under_systemd(
+        &instance,
+        &dir.path().join("state"),
+        &socket_path,
+        &log,
+        &stream,
+        "verbose",
+    );
+    let ready = next_notification(&socket);
+    assert!(ready.lines().any(|l| l == "READY=1"), "{ready:?}");
+    assert!(
+        ready.contains(&format!("STATUS=serving instance {instance}")),
+        "{ready:?}"
+    );
+    // Ready means serving: a client connects and is answered at once, without retrying.
+    let options = hexacomp_client::ClientOptions {
+        timeout: Duration::from_secs(2),
+    };
+    let status = hexacomp_client::status_of(&instance, &options);
+    assert!(status.is_ok(), "READY=1 sent before serving: {status:?}");
+    hexacomp_tests::signal_child(&child, libc::SIGTERM);
+    let stopping = next_notification(&socket);
+    assert!(stopping.lines().any(|l| l == "STOPPING=1"), "{stopping:?}");
+    assert_eq!(child.wait().unwrap().code(), Some(0));
+    let text = std::fs::read_to_string(&log).unwrap();
+    assert!(
+        !text.contains('\x1b'),
+        "colour codes in the journal: {text}"
+    );
+    for line in text.lines() {
+        assert!(
+            ["<3>", "<4>", "<6>", "<7>"]
+                .iter()
+                .any(|p| line.starts_with(p)),
+            "a line without its priority: {line:?}"
+        );
+    }
+    assert!(
+        text.lines()
+            .any(|l| l.starts_with("<6>") && l.contains(&format!("serving instance {instance}"))),
+        "{text}"
+    );
+    assert!(
+        text.lines()
+            .any(|l| l.starts_with("<4>") && l.contains("is not a single level")),
+        "{text}"
+    );
+
+    // A JOURNAL_STREAM inherited by a service whose standard error goes elsewhere names
+    // another file: plain lines, no priorities.
+    let other = dir.path().join("other.log");
+    let instance = unique_instance("notify2");
+    let mut child = start_as_under_systemd(
+        &instance,
+        &dir.path().join("state2"),
+        &socket_path,
+        &other,
+        &stream,
+        "info",
+    );
+    next_notification(&socket);
+    hexacomp_tests::signal_child(&child, libc::SIGTERM);
+    next_notification(&socket);
+    assert_eq!(child.wait().unwrap().code(), Some(0));
+    let text = std::fs::read_to_string(&other).unwrap();
+    assert!(text.contains("serving instance"), "{text}");
+    assert!(
+        !text.contains("<6>"),
+        "priorities in a file that is not the journal: {text}"
+    );
 }

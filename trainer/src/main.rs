@@ -23,8 +23,12 @@ struct Cli {
     #[arg(long, global = true, value_name = "FILE")]
     geometry: Option<PathBuf>,
 
+    #[command(flatten)]
+    generate: hexacomp_cli_docs::GenerateArgs,
+
+    /// Optional only so that --generate-man and --generate-completions can stand alone.
     #[command(subcommand)]
-    command: Command,
+    command: Option<Command>,
 }
 
 #[derive(Debug, Subcommand)]
@@ -74,7 +78,8 @@ impl Command {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
-    match run(cli) {
+    let command = cli.generate.subcommand_or_exit::<Cli, _>(cli.command);
+    match run(cli.geometry, command) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e:#}");
@@ -83,22 +88,22 @@ fn main() -> ExitCode {
     }
 }
 
-fn run(cli: Cli) -> anyhow::Result<()> {
-    cli.command
+fn run(geometry_file: Option<PathBuf>, command: Command) -> anyhow::Result<()> {
+    command
         .files()
-        .refuse_overwriting_inputs(cli.geometry.as_deref())?;
-    let geometry = match &cli.geometry {
+        .refuse_overwriting_inputs(geometry_file.as_deref())?;
+    let geometry = match &geometry_file {
         Some(path) => Geometry::load(path)?,
         None => Geometry::prototype(),
     };
-    match cli.command {
+    match command {
         Command::Calibrate(args) => commands::calibrate::run(&geometry, &args),
         Command::Plan(args) => commands::plan::run(&geometry, &args),
         Command::Simulate(args) => commands::simulate::run(&geometry, &args),
         Command::Campaign(args) => commands::campaign::run(&geometry, &args),
         Command::Verify(args) => commands::verify::run(&geometry, &args),
         Command::Check(args) => commands::check::run(&geometry, &args),
-        Command::Export(args) => commands::export::run(&geometry, cli.geometry.as_deref(), &args),
+        Command::Export(args) => commands::export::run(&geometry, geometry_file.as_deref(), &args),
         Command::Solve(args) => commands::solve::run(&geometry, &args),
         Command::Identify(args) => commands::identify::run(&geometry, &args),
         Command::Register(args) => commands::register::run(&geometry, &args),
