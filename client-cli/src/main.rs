@@ -48,7 +48,9 @@ enum Command {
     },
     /// Print the service's counters in the Prometheus text format, for a node-exporter
     /// textfile collector or a timer (the service runs no network listener; only its status
-    /// endpoint is asked, never the serving thread). A service that is absent or does not
+    /// and telemetry endpoints are asked, never the serving thread): requests, points, errors,
+    /// refusals, generation, uptime, the serving thread's answer times as a histogram, deadline
+    /// misses and the model's age. A service that is absent or does not
     /// answer is reported as `hexacomp_up 0` (and why, on standard error) with exit status 0, so
     /// that a collector's file says so instead of keeping old values; an invalid instance name,
     /// a service of another user or of another protocol version is an error. Run it as the
@@ -108,7 +110,26 @@ fn run(instance: &str, timeout_ms: u64, command: Command) -> anyhow::Result<()> 
                 }
                 Err(e) => return Err(e.into()),
             };
-            let text = metrics::prometheus_text(instance, status.as_ref());
+            let mut text = metrics::prometheus_text(instance, status.as_ref());
+            if status.is_some() {
+                // The answer times, deadline misses and the model's age; a service of an older
+                // release has no telemetry endpoint: those are left out, and it is said.
+                match hexacomp_client::telemetry_of(instance, &options) {
+                    Ok(telemetry) => text.push_str(&metrics::telemetry_text(
+                        instance,
+                        &telemetry,
+                        std::time::SystemTime::now(),
+                    )),
+                    Err(hexacomp_client::Error::ServiceAbsent { .. }) => eprintln!(
+                        "instance {instance}: the service has no telemetry endpoint (a release \
+                         before it): answer times, deadline misses and the model's age left out"
+                    ),
+                    Err(e) => eprintln!(
+                        "instance {instance}: no telemetry ({e}): answer times, deadline misses \
+                         and the model's age left out"
+                    ),
+                }
+            }
             match output {
                 Some(file) => hexacomp_core::durable::replace_file(&file, text.as_bytes())
                     .with_context(|| format!("writing {}", file.display()))?,

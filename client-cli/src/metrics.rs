@@ -4,7 +4,9 @@
 
 use std::fmt::Write;
 
-use hexacomp_client::Status;
+use std::time::{Duration, SystemTime};
+
+use hexacomp_client::{Status, Telemetry};
 
 /// The status of `instance` as one JSON object: the fields of [`Status`], the uptime in
 /// seconds.
@@ -33,9 +35,7 @@ pub fn prometheus_text(instance: &str, status: Option<&Status>) -> String {
     let instance = format!("hexacomp_instance=\"{}\"", label_value(instance));
     let mut text = String::new();
     let mut metric = |name: &str, kind: &str, help: &str, labels: &str, value: String| {
-        let _ = writeln!(text, "# HELP {name} {help}");
-        let _ = writeln!(text, "# TYPE {name} {kind}");
-        let _ = writeln!(text, "{name}{{{labels}}} {value}");
+        write_metric(&mut text, name, kind, help, labels, &value)
     };
     metric(
         "hexacomp_up",
@@ -105,6 +105,80 @@ pub fn prometheus_text(instance: &str, status: Option<&Status>) -> String {
         format!("{:.3}", s.uptime.as_secs_f64()),
     );
     text
+}
+
+/// The telemetry of `instance` in the Prometheus text format, to follow [`prometheus_text`]'s
+/// lines: the answer times as the histogram `hexacomp_answer_duration_seconds` (cumulative
+/// buckets, sum, count: `histogram_quantile` gives the percentiles), the deadline and the
+/// answers that missed it, and the model's age at `now` (none without a model; 0 when `now` is
+/// before the deploy, a clock set back).
+pub fn telemetry_text(instance: &str, telemetry: &Telemetry, now: SystemTime) -> String {
+    let labels = format!("hexacomp_instance=\"{}\"", label_value(instance));
+    let mut text = String::new();
+    let name = "hexacomp_answer_duration_seconds";
+    let _ = writeln!(
+        text,
+        "# HELP {name} Served compensation requests of at most 64 points, by the time from \
+         the serving thread receiving each to sending its answer (the service's part of a \
+         round trip: not its wake-up, not the client's side)."
+    );
+    let _ = writeln!(text, "# TYPE {name} histogram");
+    let mut answers = 0;
+    for (bound, count) in &telemetry.answer_times {
+        answers += count;
+        let le = bound.map_or("+Inf".to_string(), |b| b.as_secs_f64().to_string());
+        let _ = writeln!(text, "{name}_bucket{{{labels},le=\"{le}\"}} {answers}");
+    }
+    let sum = telemetry.answer_time_sum.as_secs_f64();
+    let _ = writeln!(text, "{name}_sum{{{labels}}} {sum}");
+    let _ = writeln!(text, "{name}_count{{{labels}}} {answers}");
+    write_metric(
+        &mut text,
+        "hexacomp_deadline_seconds",
+        "gauge",
+        "The service's deadline for answering a request (--deadline-us).",
+        &labels,
+        &telemetry.deadline.as_secs_f64().to_string(),
+    );
+    write_metric(
+        &mut text,
+        "hexacomp_deadline_misses_total",
+        "counter",
+        "Timed answers (hexacomp_answer_duration_seconds) later than the deadline.",
+        &labels,
+        &telemetry.deadline_misses.to_string(),
+    );
+    if let Some(since) = telemetry.model_since {
+        let accepted = since
+            .duration_since(SystemTime::UNIX_EPOCH)
+            .unwrap_or(Duration::ZERO);
+        write_metric(
+            &mut text,
+            "hexacomp_model_accepted_timestamp_seconds",
+            "gauge",
+            "When the model serving was accepted (deployed, or loaded at the start), seconds \
+             since the Unix epoch: `time() - hexacomp_model_accepted_timestamp_seconds` is its age.",
+            &labels,
+            &format!("{:.3}", accepted.as_secs_f64()),
+        );
+        let age = now.duration_since(since).unwrap_or(Duration::ZERO);
+        write_metric(
+            &mut text,
+            "hexacomp_model_age_seconds",
+            "gauge",
+            "Seconds since the model serving was accepted, when this file was written.",
+            &labels,
+            &format!("{:.3}", age.as_secs_f64()),
+        );
+    }
+    text
+}
+
+/// One sample with its HELP and TYPE lines.
+fn write_metric(text: &mut String, name: &str, kind: &str, help: &str, labels: &str, value: &str) {
+    let _ = writeln!(text, "# HELP {name} {help}");
+    let _ = writeln!(text, "# TYPE {name} {kind}");
+    let _ = writeln!(text, "{name}{{{labels}}} {value}");
 }
 
 /// `value` as a Prometheus label value: backslash, double quote and line feed escaped.
@@ -213,5 +287,68 @@ mod tests {
         assert_eq!(json["uptime_s"], 12.345);
         assert_eq!(json["wait_mode"], "spin");
         assert_eq!(json.as_object().unwrap().len(), 12);
+    }
+
+    fn telemetry(model_since: Option<SystemTime>) -> Telemetry {
+        let mut answer_times: Vec<_> = (0..20)
+            .map(|i| (Some(Duration::from_nanos(1 << (i + 8))), 0))
+            .collect();
+        answer_times[19].0 = None;
+        answer_times[2].1 = 5; // up to 1.024 µs
+        answer_times[10].1 = 2; // up to 262.144 µs
+        answer_times[19].1 = 1; // beyond 67 ms
+        Telemetry {
+            deadline: Duration::from_micros(200),
+            deadline_misses: 3,
+            model_since,
+            answer_times,
+            answer_time_sum: Duration::from_micros(70_400),
+        }
+    }
+
+    #[test]
+    fn the_answer_times_are_a_cumulative_histogram_with_the_deadline_and_the_models_age() {
+        let since = SystemTime::UNIX_EPOCH + Duration::from_secs(1_000_000);
+        let now = since + Duration::from_millis(3_600_250);
+        let text = telemetry_text("m\"1", &telemetry(Some(since)), now);
+        let value = |prefix: &str| -> f64 {
+            let line = text
+                .lines()
+                .find(|l| l.starts_with(prefix))
+                .unwrap_or_else(|| panic!("no {prefix} in\n{text}"));
+            line.rsplit_once(' ').unwrap().1.parse().unwrap()
+        };
+        let bucket = |le: &str| {
+            value(&format!(
+                "hexacomp_answer_duration_seconds_bucket{{hexacomp_instance=\"m\\\"1\",le=\"{le}\"}}"
+            ))
+        };
+        assert_eq!(bucket("0.000000256"), 0.0);
+        assert_eq!(bucket("0.000001024"), 5.0);
+        assert_eq!(bucket("0.000131072"), 5.0);
+        assert_eq!(bucket("0.000262144"), 7.0);
+        assert_eq!(bucket("0.067108864"), 7.0);
+        assert_eq!(bucket("+Inf"), 8.0);
+        assert_eq!(value("hexacomp_answer_duration_seconds_count"), 8.0);
+        assert_eq!(value("hexacomp_answer_duration_seconds_sum"), 0.0704);
+        assert_eq!(value("hexacomp_deadline_seconds"), 0.0002);
+        assert_eq!(value("hexacomp_deadline_misses_total"), 3.0);
+        assert_eq!(value("hexacomp_model_age_seconds"), 3600.25);
+        assert_eq!(
+            value("hexacomp_model_accepted_timestamp_seconds"),
+            1_000_000.0
+        );
+        assert_eq!(
+            text.lines()
+                .filter(|l| l.starts_with("hexacomp_answer_duration_seconds_bucket"))
+                .count(),
+            20
+        );
+        assert!(text.contains("# TYPE hexacomp_answer_duration_seconds histogram\n"));
+        // Without a model, no age; with a clock set back, 0.
+        let text = telemetry_text("m", &telemetry(None), now);
+        assert!(!text.contains("hexacomp_model_"), "{text}");
+        let text = telemetry_text("m", &telemetry(Some(now)), since);
+        assert!(text.contains("hexacomp_model_age_seconds{hexacomp_instance=\"m\"} 0.000\n"));
     }
 }

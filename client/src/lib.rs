@@ -191,6 +191,47 @@ pub struct Status {
     pub wait_mode: &'static str,
 }
 
+/// The service's answer times and its model's age ([`telemetry_of`]).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Telemetry {
+    /// The service's deadline for answering a request, from taking it to sending the answer.
+    pub deadline: Duration,
+    /// Answers sent later than [`Telemetry::deadline`].
+    pub deadline_misses: u64,
+    /// When the model serving was accepted (deployed, or loaded at the start); `None` without
+    /// a model.
+    pub model_since: Option<std::time::SystemTime>,
+    /// Answers by time from taking the request to sending the answer: (upper bound, answers
+    /// above the previous bound up to it); the last bound is `None`, for everything longer.
+    pub answer_times: Vec<(Option<Duration>, u64)>,
+    /// The sum of the answer times.
+    pub answer_time_sum: Duration,
+}
+
+impl Telemetry {
+    /// The telemetry a report on the wire says.
+    fn from_report(report: &wire::TelemetryReport) -> Self {
+        let last = report.latency_buckets.len() - 1;
+        Telemetry {
+            deadline: Duration::from_nanos(report.deadline_ns),
+            deadline_misses: report.deadline_misses,
+            model_since: (report.model_since_unix_ns > 0)
+                .then(|| std::time::UNIX_EPOCH + Duration::from_nanos(report.model_since_unix_ns)),
+            answer_times: report
+                .latency_buckets
+                .iter()
+                .enumerate()
+                .map(|(i, &count)| {
+                    let bound =
+                        (i < last).then(|| Duration::from_nanos(wire::latency_bucket_bound_ns(i)));
+                    (bound, count)
+                })
+                .collect(),
+            answer_time_sum: Duration::from_nanos(report.latency_sum_ns),
+        }
+    }
+}
+
 /// What the service said to a deployed model.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum DeployOutcome {
@@ -222,7 +263,21 @@ pub fn status_of(instance: &str, options: &ClientOptions) -> Result<Status, Erro
     let node = client_node()?;
     let endpoint = endpoints::status(&node, instance, Role::Use)?;
     let port = endpoint.client_builder().create().map_err(transport)?;
-    Ok(Status::from_report(&request_status(
+    Ok(Status::from_report(&request_report(
+        &port,
+        options.timeout,
+    )?))
+}
+
+/// The telemetry of the service of `instance` (its answer times, deadline misses and model's
+/// age), through its telemetry endpoint alone, as [`status_of`]. A service of a release without
+/// the endpoint gives [`Error::ServiceAbsent`], as an absent service does: ask [`status_of`]
+/// first to tell them apart.
+pub fn telemetry_of(instance: &str, options: &ClientOptions) -> Result<Telemetry, Error> {
+    let node = client_node()?;
+    let endpoint = endpoints::telemetry(&node, instance, Role::Use)?;
+    let port = endpoint.client_builder().create().map_err(transport)?;
+    Ok(Telemetry::from_report(&request_report(
         &port,
         options.timeout,
     )?))
@@ -239,12 +294,12 @@ fn client_node() -> Result<Node<ipc::Service>, Error> {
         .map_err(|e| transport(format!("{e}{}", hexacomp_protocol::foreign_root_hint())))
 }
 
-/// Asks `port`'s service for its status report, waiting up to `timeout` (at least
+/// Asks `port`'s service for its report, waiting up to `timeout` (at least
 /// [`MIN_CONTROL_DEADLINE`]).
-fn request_status(
-    port: &Port<ipc::Service, u64, (), StatusReport, ()>,
+fn request_report<R: wire::Report>(
+    port: &Port<ipc::Service, u64, (), R, ()>,
     timeout: Duration,
-) -> Result<StatusReport, Error> {
+) -> Result<R, Error> {
     let timeout = timeout.max(MIN_CONTROL_DEADLINE);
     let deadline = Instant::now() + timeout;
     let pending = loop {
@@ -267,9 +322,9 @@ fn request_status(
             Error::Timeout { .. } => Error::Timeout { timeout },
             other => other,
         })?;
-    if report.protocol != PROTOCOL_VERSION {
+    if report.protocol() != PROTOCOL_VERSION {
         return Err(Error::ProtocolMismatch {
-            service: report.protocol,
+            service: report.protocol(),
         });
     }
     Ok(report)
@@ -480,7 +535,7 @@ impl Client {
     /// be answered: it is sent again, every millisecond, until one receives it or the deadline
     /// passes.
     fn status_report(&mut self) -> Result<StatusReport, Error> {
-        request_status(&self.status, self.timeout)
+        request_report(&self.status, self.timeout)
     }
 
     /// The service's status.

@@ -3,10 +3,11 @@
 //! and tools use them ([`Role::Use`]: open only, so a missing service is an error, not a new
 //! empty endpoint).
 //!
-//! The four openers repeat the same open / open-or-create split on purpose: iceoryx2 0.10
-//! implements `open` and `open_or_create` separately for each combination of sized and slice
-//! payloads (`u64 → StatusReport`, `[u8] → DeployReply`, `[PointRequest] → [PointResponse]`) and
-//! for events, so no single generic function can call them for every endpoint.
+//! The openers repeat the same open / open-or-create split on purpose: iceoryx2 0.10 implements
+//! `open` and `open_or_create` separately for each combination of sized and slice payloads
+//! (`u64 → report`, `[u8] → DeployReply`, `[PointRequest] → [PointResponse]`) and for events,
+//! so no single generic function can call them for every endpoint; the two reports (status,
+//! telemetry) share one.
 
 use iceoryx2::prelude::*;
 use iceoryx2::service::builder::event::EventOpenError;
@@ -15,7 +16,7 @@ use iceoryx2::service::port_factory::{event, request_response};
 
 use crate::{
     DeployReply, Endpoint, Error, MAX_CLIENTS, MAX_NODES, MAX_REQUESTS_IN_FLIGHT, PointRequest,
-    PointResponse, RequestHeader, ResponseHeader, StatusReport, iceoryx_name,
+    PointResponse, RequestHeader, ResponseHeader, StatusReport, TelemetryReport, iceoryx_name,
 };
 
 /// The compensation endpoint: a slice of [`PointRequest`] with a [`RequestHeader`] in, a slice
@@ -28,7 +29,11 @@ pub type CompensateEndpoint = request_response::PortFactory<
     ResponseHeader,
 >;
 /// The status endpoint: any `u64` in, a [`StatusReport`] out.
-pub type StatusEndpoint = request_response::PortFactory<ipc::Service, u64, (), StatusReport, ()>;
+pub type StatusEndpoint = ReportEndpoint<StatusReport>;
+/// The telemetry endpoint: any `u64` in, a [`TelemetryReport`] out.
+pub type TelemetryEndpoint = ReportEndpoint<TelemetryReport>;
+/// An endpoint that answers any `u64` with a report `R` of the control thread.
+pub type ReportEndpoint<R> = request_response::PortFactory<ipc::Service, u64, (), R, ()>;
 /// The deploy endpoint: a model file's bytes in, a [`DeployReply`] out.
 pub type DeployEndpoint = request_response::PortFactory<ipc::Service, [u8], (), DeployReply, ()>;
 /// The wake endpoint: clients notify it after each request when the service waits on events.
@@ -135,10 +140,29 @@ pub fn status(
     instance: &str,
     role: Role,
 ) -> Result<StatusEndpoint, Error> {
-    let endpoint = Endpoint::Status;
+    report(node, instance, Endpoint::Status, role)
+}
+
+/// Opens (or, serving, creates) the telemetry endpoint of `instance`. A service of an older
+/// release has none: opening it then fails as for an absent service.
+pub fn telemetry(
+    node: &Node<ipc::Service>,
+    instance: &str,
+    role: Role,
+) -> Result<TelemetryEndpoint, Error> {
+    report(node, instance, Endpoint::Telemetry, role)
+}
+
+/// Opens (or, serving, creates) an endpoint of `instance` that answers a `u64` with a report.
+fn report<R: crate::Report>(
+    node: &Node<ipc::Service>,
+    instance: &str,
+    endpoint: Endpoint,
+    role: Role,
+) -> Result<ReportEndpoint<R>, Error> {
     let builder = node
         .service_builder(&iceoryx_name(instance, endpoint)?)
-        .request_response::<u64, StatusReport>();
+        .request_response::<u64, R>();
     match role {
         Role::Use => builder
             .open()

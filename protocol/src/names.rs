@@ -16,6 +16,8 @@ pub enum Endpoint {
     Compensate,
     /// Status queries.
     Status,
+    /// Telemetry queries: answer times, deadline misses, the model's age.
+    Telemetry,
     /// Model deployment (hot swap).
     Deploy,
     /// Wake-up events: clients notify it after each request; a service with `--wait event`
@@ -29,6 +31,7 @@ impl Endpoint {
         match self {
             Endpoint::Compensate => "compensate",
             Endpoint::Status => "status",
+            Endpoint::Telemetry => "telemetry",
             Endpoint::Deploy => "deploy",
             Endpoint::Wake => "wake",
         }

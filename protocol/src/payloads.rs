@@ -150,6 +150,78 @@ pub struct StatusReport {
     pub model: [u8; TEXT_BYTES],
 }
 
+/// A report the control thread answers a `u64` with, first field its protocol version.
+pub trait Report: Copy + core::fmt::Debug + ZeroCopySend + 'static {
+    /// The [`PROTOCOL_VERSION`] of the service that wrote it.
+    fn protocol(&self) -> u32;
+}
+
+impl Report for StatusReport {
+    fn protocol(&self) -> u32 {
+        self.protocol
+    }
+}
+
+impl Report for TelemetryReport {
+    fn protocol(&self) -> u32 {
+        self.protocol
+    }
+}
+
+/// Number of buckets of [`TelemetryReport::latency_buckets`].
+pub const LATENCY_BUCKETS: usize = 20;
+
+/// The upper bound of latency bucket `index`, ns: 2^(index + 8), from 256 ns (bucket 0) to
+/// 2^26 ns = 67 ms (bucket 18); the last bucket (19) counts every longer time.
+pub const fn latency_bucket_bound_ns(index: usize) -> u64 {
+    1 << (index + 8)
+}
+
+/// The bucket of a request that took `nanoseconds` from being taken to being answered: the
+/// first whose bound ([`latency_bucket_bound_ns`]) is at least that, the last for longer ones.
+pub const fn latency_bucket(nanoseconds: u64) -> usize {
+    if nanoseconds <= latency_bucket_bound_ns(0) {
+        return 0;
+    }
+    // ⌈log₂ nanoseconds⌉ − 8.
+    let index = (u64::BITS - (nanoseconds - 1).leading_zeros()) as usize - 8;
+    if index < LATENCY_BUCKETS {
+        index
+    } else {
+        LATENCY_BUCKETS - 1
+    }
+}
+
+/// The service's timing of its answers and its model's age: the answer to a telemetry request
+/// (the `telemetry` endpoint, added beside `status` so that clients of the status report stay
+/// as they are).
+#[derive(Debug, Clone, Copy, ZeroCopySend)]
+#[repr(C)]
+pub struct TelemetryReport {
+    /// The service's [`PROTOCOL_VERSION`].
+    pub protocol: u32,
+    /// Padding, zero.
+    pub reserved: u32,
+    /// The service's deadline for answering a request (`--deadline-us`), ns: from receiving
+    /// it to sending its answer.
+    pub deadline_ns: u64,
+    /// Timed requests (see [`TelemetryReport::latency_buckets`]) answered later than
+    /// [`TelemetryReport::deadline_ns`] after they were received.
+    pub deadline_misses: u64,
+    /// When the model serving was accepted (its deploy, or the start that loaded it), ns since
+    /// the Unix epoch; 0 without a model.
+    pub model_since_unix_ns: u64,
+    /// Served requests of at most 64 points (an NC's kind; batches and refusals are not
+    /// timed), by the time from receiving each to sending its answer: bucket `i` counts those
+    /// above bucket `i − 1`'s bound up to bucket `i`'s ([`latency_bucket_bound_ns`];
+    /// [`latency_bucket`]).
+    pub latency_buckets: [u64; LATENCY_BUCKETS],
+    /// The sum of those times, ns.
+    pub latency_sum_ns: u64,
+    /// Zero: room for later fields in this layout (iceoryx2 refuses a changed one).
+    pub spare: [u64; 4],
+}
+
 /// The answer to a deploy request.
 #[derive(Debug, Clone, Copy, ZeroCopySend)]
 #[repr(C)]
@@ -192,5 +264,39 @@ mod tests {
         let long = format!("a{}", "é".repeat(200));
         let cut = field_text(&text_field(&long));
         assert_eq!(cut, format!("a{}", "é".repeat(95)));
+    }
+}
+
+#[cfg(test)]
+mod latency_tests {
+    use super::*;
+
+    #[test]
+    fn a_time_falls_into_the_first_bucket_whose_bound_is_at_least_it() {
+        for (ns, bucket) in [
+            (0, 0),
+            (1, 0),
+            (256, 0),
+            (257, 1),
+            (512, 1),
+            (513, 2),
+            (1_000, 2),
+            (1_024, 2),
+            (1_025, 3),
+            (1 << 26, 18),
+            ((1 << 26) + 1, 19),
+            (1 << 27, 19),
+            (u64::MAX, 19),
+        ] {
+            assert_eq!(latency_bucket(ns), bucket, "{ns} ns");
+        }
+        for index in 0..LATENCY_BUCKETS {
+            let bound = latency_bucket_bound_ns(index);
+            assert_eq!(latency_bucket(bound), index);
+            assert_eq!(
+                latency_bucket(bound + 1),
+                (index + 1).min(LATENCY_BUCKETS - 1)
+            );
+        }
     }
 }

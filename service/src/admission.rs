@@ -8,8 +8,8 @@
 //! outcome and no points computed, which costs the serving thread about as much as one point.
 //! An NC client at 1 kHz uses a thousandth of the default budget.
 //!
-//! Fixed-size table, no allocation; the clock is read once per request (`Instant::now`, a vDSO
-//! call on Linux, no system call).
+//! Fixed-size table, no allocation; a request is charged as of the time it was taken from the
+//! server port (the clock read the answer times use too: `Instant::now`, a vDSO call on Linux).
 
 use std::time::Instant;
 
@@ -66,9 +66,14 @@ impl Admission {
         };
         let now = now();
         let bucket = self.bucket(client, now);
-        let elapsed = now.saturating_duration_since(bucket.refilled).as_secs_f64();
-        bucket.tokens = (bucket.tokens + elapsed * rate).min(BURST_POINTS);
-        bucket.refilled = now;
+        // Requests are charged as of when they were taken, not always in that order (a small
+        // request may be answered before an earlier large one): the refill time never moves
+        // back, so no stretch of time is credited twice.
+        if now > bucket.refilled {
+            let elapsed = now.duration_since(bucket.refilled).as_secs_f64();
+            bucket.tokens = (bucket.tokens + elapsed * rate).min(BURST_POINTS);
+            bucket.refilled = now;
+        }
         let cost = points.max(1) as f64;
         let admitted = bucket.tokens >= cost.min(BURST_POINTS) || !others_waiting();
         if admitted {
@@ -141,6 +146,27 @@ mod tests {
             (got - expected).abs() <= 2.0 * MAX_BATCH as f64,
             "admitted {got} points in 1 s, expected {expected} ± two batches"
         );
+    }
+
+    #[test]
+    fn requests_charged_out_of_order_are_not_credited_twice() {
+        let mut admission = Admission::new(Some(1_000_000.0));
+        let t1 = Instant::now();
+        // Empty the bucket at t1, then charge at t2, at the earlier t1 (a large request
+        // answered after a later small one), and at t3: the credit is (t3 − t1) × rate.
+        while admission.admit(3, 1, || t1, || true) {}
+        let t2 = t1 + Duration::from_millis(2);
+        let t3 = t1 + Duration::from_millis(3);
+        let mut admitted = 0;
+        for (at, points) in [(t2, 2000), (t1, 1000), (t3, 3000), (t3, 1000)] {
+            if admission.admit(3, points, || at, || true) {
+                admitted += points;
+            }
+        }
+        // 3 ms at 1 M points/s: 3000 points — the 2000 at t2 and the last 1000 at t3. Had
+        // t1 to t2 been credited again (the refill time moved back to t1), the 3000 at t3
+        // would have been admitted as well.
+        assert_eq!(admitted, 3000);
     }
 
     #[test]

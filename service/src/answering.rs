@@ -43,7 +43,8 @@ pub struct Answerer<'a> {
     server: &'a CompensationServer,
     geometry: &'a Geometry,
     counters: &'a Counters,
-    waiting: FairQueue<ActiveRequest>,
+    /// Each with the time it was taken from the server port.
+    waiting: FairQueue<(std::time::Instant, ActiveRequest)>,
     admission: Admission,
 }
 
@@ -70,8 +71,8 @@ impl<'a> Answerer<'a> {
     pub fn answer_next(&mut self, model: Option<&Generation>) -> bool {
         self.receive_waiting();
         match self.waiting.pop() {
-            Some((client, active)) => {
-                self.answer(&active, client, model);
+            Some((client, (taken, active))) => {
+                self.answer(taken, &active, client, model);
                 true
             }
             None => false,
@@ -83,7 +84,10 @@ impl<'a> Answerer<'a> {
     fn receive_waiting(&mut self) {
         while self.waiting.has_room() {
             match self.server.receive() {
-                Ok(Some(active)) => self.waiting.push(active.origin().value(), active),
+                Ok(Some(active)) => {
+                    let taken = std::time::Instant::now();
+                    self.waiting.push(active.origin().value(), (taken, active));
+                }
                 Ok(None) => break,
                 // Every client with a request queued already has its in-flight limit held here
                 // (a client that gave up on a request may send another before it is answered).
@@ -103,28 +107,37 @@ impl<'a> Answerer<'a> {
         self.receive_waiting();
         let mut answered = [0u128; MAX_CLIENTS];
         let mut count = 0;
-        while let Some((client, active)) = self.waiting.take_first(|client, active| {
-            active.payload().len() <= STEP_POINTS && !answered[..count].contains(&client)
-        }) {
+        while let Some((client, (taken, active))) =
+            self.waiting.take_first(|client, (_, active)| {
+                active.payload().len() <= STEP_POINTS && !answered[..count].contains(&client)
+            })
+        {
             if count < MAX_CLIENTS {
                 answered[count] = client;
                 count += 1;
             }
-            self.answer(&active, client, model);
+            self.answer(taken, &active, client, model);
         }
     }
 
     /// Answers one request of `client` from its loaned payload straight into a loaned
     /// response. A client that stopped waiting (its deadline passed) gets no answer, as
     /// iceoryx2's receive skips such requests: computing one would only delay the others.
-    fn answer(&mut self, active: &ActiveRequest, client: u128, model: Option<&Generation>) {
+    /// The time from `taken` to the answer's send is counted in the answer times.
+    fn answer(
+        &mut self,
+        taken: std::time::Instant,
+        active: &ActiveRequest,
+        client: u128,
+        model: Option<&Generation>,
+    ) {
         if !active.is_connected() {
             return;
         }
         let header = *active.user_header();
         let points = active.payload();
         let count = points.len();
-        let (outcome, kind) = match self.triage(&header, count, client) {
+        let (outcome, kind) = match self.triage(&header, count, client, taken) {
             Ok(kind) => (RequestOutcome::Served, Some(kind)),
             Err(outcome) => (outcome, None),
         };
@@ -167,6 +180,12 @@ impl<'a> Answerer<'a> {
             }
             Err(_) => false,
         };
+        // The answer times are the NC's kind of request: served, of at most STEP_POINTS points.
+        // Batches take as long as their points (a 1024-point batch about 0.3 ms) and refusals
+        // none; they are counted apart (requests, overloaded, errors).
+        if sent && outcome == RequestOutcome::Served && count <= STEP_POINTS {
+            self.counters.answer_times.record(taken.elapsed());
+        }
         let counter = match (sent, outcome) {
             (true, RequestOutcome::Served) => {
                 self.counters
@@ -182,11 +201,14 @@ impl<'a> Answerer<'a> {
 
     /// What to do with a request: compute its points, or answer at once with an outcome and
     /// none.
+    /// The client's budget is charged as of `taken`, when the request was taken (one clock
+    /// read per request serves both the budget and the answer times).
     fn triage(
         &mut self,
         header: &RequestHeader,
         count: usize,
         client: u128,
+        taken: std::time::Instant,
     ) -> Result<RequestKind, RequestOutcome> {
         let kind = check_header(header)?;
         if count > MAX_BATCH {
@@ -196,7 +218,7 @@ impl<'a> Answerer<'a> {
         let others_waiting = || !waiting.is_empty() || server.has_requests().unwrap_or(false);
         if !self
             .admission
-            .admit(client, count, std::time::Instant::now, others_waiting)
+            .admit(client, count, || taken, others_waiting)
         {
             return Err(RequestOutcome::Overloaded);
         }

@@ -61,6 +61,12 @@ pub struct Args {
     /// one flooding client cannot hold the serving thread from the others. 0: unlimited.
     #[arg(long, value_name = "POINTS_PER_S", default_value_t = crate::admission::DEFAULT_POINTS_PER_SECOND)]
     client_budget: f64,
+    /// The service's deadline for answering a request, µs from taking it from the queue to
+    /// sending its answer: answers later than this are counted as deadline misses
+    /// (`hexacomp-client metrics`). Default: the LinuxCNC component's default wait.
+    #[arg(long, value_name = "MICROSECONDS",
+          default_value_t = crate::answer_times::DEFAULT_DEADLINE.as_micros() as u64)]
+    deadline_us: u64,
     #[command(flatten)]
     generate: hexacomp_cli_docs::GenerateArgs,
 }
@@ -157,6 +163,7 @@ pub fn run(args: Args) -> Result<(), Error> {
     options.realtime = args.realtime;
     // 0 means unlimited on the command line.
     options.client_budget = Some(args.client_budget);
+    options.deadline = Duration::from_micros(args.deadline_us);
     // Before any thread starts, so that every thread inherits the blocked signals.
     let signals = TerminationSignals::block()?;
     let service = Service::start(options)?;

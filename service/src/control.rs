@@ -1,4 +1,4 @@
-//! The control thread: status and deploy endpoints. Models are validated and persisted here, then
+//! The control thread: status, telemetry and deploy endpoints. Models are validated and persisted here, then
 //! handed to the serving thread; retired models come back here to be freed.
 
 use std::path::PathBuf;
@@ -9,7 +9,7 @@ use std::time::{Duration, Instant};
 use crossbeam_channel::{Receiver, Sender, TrySendError};
 use hexacomp_core::Geometry;
 use hexacomp_protocol::endpoints::{self, Role};
-use hexacomp_protocol::{DeployReply, PROTOCOL_VERSION, StatusReport, text_field};
+use hexacomp_protocol::{DeployReply, PROTOCOL_VERSION, StatusReport, TelemetryReport, text_field};
 use iceoryx2::prelude::*;
 
 use crate::{Counters, Error, Generation, state, validate};
@@ -29,7 +29,8 @@ fn join(first: String, second: &str) -> String {
 
 /// How often the control thread polls its endpoints while idle. Every wake-up of this thread may
 /// land on the serving thread's core and preempt it (about 35 µs on a virtual machine here, at
-/// a 1 ms interval a visible p99.9 bump); status and deploy answers wait up to this long.
+/// a 1 ms interval a visible p99.9 bump); status, telemetry and deploy answers wait up to this
+/// long.
 const IDLE_POLL: Duration = Duration::from_millis(10);
 
 /// What the control thread needs.
@@ -53,8 +54,17 @@ pub struct ControlSetup {
     /// The last generation number given out before this start (the serving model's, or a
     /// higher one whose model was not served): the next deploy is numbered after it.
     pub last_numbered: u64,
+    /// When the model serving at start was accepted (`None`: no model).
+    pub model_since: Option<std::time::SystemTime>,
     /// How the serving thread waits (status report value).
     pub wait_mode: u32,
+}
+
+/// What the reports say about the model serving: its summary and when it was accepted.
+#[derive(Debug, Default)]
+struct ServingModel {
+    summary: String,
+    since: Option<std::time::SystemTime>,
 }
 
 /// A one-line summary of a model for the status report.
@@ -70,7 +80,7 @@ pub fn summarise(model: &hexacomp_core::model::Model) -> String {
     )
 }
 
-/// Creates the status and deploy endpoints and serves them until stopped.
+/// Creates the status, telemetry and deploy endpoints and serves them until stopped.
 pub fn run(setup: ControlSetup, ready: Sender<Result<(), Error>>) {
     let started = (|| -> Result<_, Error> {
         let node = NodeBuilder::new()
@@ -79,6 +89,7 @@ pub fn run(setup: ControlSetup, ready: Sender<Result<(), Error>>) {
             .map_err(|e| Error::Iceoryx(format!("creating the control thread's node: {e}")))?;
         let status_service = endpoints::status(&node, &setup.instance, Role::Serve)?;
         let deploy_service = endpoints::deploy(&node, &setup.instance, Role::Serve)?;
+        let telemetry_service = endpoints::telemetry(&node, &setup.instance, Role::Serve)?;
         let status = status_service
             .server_builder()
             .create()
@@ -87,9 +98,14 @@ pub fn run(setup: ControlSetup, ready: Sender<Result<(), Error>>) {
             .server_builder()
             .create()
             .map_err(|e| Error::Iceoryx(format!("deploy server: {e:?}")))?;
-        Ok((node, status_service, deploy_service, status, deploy))
+        let telemetry = telemetry_service
+            .server_builder()
+            .create()
+            .map_err(|e| Error::Iceoryx(format!("telemetry server: {e:?}")))?;
+        let services = (status_service, deploy_service, telemetry_service);
+        Ok((node, services, status, deploy, telemetry))
     })();
-    let (node, _s, _d, status, deploy) = match started {
+    let (node, _services, status, deploy, telemetry) = match started {
         Ok(parts) => {
             let _ = ready.send(Ok(()));
             parts
@@ -100,7 +116,10 @@ pub fn run(setup: ControlSetup, ready: Sender<Result<(), Error>>) {
         }
     };
     let start = Instant::now();
-    let mut summary = setup.initial_summary.clone();
+    let mut serving = ServingModel {
+        summary: setup.initial_summary.clone(),
+        since: setup.model_since,
+    };
     // The last generation number given out. Only this thread numbers models, one deploy at a
     // time, so numbers are unique and increase in the order the models are handed over (the
     // serving thread's counter lags until it takes a model in).
@@ -125,10 +144,16 @@ pub fn run(setup: ControlSetup, ready: Sender<Result<(), Error>>) {
                 persist_failures: c.persist_failures.load(Ordering::Relaxed),
                 uptime_ns: start.elapsed().as_nanos() as u64,
                 geometry_name: text_field(&setup.geometry.name),
-                model: text_field(&summary),
+                model: text_field(&serving.summary),
             };
             if let Err(e) = request.send_copy(report) {
                 tracing::warn!("answering a status request failed: {e:?}");
+            }
+        }
+        if let Ok(Some(request)) = telemetry.receive() {
+            busy = true;
+            if let Err(e) = request.send_copy(telemetry_report(&setup.counters, &serving)) {
+                tracing::warn!("answering a telemetry request failed: {e:?}");
             }
         }
         if let Ok(Some(request)) = deploy.receive() {
@@ -144,7 +169,7 @@ pub fn run(setup: ControlSetup, ready: Sender<Result<(), Error>>) {
                 request.payload(),
                 deployer_alive,
                 &mut numbered,
-                &mut summary,
+                &mut serving,
             );
             if let Err(e) = request.send_copy(reply) {
                 tracing::warn!("answering a deploy request failed: {e:?}");
@@ -153,6 +178,25 @@ pub fn run(setup: ControlSetup, ready: Sender<Result<(), Error>>) {
         if !busy {
             std::thread::sleep(IDLE_POLL);
         }
+    }
+}
+
+/// The telemetry report: the serving thread's answer times and the model's age.
+fn telemetry_report(counters: &Counters, serving: &ServingModel) -> TelemetryReport {
+    let times = &counters.answer_times;
+    let since_epoch = |t: std::time::SystemTime| {
+        t.duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| u64::try_from(d.as_nanos()).unwrap_or(u64::MAX))
+    };
+    TelemetryReport {
+        protocol: PROTOCOL_VERSION,
+        reserved: 0,
+        deadline_ns: u64::try_from(times.deadline().as_nanos()).unwrap_or(u64::MAX),
+        deadline_misses: times.misses(),
+        model_since_unix_ns: serving.since.map_or(0, since_epoch),
+        latency_buckets: times.buckets(),
+        latency_sum_ns: times.sum_ns(),
+        spare: [0; 4],
     }
 }
 
@@ -166,7 +210,7 @@ fn handle_deploy(
     bytes: &[u8],
     deployer_alive: impl FnOnce() -> bool,
     numbered: &mut u64,
-    summary: &mut String,
+    serving: &mut ServingModel,
 ) -> DeployReply {
     let latest = *numbered;
     let refuse = |why: String| {
@@ -234,7 +278,8 @@ fn handle_deploy(
         }
         std::thread::sleep(Duration::from_micros(100));
     }
-    *summary = line;
+    serving.summary = line;
+    serving.since = Some(std::time::SystemTime::now());
     tracing::info!("accepted a model as generation {number}");
     DeployReply {
         accepted: 1,
@@ -288,6 +333,7 @@ mod tests {
             stop: Arc::new(AtomicBool::new(false)),
             initial_summary: String::new(),
             last_numbered,
+            model_since: None,
             wait_mode: 0,
         };
         (setup, incoming)
@@ -295,7 +341,13 @@ mod tests {
 
     fn deploy(setup: &ControlSetup, offset_mm: f64, numbered: &mut u64) -> DeployReply {
         let bytes = constant_model(offset_mm).to_bytes();
-        handle_deploy(setup, &bytes, || true, numbered, &mut String::new())
+        handle_deploy(
+            setup,
+            &bytes,
+            || true,
+            numbered,
+            &mut ServingModel::default(),
+        )
     }
 
     fn persisted_generation(dir: &std::path::Path) -> String {
@@ -345,6 +397,32 @@ mod tests {
         assert_eq!(persisted_generation(dir.path()), "8");
         drop(setup);
         taker.join().unwrap();
+    }
+
+    #[test]
+    fn an_accepted_deploy_dates_the_model_and_a_refused_one_does_not() {
+        let dir = tempfile::tempdir().unwrap();
+        let (setup, _incoming) = setup(dir.path(), 0);
+        let mut serving = ServingModel::default();
+        let mut numbered = 0;
+        let refused = handle_deploy(&setup, b"no model", || true, &mut numbered, &mut serving);
+        assert_eq!(refused.accepted, 0);
+        assert_eq!(
+            telemetry_report(&setup.counters, &serving).model_since_unix_ns,
+            0
+        );
+        let before = std::time::SystemTime::now();
+        let bytes = constant_model(0.1).to_bytes();
+        let accepted = handle_deploy(&setup, &bytes, || true, &mut numbered, &mut serving);
+        assert_eq!(accepted.accepted, 1);
+        let since = telemetry_report(&setup.counters, &serving).model_since_unix_ns;
+        let ns = |t: std::time::SystemTime| {
+            t.duration_since(std::time::UNIX_EPOCH).unwrap().as_nanos() as u64
+        };
+        assert!(
+            (ns(before)..=ns(std::time::SystemTime::now())).contains(&since),
+            "{since}"
+        );
     }
 
     #[test]

@@ -1,5 +1,5 @@
 //! [`Service`]: one running service instance — its serving thread (the compensation endpoint)
-//! and its control thread (status and deploy) — started from [`ServiceOptions`].
+//! and its control thread (status, telemetry and deploy) — started from [`ServiceOptions`].
 
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -33,6 +33,9 @@ pub struct ServiceOptions {
     pub realtime: Option<i32>,
     /// Points per second each client may ask for, sustained (`None`: unlimited).
     pub client_budget: Option<f64>,
+    /// An answer sent later than this after its request was taken is a deadline miss
+    /// (telemetry).
+    pub deadline: std::time::Duration,
 }
 
 impl ServiceOptions {
@@ -48,6 +51,7 @@ impl ServiceOptions {
             cpu: None,
             realtime: None,
             client_budget: Some(admission::DEFAULT_POINTS_PER_SECOND),
+            deadline: crate::answer_times::DEFAULT_DEADLINE,
         }
     }
 }
@@ -101,6 +105,22 @@ fn panicked(thread: &'static str, result: std::thread::Result<()>) -> Result<(),
     })
 }
 
+/// When the persisted model was written (its deploy), or now when that cannot be read.
+fn persisted_at(state_dir: &std::path::Path) -> std::time::SystemTime {
+    let file = state::persisted_model_file(state_dir);
+    match file.and_then(|path| {
+        std::fs::metadata(&path)
+            .and_then(|m| m.modified())
+            .map_err(|cause| Error::StateFile { path, cause })
+    }) {
+        Ok(time) => time,
+        Err(e) => {
+            tracing::warn!("the model's age counts from now: {e}");
+            std::time::SystemTime::now()
+        }
+    }
+}
+
 impl Service {
     /// Checks the options, prepares the state directory, loads the start model (`model`, else
     /// the persisted one) and starts the serving and control threads. Fails when the instance
@@ -116,6 +136,7 @@ impl Service {
             cpu,
             realtime,
             client_budget,
+            deadline,
         } = options;
         hexacomp_protocol::service_name(&instance, hexacomp_protocol::Endpoint::Compensate)?;
         state::prepare(&state_dir)?;
@@ -129,6 +150,13 @@ impl Service {
                 (Some((model, number)), Some((bytes, number)))
             }
             None => (state::restore(&state_dir, &geometry)?, None),
+        };
+        // When the model serving was accepted: now for a start model, its deploy (the persisted
+        // file's time) for a restored one; now, said, when that time cannot be read.
+        let model_since = match (&initial, &model) {
+            (None, _) => None,
+            (Some(_), Some(_)) => Some(std::time::SystemTime::now()),
+            (Some(_), None) => Some(persisted_at(&state_dir)),
         };
         let initial_summary = initial
             .as_ref()
@@ -144,7 +172,10 @@ impl Service {
             geometry.fingerprint(),
             state_dir.display()
         );
-        let counters = Arc::new(Counters::default());
+        let counters = Arc::new(Counters {
+            answer_times: crate::answer_times::AnswerTimes::new(deadline),
+            ..Counters::default()
+        });
         let stop = Arc::new(AtomicBool::new(false));
         let (to_serving, incoming) = crossbeam_channel::bounded(1);
         let (retired_tx, retired_rx) = crossbeam_channel::bounded(4);
@@ -192,6 +223,7 @@ impl Service {
             stop,
             initial_summary,
             last_numbered,
+            model_since,
             wait_mode: effective_wait.wire_value(),
         };
         let control = spawn("control", move || control::run(setup, control_ready))?;

@@ -6,12 +6,14 @@
 //! request into a loaned response, allocation-free, and [`serving::ServingLoop`], whose
 //! `poll_once` step tests drive), [`answering`] (fair answering of the waiting requests),
 //! [`validate`] (checks a deployed model off the serving thread), [`state`] (persists the
-//! accepted model durably) and [`control`] (status and deploy endpoints, on their own thread).
+//! accepted model durably), [`answer_times`] (the serving thread's answer times) and
+//! [`control`] (status, telemetry and deploy endpoints, on their own thread).
 //! Errors are [`Error`]; why a model is refused is a [`Refusal`].
 
 #![warn(missing_docs)]
 
 pub mod admission;
+pub mod answer_times;
 pub mod answering;
 pub mod cli;
 pub mod control;
@@ -45,6 +47,8 @@ pub struct Counters {
     pub persist_failures: AtomicU64,
     /// Generation of the model serving (0: none).
     pub generation: AtomicU64,
+    /// How long answers took, against the deadline.
+    pub answer_times: answer_times::AnswerTimes,
 }
 
 /// A model, in its serving form, with the generation it serves as.

@@ -219,6 +219,12 @@ pub fn persisted_generation(dir: &Path) -> Result<Option<u64>, Error> {
     }
 }
 
+/// The model file [`restore`] reads (the current generation's), whose modification time is
+/// when it was persisted: its deploy, or the start that loaded it.
+pub fn persisted_model_file(dir: &Path) -> Result<PathBuf, Error> {
+    Ok(pair_dir(dir)?.join(MODEL))
+}
+
 /// The persisted model and generation, if any, for `geometry`. A model file for another
 /// geometry or a damaged one is reported and ignored; a generation file that does not hold a
 /// generation number, or a model without one, is an error naming the file.

@@ -122,6 +122,7 @@ fn serving_thread_allocations(wait: WaitMode) {
         stop: stop.clone(),
         initial_summary: String::new(),
         last_numbered: 0,
+        model_since: None,
         wait_mode: wait.wire_value(),
     };
     let control = std::thread::spawn(move || run_control(control_setup, control_ready_tx));

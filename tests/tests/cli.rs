@@ -255,8 +255,19 @@ fn client_status_json_and_metrics_give_the_services_counters() {
     let dir = tempfile::tempdir().unwrap();
     let (_, model) = hexacomp_tests::save_smooth_model(dir.path(), 4);
     let instance = hexacomp_tests::unique_instance("metrics");
-    let service =
-        hexacomp_tests::ServiceProcess::with_model(&instance, &dir.path().join("state"), &model);
+    let state = dir.path().join("state");
+    // A deadline of 0: every answer misses it.
+    let service = hexacomp_tests::ServiceProcess::start(
+        &instance,
+        &[
+            "--state-dir",
+            state.to_str().unwrap(),
+            "--model",
+            model.to_str().unwrap(),
+            "--deadline-us",
+            "0",
+        ],
+    );
     let poses = dir.path().join("poses.csv");
     std::fs::write(&poses, "id,x,y,z,a,b,c\n1,0,0,300,0,0,0\n2,5,0,310,0,0,0\n").unwrap();
     let out = dir.path().join("out.csv");
@@ -305,6 +316,22 @@ fn client_status_json_and_metrics_give_the_services_counters() {
     assert_eq!(sample("hexacomp_requests_total"), 1.0);
     assert_eq!(sample("hexacomp_points_total"), 2.0);
     assert_eq!(sample("hexacomp_request_errors_total"), 0.0);
+    // The serving thread's answer times: the one request, in the histogram; it missed the
+    // deadline of 0; the model, loaded at the start, is as old as the service at most.
+    assert_eq!(sample("hexacomp_answer_duration_seconds_count"), 1.0);
+    let all = text
+        .lines()
+        .find(|l| l.contains("_bucket{") && l.contains("le=\"+Inf\""))
+        .unwrap_or_else(|| panic!("no +Inf bucket in\n{text}"));
+    assert!(all.ends_with(" 1"), "{all}");
+    assert!(sample("hexacomp_answer_duration_seconds_sum") > 0.0);
+    assert_eq!(sample("hexacomp_deadline_seconds"), 0.0);
+    assert_eq!(sample("hexacomp_deadline_misses_total"), 1.0);
+    let age = sample("hexacomp_model_age_seconds");
+    assert!(
+        (0.0..=sample("hexacomp_uptime_seconds") + 1.0).contains(&age),
+        "{text}"
+    );
 
     // The status as text says what the JSON said.
     let text_status = client(&["status"]);
@@ -312,6 +339,30 @@ fn client_status_json_and_metrics_give_the_services_counters() {
     assert!(
         text_status.contains("requests      1 (2 points), 0 errors"),
         "{text_status}"
+    );
+
+    // A batch of 100 points is served and counted, but not timed: its time is its points'.
+    let batch = dir.path().join("batch.csv");
+    let rows: String = (1..=100).map(|i| format!("{i},0,0,300,0,0,0\n")).collect();
+    std::fs::write(&batch, format!("id,x,y,z,a,b,c\n{rows}")).unwrap();
+    let batch_out = dir.path().join("batch-out.csv");
+    let compensated = client(&[
+        "compensate",
+        "--input",
+        batch.to_str().unwrap(),
+        "--output",
+        batch_out.to_str().unwrap(),
+    ]);
+    assert!(compensated.status.success(), "{}", stderr(&compensated));
+    let metrics = client(&["metrics"]);
+    let text = String::from_utf8_lossy(&metrics.stdout).to_string();
+    assert!(
+        text.contains(&format!(
+            "hexacomp_requests_total{{hexacomp_instance=\"{instance}\"}} 2\n"
+        )) && text.contains(&format!(
+            "hexacomp_answer_duration_seconds_count{{hexacomp_instance=\"{instance}\"}} 1\n"
+        )),
+        "{text}"
     );
 
     // Gone: the collector's file is replaced by `hexacomp_up 0` alone, the reason on standard
@@ -346,11 +397,33 @@ fn client_status_json_and_metrics_give_the_services_counters() {
         "{}",
         stderr(&wrong)
     );
+
     // JSON status of a service that is gone is an error, not an empty object.
     assert!(
         !client(&["--timeout-ms", "200", "status", "--json"])
             .status
             .success()
+    );
+
+    // Restarted without --model, the persisted model's age counts from its deploy: the
+    // persisted file's time (set here to a known one).
+    let deployed = std::time::UNIX_EPOCH + std::time::Duration::from_secs(1_000_000_000);
+    std::fs::File::options()
+        .write(true)
+        .open(state.join("model.hxm"))
+        .unwrap()
+        .set_modified(deployed)
+        .unwrap();
+    let _restarted =
+        hexacomp_tests::ServiceProcess::start(&instance, &["--state-dir", state.to_str().unwrap()]);
+    let metrics = client(&["metrics"]);
+    let text = String::from_utf8_lossy(&metrics.stdout).to_string();
+    assert!(
+        text.contains(&format!(
+            "hexacomp_model_accepted_timestamp_seconds{{hexacomp_instance=\"{instance}\"}} \
+             1000000000.000\n"
+        )),
+        "{text}"
     );
 }
 
