@@ -260,13 +260,8 @@ type CompensatePort =
 /// [`Client::connect`], this opens no compensation or deploy port, so the serving thread never
 /// sees the connection (for monitoring that asks often). Fails as [`Client::connect`] does.
 pub fn status_of(instance: &str, options: &ClientOptions) -> Result<Status, Error> {
-    let node = client_node()?;
-    let endpoint = endpoints::status(&node, instance, Role::Use)?;
-    let port = endpoint.client_builder().create().map_err(transport)?;
-    Ok(Status::from_report(&request_report(
-        &port,
-        options.timeout,
-    )?))
+    let report = report_of(instance, options, endpoints::status)?;
+    Ok(Status::from_report(&report))
 }
 
 /// The telemetry of the service of `instance` (its answer times, deadline misses and model's
@@ -274,13 +269,27 @@ pub fn status_of(instance: &str, options: &ClientOptions) -> Result<Status, Erro
 /// the endpoint gives [`Error::ServiceAbsent`], as an absent service does: ask [`status_of`]
 /// first to tell them apart.
 pub fn telemetry_of(instance: &str, options: &ClientOptions) -> Result<Telemetry, Error> {
+    let report = report_of(instance, options, endpoints::telemetry)?;
+    Ok(Telemetry::from_report(&report))
+}
+
+/// A function that opens a report endpoint (`endpoints::status`, `endpoints::telemetry`).
+type OpenReport<R> = fn(
+    &Node<ipc::Service>,
+    &str,
+    Role,
+) -> Result<endpoints::ReportEndpoint<R>, hexacomp_protocol::Error>;
+
+/// The report of the endpoint `open` opens for `instance`, through that endpoint alone.
+fn report_of<R: wire::Report>(
+    instance: &str,
+    options: &ClientOptions,
+    open: OpenReport<R>,
+) -> Result<R, Error> {
     let node = client_node()?;
-    let endpoint = endpoints::telemetry(&node, instance, Role::Use)?;
+    let endpoint = open(&node, instance, Role::Use)?;
     let port = endpoint.client_builder().create().map_err(transport)?;
-    Ok(Telemetry::from_report(&request_report(
-        &port,
-        options.timeout,
-    )?))
+    request_report(&port, options.timeout)
 }
 
 /// This process's iceoryx2 node for a client: no signal handling (the program's own), and

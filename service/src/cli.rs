@@ -61,9 +61,9 @@ pub struct Args {
     /// one flooding client cannot hold the serving thread from the others. 0: unlimited.
     #[arg(long, value_name = "POINTS_PER_S", default_value_t = crate::admission::DEFAULT_POINTS_PER_SECOND)]
     client_budget: f64,
-    /// The service's deadline for answering a request, µs from taking it from the queue to
-    /// sending its answer: answers later than this are counted as deadline misses
-    /// (`hexacomp-client metrics`). Default: the LinuxCNC component's default wait.
+    /// The service's deadline for answering, µs from the serving thread receiving a served
+    /// request of at most 64 points to sending its answer: answers later than this are counted
+    /// as deadline misses (`hexacomp-client metrics`). 0: every answer is a miss.
     #[arg(long, value_name = "MICROSECONDS",
           default_value_t = crate::answer_times::DEFAULT_DEADLINE.as_micros() as u64)]
     deadline_us: u64,

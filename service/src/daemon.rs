@@ -33,8 +33,8 @@ pub struct ServiceOptions {
     pub realtime: Option<i32>,
     /// Points per second each client may ask for, sustained (`None`: unlimited).
     pub client_budget: Option<f64>,
-    /// An answer sent later than this after its request was taken is a deadline miss
-    /// (telemetry).
+    /// An answer sent later than this after its request was received is a deadline miss
+    /// (telemetry; [`crate::answer_times`]).
     pub deadline: std::time::Duration,
 }
 

@@ -83,7 +83,8 @@ fn install_component() {
             .status()
             .expect("running build-component.sh");
         assert!(status.success(), "building the HAL component failed");
-        let modules = Path::new("/usr/lib/linuxcnc/modules");
+        let module = Path::new(MODULE);
+        let modules = module.parent().expect("the module directory");
         let staged = modules.join(".hexacomp.so.new");
         std::fs::copy(out.join("hexacomp.so"), &staged).unwrap_or_else(|e| {
             panic!(
@@ -93,23 +94,36 @@ fn install_component() {
                 modules.display()
             )
         });
-        std::fs::rename(&staged, modules.join("hexacomp.so")).expect("installing hexacomp.so");
+        std::fs::rename(&staged, module).expect("installing hexacomp.so");
         let _ = std::fs::remove_dir_all(out);
     });
+}
+
+/// Where rtapi_app loads the component from (it loads modules only from LinuxCNC's module
+/// directory).
+const MODULE: &str = "/usr/lib/linuxcnc/modules/hexacomp.so";
+
+/// The installed package that owns [`MODULE`] (`dpkg-query -S`'s line), if one does.
+fn module_owner() -> Option<String> {
+    let owner = Command::new("dpkg-query")
+        .args(["-S", MODULE])
+        .output()
+        .ok()?;
+    owner
+        .status
+        .success()
+        .then(|| String::from_utf8_lossy(&owner.stdout).trim().to_string())
 }
 
 /// The module directory holds the component of the package `hexacomp-linuxcnc`, unmodified
 /// (`dpkg --verify` compares it with the package's checksums): not a build tree's copy.
 fn check_packaged_component() {
-    let module = "/usr/lib/linuxcnc/modules/hexacomp.so";
-    let owner = Command::new("dpkg-query")
-        .args(["-S", module])
-        .output()
-        .expect("dpkg-query");
+    let owner = module_owner();
     assert!(
-        String::from_utf8_lossy(&owner.stdout).starts_with("hexacomp-linuxcnc: "),
-        "{module} is not the package hexacomp-linuxcnc's: {}",
-        String::from_utf8_lossy(&owner.stderr)
+        owner
+            .as_deref()
+            .is_some_and(|o| o.starts_with("hexacomp-linuxcnc: ")),
+        "{MODULE} is not the package hexacomp-linuxcnc's (owner: {owner:?})"
     );
     let verify = Command::new("dpkg")
         .args(["--verify", "hexacomp-linuxcnc"])
@@ -125,15 +139,10 @@ fn check_packaged_component() {
 /// Fails when the module directory's `hexacomp.so` belongs to an installed package: the tests
 /// would replace a file dpkg owns with this build's.
 fn refuse_to_replace_a_packaged_component() {
-    let module = "/usr/lib/linuxcnc/modules/hexacomp.so";
-    let owner = Command::new("dpkg-query").args(["-S", module]).output();
-    if let Ok(owner) = owner
-        && owner.status.success()
-    {
+    if let Some(owner) = module_owner() {
         panic!(
-            "{module} belongs to an installed package ({}): remove it (dpkg -r \
-             hexacomp-linuxcnc) or test the installed pieces (HEXACOMP_INSTALLED=1)",
-            String::from_utf8_lossy(&owner.stdout).trim()
+            "{MODULE} belongs to an installed package ({owner}): remove it (dpkg -r \
+             hexacomp-linuxcnc) or test the installed pieces (HEXACOMP_INSTALLED=1)"
         );
     }
 }

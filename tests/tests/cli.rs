@@ -276,14 +276,17 @@ fn client_status_json_and_metrics_give_the_services_counters() {
         all.extend_from_slice(args);
         run("hexacomp-client", &all)
     };
-    let compensated = client(&[
-        "compensate",
-        "--input",
-        poses.to_str().unwrap(),
-        "--output",
-        out.to_str().unwrap(),
-    ]);
-    assert!(compensated.status.success(), "{}", stderr(&compensated));
+    let compensate = |input: &std::path::Path, output: &std::path::Path| {
+        let compensated = client(&[
+            "compensate",
+            "--input",
+            input.to_str().unwrap(),
+            "--output",
+            output.to_str().unwrap(),
+        ]);
+        assert!(compensated.status.success(), "{}", stderr(&compensated));
+    };
+    compensate(&poses, &out);
 
     // One request of two points served: the JSON says so, with every field.
     let status = client(&["status", "--json"]);
@@ -345,15 +348,7 @@ fn client_status_json_and_metrics_give_the_services_counters() {
     let batch = dir.path().join("batch.csv");
     let rows: String = (1..=100).map(|i| format!("{i},0,0,300,0,0,0\n")).collect();
     std::fs::write(&batch, format!("id,x,y,z,a,b,c\n{rows}")).unwrap();
-    let batch_out = dir.path().join("batch-out.csv");
-    let compensated = client(&[
-        "compensate",
-        "--input",
-        batch.to_str().unwrap(),
-        "--output",
-        batch_out.to_str().unwrap(),
-    ]);
-    assert!(compensated.status.success(), "{}", stderr(&compensated));
+    compensate(&batch, &dir.path().join("batch-out.csv"));
     let metrics = client(&["metrics"]);
     let text = String::from_utf8_lossy(&metrics.stdout).to_string();
     assert!(
