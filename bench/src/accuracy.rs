@@ -8,6 +8,7 @@ use hexacomp_client::CompensatedPoint;
 use hexacomp_core::stats::{PoseErrorNorm, PoseErrorStats};
 use hexacomp_core::{Pose, inverse_kinematics};
 use hexacomp_trainer::chart::{Axis, Chart, Series};
+use hexacomp_trainer::uncertainty::within_two_sigma;
 use hexacomp_virtual::VirtualPlatform;
 
 /// The path errors before and after compensation, and at the floor.
@@ -20,6 +21,8 @@ pub struct PathAccuracy {
     /// Error at every point with the exact legs (the noiseless machine's inverse): what the
     /// machine's repeatability alone leaves.
     pub floor: Vec<PoseErrorNorm>,
+    /// The service's 1-σ position uncertainty at every point, mm (`None`: it gave none).
+    pub sigma_mm: Vec<Option<f64>>,
 }
 
 /// Statistics of a [`PathAccuracy`].
@@ -31,15 +34,41 @@ pub struct PathStats {
     pub after: PoseErrorStats,
     /// With the exact legs.
     pub floor: PoseErrorStats,
+    /// The service's uncertainty against the compensated errors, when every point had one.
+    pub uncertainty: Option<PathUncertainty>,
+}
+
+/// The service's 1-σ position uncertainty along the path against the errors reached.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PathUncertainty {
+    /// Mean σ, mm.
+    pub mean_sigma_mm: f64,
+    /// The share of points whose compensated position error is within 2σ (95.45 % when the
+    /// uncertainty is calibrated).
+    pub within_two_sigma: f64,
 }
 
 impl PathAccuracy {
     /// Statistics before and after compensation and at the floor.
     pub fn stats(&self) -> PathStats {
+        let sigmas: Option<Vec<f64>> = self.sigma_mm.iter().copied().collect();
+        let uncertainty = sigmas.filter(|s| !s.is_empty()).map(|sigmas| {
+            let pairs: Vec<(f64, f64)> = self
+                .after
+                .iter()
+                .zip(&sigmas)
+                .map(|(e, s)| (e.position_mm, *s))
+                .collect();
+            PathUncertainty {
+                mean_sigma_mm: sigmas.iter().sum::<f64>() / sigmas.len() as f64,
+                within_two_sigma: within_two_sigma(&pairs),
+            }
+        });
         PathStats {
             before: PoseErrorStats::of(&self.before),
             after: PoseErrorStats::of(&self.after),
             floor: PoseErrorStats::of(&self.floor),
+            uncertainty,
         }
     }
 }
@@ -85,6 +114,7 @@ pub fn along_path(
             .move_legs(&point.legs, &pose)
             .with_context(|| at("compensated legs"))?;
         accuracy.after.push(PoseErrorNorm::between(&pose, &reached));
+        accuracy.sigma_mm.push(point.uncertainty_mm);
         let reached = exact_run
             .move_legs(&truth.exact_command(&pose), &pose)
             .with_context(|| at("exact legs"))?;
@@ -93,10 +123,10 @@ pub fn along_path(
     Ok(accuracy)
 }
 
-/// Position error along the path before and after compensation and at the floor (mm), against
-/// time along the path (s).
+/// Position error along the path before and after compensation and at the floor (mm), and twice
+/// the service's uncertainty where it gave one, against time along the path (s).
 pub fn chart(accuracy: &PathAccuracy, seconds_per_point: f64, title: &str) -> Chart {
-    let series = |name: &str, errors: &[PoseErrorNorm]| {
+    let errors_line = |name: &str, errors: &[PoseErrorNorm]| {
         Series::line(
             name,
             errors
@@ -106,14 +136,26 @@ pub fn chart(accuracy: &PathAccuracy, seconds_per_point: f64, title: &str) -> Ch
                 .collect(),
         )
     };
+    let mut series = vec![
+        errors_line("uncompensated", &accuracy.before),
+        errors_line("compensated", &accuracy.after),
+        errors_line("floor (exact legs)", &accuracy.floor),
+    ];
+    let sigmas: Option<Vec<f64>> = accuracy.sigma_mm.iter().copied().collect();
+    if let Some(sigmas) = sigmas.filter(|s| !s.is_empty()) {
+        series.push(Series::line(
+            "2σ (the service's uncertainty)",
+            sigmas
+                .iter()
+                .enumerate()
+                .map(|(i, s)| (i as f64 * seconds_per_point, 2.0 * s))
+                .collect(),
+        ));
+    }
     Chart {
         title: title.to_string(),
         x: Axis::linear("time along the path (s)"),
-        y: Axis::linear("position error ‖δ_A‖ (mm)"),
-        series: vec![
-            series("uncompensated", &accuracy.before),
-            series("compensated", &accuracy.after),
-            series("floor (exact legs)", &accuracy.floor),
-        ],
+        y: Axis::log("position error ‖δ_A‖ (mm)"),
+        series,
     }
 }

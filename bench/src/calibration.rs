@@ -1,13 +1,18 @@
 //! Calibrating the virtual platform for the benchmarks that need a model: the trainer's pipeline
-//! (plan, simulated measurement, robust joint corrections, decoupled networks with hidden-node
-//! selection) on its defaults.
+//! on its defaults (plan, simulated measurement, robust joint corrections), then the model
+//! `hexacomp-trainer calibrate` writes as model.hxm on the virtual platform at every size
+//! measured (docs/accuracy.md): the physical model carried into networks, with its position
+//! uncertainty.
 
 use anyhow::Context;
 use hexacomp_core::Geometry;
 use hexacomp_core::model::Model;
+use hexacomp_trainer::distill::DistillOptions;
+use hexacomp_trainer::identify::{PHYSICAL, identify};
+use hexacomp_trainer::physical_candidate::carried_into_networks;
 use hexacomp_trainer::pipeline::Pipeline;
 use hexacomp_trainer::plan::PlanOptions;
-use hexacomp_trainer::train::{Architecture, TrainOptions, training_work};
+use hexacomp_trainer::train::{Architecture, training_work};
 use hexacomp_virtual::{ErrorModel, ErrorVariant, VirtualPlatform};
 use indicatif::{ProgressBar, ProgressStyle};
 
@@ -20,27 +25,33 @@ pub fn virtual_platform(
 ) -> anyhow::Result<VirtualPlatform> {
     Ok(VirtualPlatform::new(
         geometry,
-        &ErrorModel::variant(ErrorVariant::Paper),
+        &error_model(),
         machine_seed,
         seed,
     )?)
 }
 
+/// The errors of the benchmarks' virtual machine: the paper's variant.
+fn error_model() -> ErrorModel {
+    ErrorModel::variant(ErrorVariant::Paper)
+}
+
 /// What a calibration produced.
 #[derive(Debug)]
 pub struct Calibration {
-    /// The decoupled model.
+    /// The physical model as networks, with its uncertainty.
     pub model: Model,
     /// Configurations measured.
     pub configurations: usize,
-    /// Holdout validation RMSE of the corrections, mm.
-    pub validation_rmse_mm: f64,
+    /// How closely the networks command what the physical model does (RMS over fresh poses'
+    /// legs), mm.
+    pub departure_mm: f64,
     /// Seconds the whole calibration took.
     pub seconds: f64,
 }
 
-/// Calibrates `platform` on `configurations` planned poses and trains the decoupled model, with
-/// a progress bar on standard error.
+/// Calibrates `platform` on `configurations` planned poses, identifies the physical model and
+/// carries it into networks, with a progress bar on standard error.
 pub fn calibrate(
     platform: &mut VirtualPlatform,
     configurations: usize,
@@ -54,45 +65,57 @@ pub fn calibrate(
             seed,
             ..Default::default()
         },
-        train: TrainOptions {
-            seed,
-            ..Default::default()
-        },
         ..Default::default()
     };
     let (_, measurements) = pipeline.measure_virtual(platform)?;
     let solved = pipeline
         .solve(&geometry, &measurements)
         .context("solving the virtual platform's corrections")?;
+    let kept = solved.kept_of(&measurements);
+    let options = DistillOptions {
+        seed,
+        ..DistillOptions::default()
+    };
     let bar = ProgressBar::new(training_work(
-        solved.corrections.len(),
+        options.samples + kept.len(),
         Architecture::Decoupled,
-        &pipeline.train,
+        &options.train,
     ));
     bar.set_style(
         ProgressStyle::with_template(
-            "training decoupled networks [{bar:30}] {percent}% ({elapsed}, about {eta} left)",
+            "identifying the physical model, carrying it into networks [{bar:30}] {percent}% \
+             ({elapsed}, about {eta} left)",
         )
         .expect("valid template")
         .progress_chars("=> "),
     );
-    let mut trained = pipeline
-        .train(
-            &geometry,
-            &solved.corrections,
-            Architecture::Decoupled,
-            &|n| bar.inc(n),
-        )
-        .context("training the virtual platform's model")?;
+    let physical = identify(&geometry, &kept, &PHYSICAL)
+        .context("identifying the virtual platform's physical model")?
+        .model;
+    let carried = carried_into_networks(
+        &geometry,
+        &physical,
+        &kept,
+        &options,
+        error_model().repeatability_sigma_mm,
+        &|n| bar.inc(n),
+    )
+    .context("carrying the virtual platform's physical model into networks")?;
     bar.finish_and_clear();
-    trained.model.provenance.source = format!(
-        "hexacomp-bench {} virtual calibration ({configurations} configurations)",
+    if let Err(e) = &carried.uncertainty {
+        eprintln!("the model carries no uncertainty: {e}");
+    }
+    let mut model = carried.distilled.model;
+    model.provenance.configurations = kept.len();
+    model.provenance.source = format!(
+        "hexacomp-bench {} virtual calibration ({configurations} configurations): physical \
+         model as networks",
         env!("CARGO_PKG_VERSION")
     );
     Ok(Calibration {
-        model: trained.model,
+        model,
         configurations,
-        validation_rmse_mm: trained.validation_rmse_mm,
+        departure_mm: carried.fidelity.rms_mm,
         seconds: start.elapsed().as_secs_f64(),
     })
 }

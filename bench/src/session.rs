@@ -177,11 +177,12 @@ impl Session {
                 let path = args.out_dir.join("model.hxm");
                 calibration.model.save(&path)?;
                 println!(
-                    "calibrated: {} configurations, decoupled hidden nodes {:?}, holdout RMSE \
-                     {:.4} mm, {:.1} s → {}",
+                    "calibrated: {} configurations, the physical model as networks of hidden \
+                     nodes {:?} commanding it within {:.4} mm RMS, with its uncertainty; \
+                     {:.1} s → {}",
                     calibration.configurations,
                     calibration.model.hidden_nodes(),
-                    calibration.validation_rmse_mm,
+                    calibration.departure_mm,
                     calibration.seconds,
                     path.display()
                 );

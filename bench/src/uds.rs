@@ -4,7 +4,8 @@
 //!
 //! Frames, little-endian: a request is `count: u32, kind: u32` and `count` points of six `f64`;
 //! the response is `count` points of `legs: 6 × f64, corrections: 6 × f64, generation: u64,
-//! status: u8` and 7 bytes of padding (the [`PointResponse`] layout, 112 bytes).
+//! status: u8`, 3 bytes of padding and `uncertainty_mm: f32` (the [`PointResponse`] layout,
+//! 112 bytes).
 
 use std::io::{Read, Write};
 use std::os::unix::net::{UnixListener, UnixStream};
@@ -12,8 +13,8 @@ use std::path::Path;
 use std::time::Duration;
 
 use anyhow::{Context, ensure};
+use hexacomp_client::CompensatedPoint;
 use hexacomp_client::wire::{MAX_BATCH, PointRequest, PointResponse, RequestKind};
-use hexacomp_client::{CompensatedPoint, PointStatus};
 use hexacomp_core::Geometry;
 use hexacomp_service::Generation;
 use hexacomp_service::serving::compute_points;
@@ -100,7 +101,8 @@ fn write_response(out: &mut [u8], point: &PointResponse) {
     }
     out[96..104].copy_from_slice(&point.generation.to_le_bytes());
     out[104] = point.status;
-    out[105..112].fill(0);
+    out[105..108].fill(0);
+    out[108..112].copy_from_slice(&point.uncertainty_mm.to_le_bytes());
 }
 
 /// A client of the socket server.
@@ -148,12 +150,14 @@ impl UdsClient {
             .read_exact(&mut self.response[..count * RESPONSE_BYTES])?;
         for (i, slot) in out.iter_mut().enumerate() {
             let bytes = &self.response[i * RESPONSE_BYTES..];
-            *slot = CompensatedPoint {
+            *slot = CompensatedPoint::from(&PointResponse {
                 legs: read_f64s::<6>(bytes),
                 corrections: read_f64s::<6>(&bytes[48..]),
                 generation: u64::from_le_bytes(bytes[96..104].try_into().expect("8")),
-                status: PointStatus::from_u8(bytes[104]).unwrap_or(PointStatus::InvalidInput),
-            };
+                status: bytes[104],
+                reserved: [0; 3],
+                uncertainty_mm: f32::from_le_bytes(bytes[108..112].try_into().expect("4")),
+            });
         }
         Ok(())
     }
@@ -162,6 +166,7 @@ impl UdsClient {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use hexacomp_client::PointStatus;
     use hexacomp_core::Pose;
     use hexacomp_core::compensator::compensate_pose;
 

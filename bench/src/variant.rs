@@ -4,8 +4,8 @@
 
 use std::path::Path;
 
-use hexacomp_client::wire::{PointRequest, PointResponse, RequestKind};
-use hexacomp_client::{Client, ClientOptions, CompensatedPoint, PointStatus};
+use hexacomp_client::wire::{PointRequest, RequestKind};
+use hexacomp_client::{Client, ClientOptions, CompensatedPoint};
 use hexacomp_core::Geometry;
 use hexacomp_service::Generation;
 use hexacomp_service::serving::compute_points;
@@ -98,18 +98,8 @@ impl Variant for InProcess {
             RequestKind::Poses,
             count,
             |i| PointRequest { values: poses[i] },
-            |i, point| out[i] = answered(&point),
+            |i, point| out[i] = CompensatedPoint::from(&point),
         );
         Ok(())
-    }
-}
-
-/// A computed point as the client reports it.
-fn answered(point: &PointResponse) -> CompensatedPoint {
-    CompensatedPoint {
-        legs: point.legs,
-        corrections: point.corrections,
-        status: PointStatus::from_u8(point.status).unwrap_or(PointStatus::InvalidInput),
-        generation: point.generation,
     }
 }

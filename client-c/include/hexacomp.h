@@ -138,6 +138,13 @@ typedef struct HexacompPoint {
    * `HEXACOMP_STATUS_*`.
    */
   uint8_t status;
+  /**
+   * The model's 1-σ position uncertainty at the point, mm (one-dimensional equivalent: the
+   * position error lies within twice it for 95.45 % of points); 0 when there is none (the
+   * model file has none, the point was not corrected, or the service predates it). It sits
+   * in what was padding: the struct's size (112 bytes) and layout are as before.
+   */
+  float uncertainty_mm;
 } HexacompPoint;
 
 /**

@@ -111,7 +111,17 @@ pub struct HexacompPoint {
     pub generation: u64,
     /// `HEXACOMP_STATUS_*`.
     pub status: u8,
+    /// The model's 1-σ position uncertainty at the point, mm (one-dimensional equivalent: the
+    /// position error lies within twice it for 95.45 % of points); 0 when there is none (the
+    /// model file has none, the point was not corrected, or the service predates it). It sits
+    /// in what was padding: the struct's size (112 bytes) and layout are as before.
+    pub uncertainty_mm: f32,
 }
+
+// The uncertainty sits in what was padding after `status`: programs built against the earlier
+// header allocate points of the same size.
+const _: () = assert!(std::mem::size_of::<HexacompPoint>() == 112);
+const _: () = assert!(std::mem::offset_of!(HexacompPoint, uncertainty_mm) == 108);
 
 /// The service's counters.
 #[repr(C)]
@@ -301,6 +311,7 @@ fn point(p: &CompensatedPoint) -> HexacompPoint {
         corrections: p.corrections,
         generation: p.generation,
         status: p.status as u8,
+        uncertainty_mm: p.uncertainty_mm.map_or(0.0, |sigma| sigma as f32),
     }
 }
 

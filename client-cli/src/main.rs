@@ -63,7 +63,8 @@ enum Command {
     },
     /// Compensate a poses CSV (`id,x,y,z,a,b,c`, mm and degrees) or, with --joints, a CSV of
     /// nominal leg lengths (`id,q1..q6`, mm), in batches of up to 1024; writes
-    /// `id,q1..q6,dq1..dq6,status`: exactly the numbers of `hexacomp-trainer predict`.
+    /// `id,q1..q6,dq1..dq6,status,uncertainty_mm`: exactly the numbers of `hexacomp-trainer
+    /// predict`, the uncertainty as the service sends it (an `f32`; empty when there is none).
     Compensate {
         /// Input CSV.
         #[arg(long, value_name = "FILE")]
@@ -193,6 +194,7 @@ fn run(instance: &str, timeout_ms: u64, command: Command) -> anyhow::Result<()> 
                         legs: r.legs,
                         corrections: r.corrections,
                         status: compensator_status(r.status),
+                        uncertainty_mm: r.uncertainty_mm,
                     }));
                     generations.extend(answers.iter().map(|r| r.generation));
                     Ok(())

@@ -162,6 +162,10 @@ pub struct CompensatedPoint {
     pub status: PointStatus,
     /// Generation of the model that computed it (0: no model).
     pub generation: u64,
+    /// The model's 1-σ position uncertainty at the point, mm (one-dimensional equivalent: the
+    /// position error lies within twice it for 95.45 % of points); `None` when the model has
+    /// none, the point was not corrected or its correction clamped, or the service predates it.
+    pub uncertainty_mm: Option<f64>,
 }
 
 /// The service's status.
@@ -522,15 +526,7 @@ impl Client {
             )));
         }
         for (i, p) in payload.iter().enumerate() {
-            write(
-                i,
-                CompensatedPoint {
-                    legs: p.legs,
-                    corrections: p.corrections,
-                    status: PointStatus::from_u8(p.status).unwrap_or(PointStatus::InvalidInput),
-                    generation: p.generation,
-                },
-            );
+            write(i, CompensatedPoint::from(p));
         }
         Ok(())
     }
@@ -585,6 +581,21 @@ impl Client {
     }
 }
 
+impl From<&PointResponse> for CompensatedPoint {
+    /// The point as the service answered it (an unknown status reads as `InvalidInput`; an
+    /// uncertainty that is not a finite positive number, 0 included, as none).
+    fn from(p: &PointResponse) -> Self {
+        Self {
+            legs: p.legs,
+            corrections: p.corrections,
+            status: PointStatus::from_u8(p.status).unwrap_or(PointStatus::InvalidInput),
+            generation: p.generation,
+            uncertainty_mm: (p.uncertainty_mm.is_finite() && p.uncertainty_mm > 0.0)
+                .then_some(f64::from(p.uncertainty_mm)),
+        }
+    }
+}
+
 impl CompensatedPoint {
     /// A placeholder to be overwritten by a response.
     pub const fn empty() -> Self {
@@ -593,6 +604,7 @@ impl CompensatedPoint {
             corrections: [0.0; 6],
             status: PointStatus::NoModel,
             generation: 0,
+            uncertainty_mm: None,
         }
     }
 }

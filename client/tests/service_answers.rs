@@ -159,7 +159,8 @@ fn serve(
                     corrections: [0.001; 6],
                     generation: 7,
                     status: PointStatus::Ok as u8,
-                    reserved: [0; 7],
+                    reserved: [0; 3],
+                    uncertainty_mm: 0.004,
                 });
             *response.user_header_mut() = ResponseHeader {
                 protocol,
@@ -184,6 +185,7 @@ fn each_answer_of_the_service_is_reported_as_its_own_error() {
         (point.legs, point.status, point.generation),
         ([300.0; 6], PointStatus::Ok, 7)
     );
+    assert_eq!(point.uncertainty_mm, Some(f64::from(0.004f32)));
     service.answer(Answer::Overloaded);
     assert_eq!(client.compensate_pose(POSE), Err(Error::Overloaded));
     service.answer(Answer::UnknownOutcome);

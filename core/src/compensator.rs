@@ -23,6 +23,11 @@ pub struct Compensated {
     pub corrections: [f64; LEGS],
     /// How the point was compensated.
     pub status: PointStatus,
+    /// The model's 1-σ position uncertainty at the point (one-dimensional equivalent, mm:
+    /// the position error lies within twice it for 95.45 % of points; see
+    /// [`crate::uncertainty`]); `None` when the model has none, did not correct the point or
+    /// clamped its correction.
+    pub uncertainty_mm: Option<f64>,
 }
 
 /// Tolerance on the trained range before a point counts as outside it, mm.
@@ -153,6 +158,7 @@ fn unchanged(q: &[f64; LEGS], status: PointStatus) -> Compensated {
         legs: *q,
         corrections: [0.0; LEGS],
         status,
+        uncertainty_mm: None,
     }
 }
 
@@ -210,6 +216,13 @@ fn corrected<M: Corrections>(
         legs,
         corrections,
         status,
+        // A clamped correction is not the model's: its uncertainty does not hold there.
+        uncertainty_mm: reference
+            .uncertainty
+            .as_ref()
+            .filter(|_| status != PointStatus::Clamped)
+            .map(|u| u.sigma_mm(q))
+            .filter(|sigma| sigma.is_finite()),
     }
 }
 
@@ -310,6 +323,7 @@ fn nominal_legs(geometry: &Geometry, pose: &Pose) -> Result<[f64; LEGS], Compens
             legs: [f64::NAN; LEGS],
             corrections: [0.0; LEGS],
             status: PointStatus::InvalidInput,
+            uncertainty_mm: None,
         });
     }
     Ok(inverse_kinematics(geometry, pose).lengths)

@@ -106,11 +106,11 @@ pub enum ModelFileProblem {
     #[error("not a hexacomp model file")]
     NotAModel,
     /// The file has a format version this build does not read.
-    #[error("format version {found}, this build reads version {supported}")]
+    #[error("format version {found}, this build reads versions 1 to {supported}")]
     Version {
         /// Version in the file.
         found: u16,
-        /// Version this build reads.
+        /// The newest version this build reads.
         supported: u16,
     },
     /// The file is shorter than its header says: cut short, or the header's length field is

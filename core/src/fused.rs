@@ -324,6 +324,7 @@ mod tests {
             correction_bounds: [[-1.0, 1.0]; LEGS],
             geometry: crate::Geometry::prototype().fingerprint(),
             provenance: Provenance::default(),
+            uncertainty: None,
         }
     }
 

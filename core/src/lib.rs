@@ -43,6 +43,7 @@ pub mod rigid_fit;
 pub mod sampling;
 pub mod screw;
 pub mod stats;
+pub mod uncertainty;
 
 pub use error::{Error, Result};
 pub use geometry::{Fiducial, Fingerprint, Geometry, LEGS, MIN_TARGETS, Workspace};

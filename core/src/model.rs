@@ -1,8 +1,11 @@
 //! The trained compensation model and its file (docs/formats.md, "Model file").
 //!
 //! File layout: 8 magic bytes `HXCMODEL`, the format version (u16, little-endian), the payload
-//! length (u32 LE), the postcard-encoded [`Model`], and a CRC-64/XZ (u64 LE) of everything
-//! before it. A model binds itself to the fingerprint of the geometry it was trained for.
+//! length (u32 LE), the payload, and a CRC-64/XZ (u64 LE) of everything before it. The payload
+//! is the postcard-encoded [`Model`] without its uncertainty (version 1), followed in version 2
+//! by the postcard-encoded [`PositionUncertainty`]. A model without an uncertainty is written as
+//! version 1, so that builds that read only version 1 keep reading it. A model binds itself to
+//! the fingerprint of the geometry it was trained for.
 
 use std::path::Path;
 
@@ -11,11 +14,15 @@ use serde::{Deserialize, Serialize};
 use crate::error::{Error, ModelFileProblem, Result};
 use crate::geometry::{Fingerprint, Geometry, LEGS};
 use crate::network::{Network, Normalisation};
+use crate::uncertainty::PositionUncertainty;
 
 /// Magic bytes at the start of every model file.
 pub const MAGIC: &[u8; 8] = b"HXCMODEL";
-/// The model-file format version this build writes and reads.
-pub const FORMAT_VERSION: u16 = 1;
+/// The newest model-file format version, which this build writes for a model with an
+/// uncertainty; it reads it and every earlier one.
+pub const FORMAT_VERSION: u16 = 2;
+/// The format version of a model without an uncertainty (the first).
+const FORMAT_WITHOUT_UNCERTAINTY: u16 = 1;
 const HEADER: usize = 8 + 2 + 4;
 const CHECKSUM: crc::Crc<u64> = crc::Crc::<u64>::new(&crc::CRC_64_XZ);
 
@@ -85,6 +92,10 @@ pub struct Model {
     pub geometry: Fingerprint,
     /// Where the model came from.
     pub provenance: Provenance,
+    /// The 1-σ position uncertainty of each compensated point (format version 2; `None` in a
+    /// version-1 file).
+    #[serde(skip)]
+    pub uncertainty: Option<PositionUncertainty>,
 }
 
 impl Model {
@@ -165,15 +176,34 @@ impl Model {
                 }
             }
         }
+        if let Some(uncertainty) = &self.uncertainty {
+            uncertainty.validate()?;
+        }
         Ok(())
     }
 
-    /// The model-file bytes.
+    /// The format version the model's file has: [`FORMAT_VERSION`] with an uncertainty, 1
+    /// without (what a file read with or without one had).
+    pub fn format_version(&self) -> u16 {
+        if self.uncertainty.is_some() {
+            FORMAT_VERSION
+        } else {
+            FORMAT_WITHOUT_UNCERTAINTY
+        }
+    }
+
+    /// The model-file bytes, in [`Model::format_version`].
     pub fn to_bytes(&self) -> Vec<u8> {
-        let payload = postcard::to_stdvec(self).expect("a model always serialises");
+        let mut payload = postcard::to_stdvec(self).expect("a model always serialises");
+        if let Some(uncertainty) = &self.uncertainty {
+            payload.extend(
+                postcard::to_stdvec(uncertainty).expect("an uncertainty always serialises"),
+            );
+        }
+        let version = self.format_version();
         let mut bytes = Vec::with_capacity(HEADER + payload.len() + 8);
         bytes.extend_from_slice(MAGIC);
-        bytes.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
+        bytes.extend_from_slice(&version.to_le_bytes());
         bytes.extend_from_slice(&(payload.len() as u32).to_le_bytes());
         bytes.extend_from_slice(&payload);
         let checksum = CHECKSUM.checksum(&bytes);
@@ -193,7 +223,7 @@ impl Model {
             });
         }
         let version = u16::from_le_bytes([bytes[8], bytes[9]]);
-        if version != FORMAT_VERSION {
+        if !(FORMAT_WITHOUT_UNCERTAINTY..=FORMAT_VERSION).contains(&version) {
             return Err(ModelFileProblem::Version {
                 found: version,
                 supported: FORMAT_VERSION,
@@ -218,8 +248,22 @@ impl Model {
         if CHECKSUM.checksum(body) != stored {
             return Err(ModelFileProblem::Checksum);
         }
-        let model: Model = postcard::from_bytes(&body[HEADER..])
-            .map_err(|e| ModelFileProblem::Corrupt(e.to_string()))?;
+        let corrupt = |e: postcard::Error| ModelFileProblem::Corrupt(e.to_string());
+        let (mut model, rest): (Model, _) =
+            postcard::take_from_bytes(&body[HEADER..]).map_err(corrupt)?;
+        let rest = if version == FORMAT_VERSION {
+            let (uncertainty, rest) = postcard::take_from_bytes(rest).map_err(corrupt)?;
+            model.uncertainty = Some(uncertainty);
+            rest
+        } else {
+            rest
+        };
+        if !rest.is_empty() {
+            return Err(ModelFileProblem::Corrupt(format!(
+                "{} bytes after the format version {version} payload",
+                rest.len()
+            )));
+        }
         model
             .validate()
             .map_err(|e| ModelFileProblem::Corrupt(e.to_string()))?;

@@ -4,6 +4,8 @@
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
 
+mod common;
+
 use hexacomp_core::Geometry;
 use hexacomp_core::compensator::{compensate_pose, compensate_poses};
 use hexacomp_core::fused::FusedModel;
@@ -66,6 +68,8 @@ fn inference_and_compensation_allocate_nothing() {
         correction_bounds: [[-2.0, 2.0]; 6],
         geometry: g.fingerprint(),
         provenance: Provenance::default(),
+        // With an uncertainty: every compensated point computes it too.
+        uncertainty: Some(common::uncertainty()),
     };
     let models = [
         model(Networks::Coupled(network(6))),

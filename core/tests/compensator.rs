@@ -5,6 +5,7 @@
 
 #[path = "common/both_forms.rs"]
 mod both_forms;
+mod common;
 
 use both_forms::{compensate_legs, compensate_pose};
 use hexacomp_core::compensator::{Compensated, PointStatus};
@@ -32,6 +33,7 @@ fn constant_model(geometry: &Geometry, offsets: [f64; 6], bounds: [f64; 2]) -> M
         correction_bounds: [bounds; 6],
         geometry: geometry.fingerprint(),
         provenance: Provenance::default(),
+        uncertainty: None,
     }
 }
 
@@ -96,6 +98,66 @@ fn every_kind_of_point_gets_its_status() {
     assert_eq!(
         compensate_pose(&g, Some(&ok), &bad_pose).status,
         PointStatus::InvalidInput
+    );
+}
+
+#[test]
+fn a_corrected_point_carries_the_models_uncertainty_at_its_nominal_legs_and_others_none() {
+    let g = Geometry::prototype();
+    let uncertainty = common::uncertainty();
+    let m = Model {
+        uncertainty: Some(uncertainty.clone()),
+        ..constant_model(&g, [0.1; 6], [-1.0, 1.0])
+    };
+    let home = inverse_kinematics(&g, &g.home_pose()).lengths;
+    let at_home = compensate_pose(&g, Some(&m), &g.home_pose());
+    assert_eq!(at_home.status, PointStatus::Ok);
+    // At the nominal legs, not the corrected ones.
+    assert_eq!(at_home.uncertainty_mm, Some(uncertainty.sigma_mm(&home)));
+    assert_ne!(
+        at_home.uncertainty_mm,
+        Some(uncertainty.sigma_mm(&at_home.legs))
+    );
+    // Outside the trained range it is still given, and larger.
+    let mut untrained = home;
+    untrained[3] = 290.0;
+    let outside = compensate_legs(&g, Some(&m), &untrained);
+    assert_eq!(outside.status, PointStatus::OutsideTrainedRange);
+    assert!(outside.uncertainty_mm.unwrap() > at_home.uncertainty_mm.unwrap());
+    // Points the model did not correct, or not as it wanted, have none.
+    let clamped = compensate_legs(
+        &g,
+        Some(&Model {
+            uncertainty: Some(uncertainty.clone()),
+            ..constant_model(&g, [0.1, -0.2, 0.3, -0.4, 0.5, 2.0], [-1.0, 1.0])
+        }),
+        &home,
+    );
+    assert_eq!(clamped.status, PointStatus::Clamped);
+    assert_eq!(clamped.uncertainty_mm, None);
+    let mut long = home;
+    long[0] = 431.0;
+    let mut nan = home;
+    nan[2] = f64::NAN;
+    for (point, status) in [
+        (
+            compensate_legs(&g, Some(&m), &long),
+            PointStatus::OutOfStroke,
+        ),
+        (
+            compensate_legs(&g, Some(&m), &nan),
+            PointStatus::InvalidInput,
+        ),
+        (compensate_legs(&g, None, &home), PointStatus::NoModel),
+    ] {
+        assert_eq!(point.status, status);
+        assert_eq!(point.uncertainty_mm, None, "{status:?}");
+    }
+    // A model without one gives none.
+    let plain = constant_model(&g, [0.1; 6], [-1.0, 1.0]);
+    assert_eq!(
+        compensate_legs(&g, Some(&plain), &home).uncertainty_mm,
+        None
     );
 }
 

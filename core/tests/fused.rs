@@ -62,6 +62,7 @@ fn random_model(geometry: &Geometry, seed: u64, coupled: bool, input_scale: f64)
         correction_bounds: [[-0.08, 0.08]; 6],
         geometry: geometry.fingerprint(),
         provenance: Provenance::default(),
+        uncertainty: None,
     };
     model.validate().unwrap();
     model

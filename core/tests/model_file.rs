@@ -2,7 +2,7 @@
 
 mod common;
 
-use common::model;
+use common::{model, uncertainty};
 use hexacomp_core::Geometry;
 use hexacomp_core::error::{Error, ModelFileProblem};
 use hexacomp_core::model::{FORMAT_VERSION, Model, Networks};
@@ -22,6 +22,77 @@ fn model_round_trips_through_a_file_exactly() {
     assert_eq!(Model::load(&path, &g).unwrap(), m);
     // No temporary file is left beside it.
     assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
+}
+
+#[test]
+fn a_model_with_an_uncertainty_is_version_2_and_one_without_stays_version_1() {
+    let g = Geometry::prototype();
+    let plain = model(&g);
+    let bytes = plain.to_bytes();
+    // Builds that read only version 1 keep reading models without an uncertainty.
+    assert_eq!(u16::from_le_bytes([bytes[8], bytes[9]]), 1);
+    assert_eq!(Model::from_bytes(&bytes).unwrap().uncertainty, None);
+    let with = Model {
+        uncertainty: Some(uncertainty()),
+        ..plain.clone()
+    };
+    let bytes = with.to_bytes();
+    assert_eq!(u16::from_le_bytes([bytes[8], bytes[9]]), FORMAT_VERSION);
+    assert_eq!(FORMAT_VERSION, 2);
+    let read = Model::from_bytes(&bytes).unwrap();
+    assert_eq!(read, with);
+    assert_eq!(read.format_version(), 2);
+    // A version-2 file is the version-1 payload and the uncertainty after it.
+    let old = plain.to_bytes();
+    let old_payload = &old[14..old.len() - 8];
+    assert_eq!(&bytes[14..14 + old_payload.len()], old_payload);
+}
+
+/// `bytes` with the format version `version` and the checksum recomputed.
+fn with_version(bytes: &[u8], version: u16) -> Vec<u8> {
+    let mut changed = bytes[..bytes.len() - 8].to_vec();
+    changed[8..10].copy_from_slice(&version.to_le_bytes());
+    let checksum = crc::Crc::<u64>::new(&crc::CRC_64_XZ).checksum(&changed);
+    changed.extend_from_slice(&checksum.to_le_bytes());
+    changed
+}
+
+#[test]
+fn a_version_2_file_without_a_valid_uncertainty_is_refused() {
+    let g = Geometry::prototype();
+    // Announced as version 2, but the payload ends with the model.
+    let missing = with_version(&model(&g).to_bytes(), 2);
+    assert!(
+        matches!(problem(&missing), ModelFileProblem::Corrupt(_)),
+        "{:?}",
+        problem(&missing)
+    );
+    // An uncertainty whose variance is negative.
+    let mut bad = uncertainty();
+    bad.constant_variance_mm2 = -1e-6;
+    let negative = Model {
+        uncertainty: Some(bad),
+        ..model(&g)
+    }
+    .to_bytes();
+    match problem(&negative) {
+        ModelFileProblem::Corrupt(why) => assert!(why.contains("variance"), "{why}"),
+        other => panic!("{other:?}"),
+    }
+    // Version 1 with an uncertainty after the model: bytes the version does not have.
+    let extra = with_version(
+        &Model {
+            uncertainty: Some(uncertainty()),
+            ..model(&g)
+        }
+        .to_bytes(),
+        1,
+    );
+    assert!(
+        matches!(problem(&extra), ModelFileProblem::Corrupt(_)),
+        "{:?}",
+        problem(&extra)
+    );
 }
 
 #[test]

@@ -436,6 +436,7 @@ pub fn write_compensated<W: Write>(writer: W, rows: &[NamedCompensation]) -> std
 fn write_compensated_header<W: Write>(writer: W) -> std::io::Result<csv::Writer<W>> {
     let mut head = header(&[&LEG_COLUMNS, &CORRECTION_COLUMNS]);
     head.push("status");
+    head.push("uncertainty_mm");
     let mut csv = csv::Writer::from_writer(writer);
     csv.write_record(&head)?;
     Ok(csv)
@@ -450,6 +451,11 @@ fn write_compensated_row<W: Write>(
         .chain(cells(&row.point.legs))
         .chain(cells(&row.point.corrections))
         .chain(std::iter::once(row.point.status.name().to_string()))
+        .chain(std::iter::once(
+            row.point
+                .uncertainty_mm
+                .map_or_else(String::new, |sigma| sigma.to_string()),
+        ))
         .collect();
     Ok(csv.write_record(&cells)?)
 }

@@ -11,7 +11,9 @@
 //!
 //! Changing a layout, a value or a name is a new [`PROTOCOL_VERSION`]: it is part of every
 //! service name and of every request header, so mismatched sides refuse each other instead of
-//! misreading bytes.
+//! misreading bytes. What earlier sides can ignore is added within version 1 instead: a new
+//! endpoint (`telemetry`), a field in bytes that were zero padding
+//! (`PointResponse::uncertainty_mm`, 0 from an earlier service).
 
 #![warn(missing_docs)]
 

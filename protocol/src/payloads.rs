@@ -105,8 +105,20 @@ pub struct PointResponse {
     /// [`PointStatus`](crate::PointStatus) as `u8`.
     pub status: u8,
     /// Padding, zero.
-    pub reserved: [u8; 7],
+    pub reserved: [u8; 3],
+    /// The model's 1-σ position uncertainty at the point, mm (one-dimensional equivalent: the
+    /// position error lies within twice it for 95.45 % of points); 0 when there is none: the
+    /// model file has no uncertainty, the point was not corrected, or the service predates the
+    /// field (these four bytes were padding, zero, before: the layout is unchanged).
+    pub uncertainty_mm: f32,
 }
+
+// The uncertainty took four bytes of the padding after `status`: the size, alignment and the
+// earlier fields' offsets are the first release's, which iceoryx2 and earlier clients rely on.
+const _: () = assert!(core::mem::size_of::<PointResponse>() == 112);
+const _: () = assert!(core::mem::align_of::<PointResponse>() == 8);
+const _: () = assert!(core::mem::offset_of!(PointResponse, status) == 104);
+const _: () = assert!(core::mem::offset_of!(PointResponse, uncertainty_mm) == 108);
 
 /// The serving thread busy-polls.
 pub const WAIT_SPIN: u32 = 0;

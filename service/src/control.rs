@@ -313,6 +313,7 @@ mod tests {
             correction_bounds: [[-0.5, 0.5]; 6],
             geometry: g.fingerprint(),
             provenance: Provenance::default(),
+            uncertainty: None,
         }
     }
 

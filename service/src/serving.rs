@@ -88,7 +88,8 @@ fn response(point: Compensated, model: Option<&Generation>) -> PointResponse {
         corrections: point.corrections,
         generation: model.map_or(0, |g| g.number),
         status: point.status as u8,
-        reserved: [0; 7],
+        reserved: [0; 3],
+        uncertainty_mm: point.uncertainty_mm.map_or(0.0, |sigma| sigma as f32),
     }
 }
 

@@ -107,6 +107,7 @@ mod tests {
             correction_bounds: [[-1.0, 1.0]; LEGS],
             geometry: geometry.fingerprint(),
             provenance: Provenance::default(),
+            uncertainty: None,
         }
     }
 

@@ -25,7 +25,7 @@ static void print_point(char tag, int i, const double in[6], const HexacompPoint
     printf(" %u %llu", (unsigned)p->status, (unsigned long long)p->generation);
     for (int k = 0; k < 6; k++) printf(" %.17g", p->legs[k]);
     for (int k = 0; k < 6; k++) printf(" %.17g", p->corrections[k]);
-    printf("\n");
+    printf(" %.9g\n", (double)p->uncertainty_mm);
 }
 
 /* A pose call to the stopped service with deadline `timeout_us`: it must give the timeout code,

@@ -141,6 +141,23 @@ pub fn smooth_model_for(
             source: format!("hexacomp-tests smooth_model({seed})"),
             ..Provenance::default()
         },
+        uncertainty: None,
+    }
+}
+
+/// A position uncertainty with the identity moment matrix, centred on the prototype's mid
+/// stroke: `σ² = 2e-5 + 3e-5 · h` mm², `h` the squared norm of the legs' features over 13.
+pub fn test_uncertainty() -> hexacomp_core::uncertainty::PositionUncertainty {
+    use hexacomp_core::uncertainty::{FEATURES, PositionUncertainty};
+    let scale = 1.0 / (FEATURES as f64).sqrt();
+    PositionUncertainty {
+        centre_mm: [355.0; 6],
+        half_span_mm: [60.0; 6],
+        whitening: (0..FEATURES)
+            .flat_map(|r| (0..=r).map(move |c| if r == c { scale } else { 0.0 }))
+            .collect(),
+        constant_variance_mm2: 2e-5,
+        leverage_variance_mm2: 3e-5,
     }
 }
 

@@ -120,6 +120,21 @@ fn demo_calibrates_hot_swaps_streams_and_compensates_the_path() {
     );
     // The floor the same machine reaches with its exact legs: above zero (its repeatability),
     // below what the compensated run reaches, and the same in the summary.
+    // The service's uncertainty against the errors reached along the path: the model the demo
+    // calibrates carries one, and on its own virtual machine it holds (95.45 % if calibrated).
+    let sigma = number_after(stdout, "the service's uncertainty: mean σ ");
+    assert!(sigma > 0.004 && sigma < 0.02, "mean σ {sigma}\n{stdout}");
+    let share = number_after(stdout, " mm; ");
+    assert!(
+        (85.0..=100.0).contains(&share),
+        "{share} % within 2σ\n{stdout}"
+    );
+    assert!(
+        stdout.contains(&format!(
+            "the service's 1-σ uncertainty {sigma:.4} mm mean, {share:.1} % of the errors"
+        )),
+        "{stdout}"
+    );
     let floor = number_after(stdout, "exact (the floor)");
     assert!(floor > 0.0 && floor < after, "{floor} {after}\n{stdout}");
     assert_eq!(
@@ -149,6 +164,13 @@ fn demo_calibrates_hot_swaps_streams_and_compensates_the_path() {
     }
     // Every variant streamed the same path: in both latency charts, named in the legend and
     // drawn (a curve per variant; along the path, hexacomp's median too).
+    // The accuracy chart: before, after, the floor, and twice the service's uncertainty.
+    let accuracy = std::fs::read_to_string(dir.path().join("demo-accuracy.svg")).unwrap();
+    assert!(
+        accuracy.contains("2σ (the service&apos;s uncertainty)"),
+        "no 2σ series in the legend"
+    );
+    assert_eq!(drawn_curves(&accuracy), 4);
     for (chart, curves) in [
         ("demo-percentiles.svg", 4),
         ("demo-latency-along-path.svg", 5),

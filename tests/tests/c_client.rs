@@ -8,7 +8,7 @@ use hexacomp_core::compensator::{compensate_legs, compensate_pose};
 use hexacomp_core::fused::FusedModel;
 use hexacomp_core::pose::Pose;
 use hexacomp_tests::c_program::{compile, run_against};
-use hexacomp_tests::{ServiceProcess, save_smooth_model, unique_instance};
+use hexacomp_tests::{ServiceProcess, save_smooth_model, test_uncertainty, unique_instance};
 
 fn numbers(fields: &[&str]) -> [f64; 6] {
     std::array::from_fn(|k| fields[k].parse().unwrap())
@@ -17,7 +17,10 @@ fn numbers(fields: &[&str]) -> [f64; 6] {
 #[test]
 fn a_c_program_linked_statically_and_dynamically_gets_the_compensators_answers() {
     let dir = tempfile::tempdir().unwrap();
-    let (model, path) = save_smooth_model(dir.path(), 51);
+    let (mut model, path) = save_smooth_model(dir.path(), 51);
+    // With an uncertainty, as `calibrate` writes a model.
+    model.uncertainty = Some(test_uncertainty());
+    model.save(&path).unwrap();
     let g = Geometry::prototype();
     for shared in [false, true] {
         let exe = compile("client_test.c", dir.path(), shared);
@@ -27,6 +30,7 @@ fn a_c_program_linked_statically_and_dynamically_gets_the_compensators_answers()
             ServiceProcess::with_model(&instance, &dir.path().join(format!("s{shared}")), &path);
         let stdout = run_against(&exe, &service);
         let mut checked = std::collections::BTreeMap::new();
+        let mut with_uncertainty = 0;
         let mut deadlines = Vec::new();
         for line in stdout.lines() {
             let fields: Vec<&str> = line.split(' ').collect();
@@ -47,6 +51,17 @@ fn a_c_program_linked_statically_and_dynamically_gets_the_compensators_answers()
                     assert_eq!(fields[9], "1", "{line}");
                     let legs = numbers(&fields[10..16]);
                     let corrections = numbers(&fields[16..22]);
+                    // The uncertainty travels as an f32 (0: none); `%.9g` prints it exactly.
+                    let sigma: f32 = fields[22].parse().unwrap();
+                    assert_eq!(
+                        sigma.to_bits(),
+                        expected
+                            .uncertainty_mm
+                            .map_or(0.0f32, |s| s as f32)
+                            .to_bits(),
+                        "{line}"
+                    );
+                    with_uncertainty += usize::from(sigma > 0.0);
                     for k in 0..6 {
                         assert_eq!(legs[k].to_bits(), expected.legs[k].to_bits(), "{line}");
                         assert_eq!(
@@ -67,6 +82,10 @@ fn a_c_program_linked_statically_and_dynamically_gets_the_compensators_answers()
         }
         let expected_counts = [("A", 1), ("B", 64), ("J", 64), ("K", 64), ("P", 64)];
         assert_eq!(checked, expected_counts.into_iter().collect());
+        assert!(
+            with_uncertainty > 200,
+            "{with_uncertainty} of 257 points with an uncertainty"
+        );
         let timeouts: Vec<&str> = deadlines.iter().map(|(d, _)| d.as_str()).collect();
         assert_eq!(timeouts, ["50000", "300000"], "{stdout}");
         // The short deadline was the one set, not the 10 s the program connected with.

@@ -7,7 +7,7 @@ use hexacomp_core::Geometry;
 use hexacomp_core::compensator::{compensate_legs, compensate_pose};
 use hexacomp_core::fused::FusedModel;
 use hexacomp_core::model::Model;
-use hexacomp_tests::run;
+use hexacomp_tests::{run, test_uncertainty};
 
 fn text(bytes: &[u8]) -> String {
     String::from_utf8_lossy(bytes).into_owned()
@@ -80,6 +80,18 @@ fn predict_returns_exactly_the_library_compensation() {
         "{inspected}"
     );
 
+    // The model carries an uncertainty (as `calibrate` writes it): σ² = 2e-5 + 3e-5 · h mm²,
+    // h the squared norm of the legs' features over 13.
+    let mut with = Model::load(&model_path, &Geometry::prototype()).unwrap();
+    with.uncertainty = Some(test_uncertainty());
+    with.save(&model_path).unwrap();
+    let inspected = ok(&["inspect", p(&model_path)]);
+    assert!(inspected.contains("format version 2"), "{inspected}");
+    assert!(
+        inspected.contains("uncertainty    1-σ position"),
+        "{inspected}"
+    );
+
     let out = d.join("out.csv");
     ok(&[
         "predict",
@@ -97,12 +109,13 @@ fn predict_returns_exactly_the_library_compensation() {
     let mut lines = written.lines();
     assert_eq!(
         lines.next().unwrap(),
-        "id,q1,q2,q3,q4,q5,q6,dq1,dq2,dq3,dq4,dq5,dq6,status"
+        "id,q1,q2,q3,q4,q5,q6,dq1,dq2,dq3,dq4,dq5,dq6,status,uncertainty_mm"
     );
     // One row per pose, no more, no less.
     assert_eq!(written.lines().count(), 1 + poses.len());
     assert!(!poses.is_empty());
     let mut joints = String::from("id,q1,q2,q3,q4,q5,q6\n");
+    let mut with_sigma = 0;
     for (line, row) in lines.zip(&poses) {
         let expected = compensate_pose(&g, Some(&FusedModel::new(&model)), &row.pose());
         let cells: Vec<&str> = line.split(',').collect();
@@ -115,9 +128,18 @@ fn predict_returns_exactly_the_library_compensation() {
             );
         }
         assert_eq!(cells[13], expected.status.name());
+        match expected.uncertainty_mm {
+            Some(sigma) => {
+                assert!(sigma > 2e-5f64.sqrt(), "{sigma}");
+                assert_eq!(cells[14].parse::<f64>().unwrap(), sigma);
+                with_sigma += 1;
+            }
+            None => assert_eq!(cells[14], ""),
+        }
         let nominal = hexacomp_core::inverse_kinematics(&g, &row.pose()).lengths;
         joints += &format!("{},{}\n", row.id, nominal.map(|q| q.to_string()).join(","));
     }
+    assert!(with_sigma > 0, "no point was answered with an uncertainty");
     // --joints gives the same numbers from the nominal legs.
     std::fs::write(d.join("joints.csv"), joints).unwrap();
     let out2 = d.join("out2.csv");
@@ -140,6 +162,11 @@ fn predict_returns_exactly_the_library_compensation() {
         for i in 0..6 {
             assert_eq!(cells[1 + i].parse::<f64>().unwrap(), expected.legs[i]);
         }
+        assert_eq!(
+            cells[14].parse::<f64>().ok(),
+            expected.uncertainty_mm,
+            "{line}"
+        );
     }
 }
 
@@ -163,7 +190,7 @@ fn bad_model_files_are_refused_each_with_its_reason() {
         (
             "newer.hxm",
             newer,
-            "format version 9, this build reads version 1",
+            "format version 9, this build reads versions 1 to 2",
         ),
         ("text.hxm", b"id,q1\n".to_vec(), "not a hexacomp model file"),
     ];
@@ -334,6 +361,7 @@ fn calibrate_runs_the_whole_pipeline_and_summarises() {
         .unwrap_or_else(|| panic!("no robust decoupled row in\n{report}"))
         ["robust decoupled".len()..]
         .split_whitespace()
+        .take(5)
         .map(|w| w.parse().unwrap())
         .collect();
     assert_eq!(row.len(), 5, "{row:?}");
@@ -357,7 +385,37 @@ fn calibrate_runs_the_whole_pipeline_and_summarises() {
         floor < physical && physical < row[0],
         "{floor} {physical} {row:?}"
     );
-    Model::load(&out_dir.join("model.hxm"), &Geometry::prototype()).unwrap();
+    // Every model file carries its uncertainty, and the check says how it held: the physical
+    // model's row ends with its mean σ and the share within 2σ.
+    for file in ["model.hxm", "model-coupled.hxm", "model-decoupled.hxm"] {
+        let model = Model::load(&out_dir.join(file), &Geometry::prototype()).unwrap();
+        let u = model
+            .uncertainty
+            .unwrap_or_else(|| panic!("{file} has no uncertainty"));
+        assert!(u.leverage_variance_mm2 > 0.0, "{file}: {u:?}");
+    }
+    let line = report
+        .lines()
+        .find(|l| l.starts_with("physical model (as networks)"))
+        .unwrap();
+    let cells: Vec<&str> = line.split_whitespace().collect();
+    let share: f64 = cells[cells.len() - 2].parse().unwrap();
+    assert_eq!(cells[cells.len() - 1], "%", "{line}");
+    assert!((50.0..=100.0).contains(&share), "{line}");
+    assert!(
+        report.contains("its 1-σ position uncertainty: "),
+        "{report}"
+    );
+    // A repeatability that is not a length is refused before anything runs.
+    for bad in ["--repeatability-mm=-0.1", "--repeatability-mm=nan"] {
+        let refused = trainer(&["calibrate", bad, "--out-dir", p(&out_dir)]);
+        assert!(!refused.status.success());
+        assert!(
+            text(&refused.stderr).contains("is not a repeatability in mm"),
+            "{}",
+            text(&refused.stderr)
+        );
+    }
 }
 
 /// The peak resident memory (VmHWM, KiB) that `child` reached, polled until it exits, and its

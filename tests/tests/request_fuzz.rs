@@ -148,7 +148,11 @@ fn any_request_gets_its_outcome_and_every_point_exactly_the_compensators_answer(
             assert!(same(&answer.legs, &local.legs), "request {r} {point:?}");
             assert!(same(&answer.corrections, &local.corrections));
             assert_eq!(answer.generation, 1);
-            assert_eq!(answer.reserved, [0; 7]);
+            assert_eq!(answer.reserved, [0; 3]);
+            assert_eq!(
+                answer.uncertainty_mm.to_bits(),
+                local.uncertainty_mm.map_or(0.0f32, |s| s as f32).to_bits()
+            );
         }
     }
     // The fuzzer reached every outcome and the statuses a point can have with a model.

@@ -12,7 +12,7 @@ use hexacomp_core::model::Model;
 use hexacomp_core::sampling::{SamplerOptions, WorkspaceSampler};
 use hexacomp_core::stats::PoseErrorNorm;
 use hexacomp_core::{Geometry, Pose, inverse_kinematics};
-use hexacomp_tests::{ServiceProcess, unique_instance};
+use hexacomp_tests::{ServiceProcess, test_uncertainty, unique_instance};
 use hexacomp_trainer::pipeline::Pipeline;
 use hexacomp_trainer::plan::PlanOptions;
 use hexacomp_trainer::train::{Architecture, TrainOptions};
@@ -62,12 +62,20 @@ fn assert_same(got: &CompensatedPoint, expected: &hexacomp_core::compensator::Co
     assert_eq!(got.legs, expected.legs);
     assert_eq!(got.corrections, expected.corrections);
     assert_eq!(got.status as u8, expected.status as u8);
+    // The uncertainty travels as an f32.
+    assert_eq!(
+        got.uncertainty_mm,
+        expected.uncertainty_mm.map(|sigma| f64::from(sigma as f32))
+    );
 }
 
 #[test]
 fn client_results_equal_predict_for_10000_poses_single_and_batched() {
     let dir = tempfile::tempdir().unwrap();
-    let (model, path) = small_model(dir.path(), 1);
+    let (mut model, path) = small_model(dir.path(), 1);
+    // With an uncertainty, as `calibrate` writes a model.
+    model.uncertainty = Some(test_uncertainty());
+    model.save(&path).unwrap();
     let g = Geometry::prototype();
     let service = ServiceProcess::start(
         &unique_instance("equal"),
@@ -80,8 +88,10 @@ fn client_results_equal_predict_for_10000_poses_single_and_batched() {
     );
     let mut client = service.client().unwrap();
     let poses = poses(10_000, 3);
+    let mut with_uncertainty = 0;
     for pose in &poses {
         let got = client.compensate_pose(pose.to_mm_deg()).unwrap();
+        with_uncertainty += usize::from(got.uncertainty_mm.is_some());
         assert_same(
             &got,
             &compensate_pose(
@@ -92,6 +102,10 @@ fn client_results_equal_predict_for_10000_poses_single_and_batched() {
         );
         assert_eq!(got.generation, 1);
     }
+    assert!(
+        with_uncertainty > 9_000,
+        "{with_uncertainty} of 10000 answered with an uncertainty"
+    );
     let points: Vec<[f64; 6]> = poses.iter().map(|p| p.to_mm_deg()).collect();
     let mut out = vec![CompensatedPoint::empty(); 1024];
     for chunk in points.chunks(1024) {
@@ -495,6 +509,7 @@ impl HandModel {
                 source: "hand-made known-answer model".into(),
                 ..Provenance::default()
             },
+            uncertainty: None,
         };
         Self {
             model,

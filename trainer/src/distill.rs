@@ -80,7 +80,7 @@ pub fn measured_range(nominal: &Geometry, poses: &[Pose]) -> [[f64; 2]; LEGS] {
 
 /// `count` poses drawn over the workspace with `seed` whose nominal legs lie within `range`
 /// (per leg `[min, max]`, mm).
-fn draw(
+pub(crate) fn draw(
     nominal: &Geometry,
     range: &[[f64; 2]; LEGS],
     count: usize,

@@ -11,20 +11,22 @@
 use hexacomp_core::compensator::compensate_pose;
 use hexacomp_core::kinematics::pose_from_targets;
 use hexacomp_core::model::NetworkInput;
-use hexacomp_core::records::{JointCorrection, MeasuredConfiguration};
+use hexacomp_core::records::JointCorrection;
 use hexacomp_core::sampling::{SamplerOptions, WorkspaceSampler};
 use hexacomp_core::stats::{PoseErrorNorm, PoseErrorStats};
 use hexacomp_core::{Geometry, Pose, inverse_kinematics};
 use hexacomp_virtual::{ErrorModel, VirtualPlatform};
 
 use crate::corrections::{Checks, SolverOptions};
-use crate::distill::{DistillOptions, distill};
+use crate::distill::DistillOptions;
 use crate::error::{Error, Result};
 use crate::identify::{IdentifyOptions, PHYSICAL, identify};
+use crate::physical_candidate::carried_into_networks;
 use crate::pipeline::Pipeline;
 use crate::plan::PlanOptions;
 use crate::screening::ScreeningOptions;
 use crate::train::{Architecture, TrainOptions, Trained};
+use crate::uncertainty::within_two_sigma;
 
 /// A compensation method of the comparison.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -155,6 +157,43 @@ pub struct SizeResult {
     pub coupled: Trained,
     /// See `coupled`.
     pub decoupled: Trained,
+    /// How the physical model's networks' uncertainty held on the validation poses (`None`:
+    /// they carry none, too few configurations to fit it).
+    pub uncertainty: Option<UncertaintyCheck>,
+}
+
+/// A model's 1-σ position uncertainty against its errors reached at the validation poses.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct UncertaintyCheck {
+    /// The share of poses whose reached position error is within twice the uncertainty (95.45 %
+    /// for a calibrated one).
+    pub within_two_sigma: f64,
+    /// The mean uncertainty, mm.
+    pub mean_sigma_mm: f64,
+}
+
+impl UncertaintyCheck {
+    /// The check of `model`'s uncertainty at `poses` against the position errors reached
+    /// there (same order). Points without an uncertainty count as 0 mm.
+    pub fn of(
+        geometry: &Geometry,
+        model: &hexacomp_core::model::Model,
+        poses: &[Pose],
+        errors: &[PoseErrorNorm],
+    ) -> Self {
+        let pairs: Vec<(f64, f64)> = poses
+            .iter()
+            .zip(errors)
+            .map(|(pose, e)| {
+                let sigma = compensate_pose(geometry, Some(model), pose).uncertainty_mm;
+                (e.position_mm, sigma.unwrap_or(0.0))
+            })
+            .collect();
+        Self {
+            within_two_sigma: within_two_sigma(&pairs),
+            mean_sigma_mm: pairs.iter().map(|(_, s)| s).sum::<f64>() / pairs.len().max(1) as f64,
+        }
+    }
 }
 
 impl SizeResult {
@@ -304,11 +343,15 @@ pub fn evaluate(
                 }
             })
             .collect();
-        let measured: Vec<Pose> = measurements[..n]
-            .iter()
-            .map(MeasuredConfiguration::pose)
-            .collect();
-        let distilled = distill(geometry, &physical, &measured, &options.distill, &|_| {})?;
+        let distilled = carried_into_networks(
+            geometry,
+            &physical,
+            &measurements[..n],
+            &options.distill,
+            options.error_model.repeatability_sigma_mm,
+            &|_| {},
+        )?
+        .distilled;
         let residual = fit(
             &left_by_physical,
             Architecture::Decoupled,
@@ -383,11 +426,25 @@ pub fn evaluate(
             inputs = vec![(input, own), (other, alt)];
         }
         platform = machine;
+        let uncertainty = distilled.model.uncertainty.is_some().then(|| {
+            UncertaintyCheck::of(
+                geometry,
+                &distilled.model,
+                &validation,
+                &errors
+                    .iter()
+                    .find(|(m, _)| *m == Method::PhysicalNetworks)
+                    .expect("every method")
+                    .1
+                    .reached,
+            )
+        });
         sizes.push(SizeResult {
             configurations: n,
             errors,
             coupled,
             decoupled,
+            uncertainty,
         });
     }
     Ok(Evaluation {

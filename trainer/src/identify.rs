@@ -237,7 +237,7 @@ pub fn target_distance(geometry: &Geometry, row: &MeasuredConfiguration) -> Opti
 /// The divisor of each column of `jacobian` before the truncated SVD: 1 for the geometric
 /// columns, and for the others their norm over the geometric columns' median norm (1 for a
 /// column the data does not touch).
-fn column_scales(jacobian: &DMatrix<f64>) -> DVector<f64> {
+pub(crate) fn column_scales(jacobian: &DMatrix<f64>) -> DVector<f64> {
     let norms: Vec<f64> = jacobian.column_iter().map(|c| c.norm()).collect();
     let mut geometric = norms[..PARAMETERS].to_vec();
     geometric.sort_by(f64::total_cmp);
@@ -272,7 +272,7 @@ fn ill_conditioned(error: Error, rank: usize, parameters: usize) -> Error {
 /// Eq. 4) at the current parameters, over every configuration's
 /// [`hexacomp_core::observation::Observation::points`] (a measured pose counts as its targets
 /// placed at it); `poses` are updated to the model's poses (and seed the next call).
-fn linearise(
+pub(crate) fn linearise(
     model: &PhysicalModel,
     options: &IdentifyOptions,
     rows: &[MeasuredConfiguration],
@@ -280,7 +280,6 @@ fn linearise(
 ) -> Result<(DMatrix<f64>, DVector<f64>)> {
     let geometry = &model.geometry;
     let parameters = options.parameters();
-    let compliance_columns = PARAMETERS + LEGS * options.pitch_columns();
     let points: Vec<Vec<usize>> = rows
         .iter()
         .map(|row| {
@@ -305,35 +304,7 @@ fn linearise(
         let t = screws.motion_jacobian().ok_or_else(|| {
             Error::InsufficientData(format!("configuration {} is singular", row.id))
         })?;
-        let rotation_t = pose.rotation().transpose();
-        let mut g = DMatrix::<f64>::zeros(LEGS, parameters);
-        for i in 0..LEGS {
-            let s = screws.directions[i];
-            let s_platform = rotation_t * s;
-            for axis in 0..3 {
-                g[(i, 3 * i + axis)] = s[axis];
-                g[(i, 18 + 3 * i + axis)] = -s_platform[axis];
-            }
-            g[(i, 36 + i)] = 1.0;
-            // A pitch coefficient and a compliance coefficient lengthen the leg as its offset.
-            // The middle basis function's coefficient stays 0: the functions sum to one, so
-            // with it the curve and the offset could trade a constant.
-            for (k, b) in model.pitch.basis_at(row.legs[i]).iter().enumerate() {
-                if let Some(column) = options.pitch_column(i, k) {
-                    g[(i, column)] = *b;
-                }
-            }
-        }
-        if options.compliance {
-            let unloaded: [f64; LEGS] =
-                std::array::from_fn(|i| row.legs[i] + model.pitch.error(i, row.legs[i]));
-            let basis = model.compliance_basis(pose, &unloaded);
-            for (i, terms) in basis.iter().enumerate() {
-                for (m, h) in terms.iter().enumerate() {
-                    g[(i, compliance_columns + COMPLIANCE_TERMS * i + m)] = -h;
-                }
-            }
-        }
+        let g = leg_sensitivities(model, options, &row.legs, pose, &screws);
         let t = DMatrix::from_column_slice(LEGS, LEGS, t.as_slice());
         let block = point_matrix(geometry, pose, which) * t * g;
         let height = 3 * which.len();
@@ -346,6 +317,50 @@ fn linearise(
         at += height;
     }
     Ok((jacobian, residual))
+}
+
+/// `G` at `pose` for legs commanded to `commanded` (mm): row `i` is how far leg `i`'s loaded
+/// length (the length the geometry's forward kinematics places the platform with, mm) moves
+/// per unit of each parameter (the order of [`linearise`]'s columns), the commanded legs held;
+/// `screws` are the model geometry's at `pose`.
+pub(crate) fn leg_sensitivities(
+    model: &PhysicalModel,
+    options: &IdentifyOptions,
+    commanded: &[f64; LEGS],
+    pose: &Pose,
+    screws: &ActuationScrews,
+) -> DMatrix<f64> {
+    let compliance_columns = PARAMETERS + LEGS * options.pitch_columns();
+    let rotation_t = pose.rotation().transpose();
+    let mut g = DMatrix::<f64>::zeros(LEGS, options.parameters());
+    for i in 0..LEGS {
+        let s = screws.directions[i];
+        let s_platform = rotation_t * s;
+        for axis in 0..3 {
+            g[(i, 3 * i + axis)] = s[axis];
+            g[(i, 18 + 3 * i + axis)] = -s_platform[axis];
+        }
+        g[(i, 36 + i)] = 1.0;
+        // A pitch coefficient and a compliance coefficient lengthen the leg as its offset.
+        // The middle basis function's coefficient stays 0: the functions sum to one, so
+        // with it the curve and the offset could trade a constant.
+        for (k, b) in model.pitch.basis_at(commanded[i]).iter().enumerate() {
+            if let Some(column) = options.pitch_column(i, k) {
+                g[(i, column)] = *b;
+            }
+        }
+    }
+    if options.compliance {
+        let unloaded: [f64; LEGS] =
+            std::array::from_fn(|i| commanded[i] + model.pitch.error(i, commanded[i]));
+        let basis = model.compliance_basis(pose, &unloaded);
+        for (i, terms) in basis.iter().enumerate() {
+            for (m, h) in terms.iter().enumerate() {
+                g[(i, compliance_columns + COMPLIANCE_TERMS * i + m)] = -h;
+            }
+        }
+    }
+    g
 }
 
 /// Adds a parameter step (the order of [`linearise`]'s columns) to the model.

@@ -58,6 +58,7 @@ pub mod registration;
 pub mod screening;
 pub mod table;
 pub mod train;
+pub mod uncertainty;
 pub mod verify;
 pub mod verify_report;
 

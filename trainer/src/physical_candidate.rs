@@ -18,6 +18,7 @@ use crate::error::{Error, Result};
 use crate::identify::{PHYSICAL, identify};
 use crate::physical::PhysicalModel;
 use crate::train::{TrainOptions, Trained, folds};
+use crate::uncertainty::UncertaintySource;
 
 /// Poses the distilled networks are checked on.
 const FIDELITY_POSES: usize = 500;
@@ -35,22 +36,38 @@ pub struct PhysicalCandidate {
     /// cross-validated RMSE and the networks' departure (`√6 ·` its RMS per leg, in Eq. 21's
     /// units) in quadrature, mm.
     pub score_mm: f64,
-    /// Wall-clock seconds of the identifications and the distillation.
+    /// The uncertainty of networks trained on the same configurations (the distilled networks
+    /// carry theirs already), or why there is none (then neither has one).
+    pub networks_uncertainty: Result<NetworksUncertainty>,
+    /// Wall-clock seconds of the identifications, the distillation and the uncertainty.
     pub seconds: f64,
+}
+
+/// How the physical model is scored, carried into networks and given its uncertainty.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CandidateOptions {
+    /// Folds of the cross-validation (those the networks are scored on).
+    pub folds: usize,
+    /// How the model is carried into networks.
+    pub distill: DistillOptions,
+    /// The machine's repeatability: σ of one leg's length error at every move, mm.
+    pub repeatability_mm: f64,
 }
 
 /// Identifies, scores and distills the physical model of the kept `measurements` and their
 /// robust `corrections` (one row per measurement, in the same order), cross-validated on the
-/// folds [`folds`]`(rows, fold_count, train.seed)` the networks are scored on.
+/// folds [`folds`]`(rows, options.folds, train.seed)` the networks are scored on. The networks
+/// carry the model's position uncertainty for the machine's repeatability, their own departure
+/// from the model added.
 pub fn physical_candidate(
     nominal: &Geometry,
     measurements: &[MeasuredConfiguration],
     corrections: &[JointCorrection],
     train: &TrainOptions,
-    fold_count: usize,
-    distill_options: &DistillOptions,
+    options: &CandidateOptions,
     progress: &(dyn Fn(u64) + Sync),
 ) -> Result<PhysicalCandidate> {
+    let (fold_count, distill_options) = (options.folds, &options.distill);
     let start = std::time::Instant::now();
     if measurements.len() != corrections.len()
         || measurements
@@ -74,19 +91,15 @@ pub fn physical_candidate(
     let cross_validated_rmse_mm =
         cross_validated_rmse(nominal, measurements, corrections, train, fold_count)?;
     let physical = identify(nominal, measurements, &PHYSICAL)?.model;
-    let measured: Vec<Pose> = measurements
-        .iter()
-        .map(MeasuredConfiguration::pose)
-        .collect();
-    let mut distilled = distill(nominal, &physical, &measured, distill_options, progress)?;
-    let fidelity = fidelity(
+    let carried = carried_into_networks(
         nominal,
         &physical,
-        &distilled.model,
-        &measured,
+        measurements,
         distill_options,
-        FIDELITY_POSES,
+        options.repeatability_mm,
+        progress,
     )?;
+    let (mut distilled, fidelity) = (carried.distilled, carried.fidelity);
     let score_mm = (cross_validated_rmse_mm.powi(2) + LEGS as f64 * fidelity.rms_mm.powi(2)).sqrt();
     if !score_mm.is_finite() {
         return Err(Error::InvalidSetting(format!(
@@ -101,8 +114,91 @@ pub fn physical_candidate(
         cross_validated_rmse_mm,
         fidelity,
         score_mm,
+        networks_uncertainty: carried.uncertainty.map(|source| NetworksUncertainty {
+            source,
+            physical_cross_validated_mm: cross_validated_rmse_mm,
+        }),
         seconds: start.elapsed().as_secs_f64(),
     })
+}
+
+/// The physical model carried into networks.
+#[derive(Debug)]
+pub struct CarriedModel {
+    /// The networks, with the model's position uncertainty when it could be fitted.
+    pub distilled: Trained,
+    /// How closely the networks command what the model does, on fresh poses.
+    pub fidelity: Fidelity,
+    /// What the uncertainty was fitted from (for other models of the same configurations), or
+    /// why it could not be (too few configurations to estimate the noise or place the
+    /// leverage): then the networks carry none.
+    pub uncertainty: Result<UncertaintySource>,
+}
+
+/// Carries `physical`, identified on `measurements` with [`PHYSICAL`], into networks
+/// ([`distill`]) that carry its position uncertainty for legs repeating within
+/// `repeatability_mm` (1 σ per move, mm), the networks' own departure from the model added.
+pub fn carried_into_networks(
+    nominal: &Geometry,
+    physical: &PhysicalModel,
+    measurements: &[MeasuredConfiguration],
+    options: &DistillOptions,
+    repeatability_mm: f64,
+    progress: &(dyn Fn(u64) + Sync),
+) -> Result<CarriedModel> {
+    let measured: Vec<Pose> = measurements
+        .iter()
+        .map(MeasuredConfiguration::pose)
+        .collect();
+    let mut distilled = distill(nominal, physical, &measured, options, progress)?;
+    let fidelity = fidelity(
+        nominal,
+        physical,
+        &distilled.model,
+        &measured,
+        options,
+        FIDELITY_POSES,
+    )?;
+    let leg_variance_mm2 = repeatability_mm.powi(2) + fidelity.rms_mm.powi(2);
+    let uncertainty =
+        UncertaintySource::new(nominal, physical, &PHYSICAL, measurements, options.seed).and_then(
+            |source| {
+                distilled.model.uncertainty = Some(source.fitted(nominal, leg_variance_mm2)?);
+                Ok(source)
+            },
+        );
+    Ok(CarriedModel {
+        distilled,
+        fidelity,
+        uncertainty,
+    })
+}
+
+/// The position uncertainty of networks trained on the configurations the physical model was
+/// identified from: the model's, with the excess of the networks' cross-validated error over
+/// the model's (on the same folds) as more variance on every leg.
+#[derive(Debug, Clone)]
+pub struct NetworksUncertainty {
+    /// The physical model's propagation and the poses it is fitted at.
+    pub source: UncertaintySource,
+    /// The physical model's cross-validated error, Eq. 21's units, mm.
+    pub physical_cross_validated_mm: f64,
+}
+
+impl NetworksUncertainty {
+    /// The uncertainty of networks whose cross-validated error is `score_mm` (Eq. 21's units,
+    /// mm) on a machine whose legs repeat within `repeatability_mm` (1 σ per move, mm).
+    pub fn of_networks(
+        &self,
+        nominal: &Geometry,
+        score_mm: f64,
+        repeatability_mm: f64,
+    ) -> Result<hexacomp_core::uncertainty::PositionUncertainty> {
+        let excess =
+            (score_mm.powi(2) - self.physical_cross_validated_mm.powi(2)).max(0.0) / LEGS as f64;
+        self.source
+            .fitted(nominal, repeatability_mm.powi(2) + excess)
+    }
 }
 
 /// Eq. 21 over every configuration of the physical model identified without its fold.

@@ -414,6 +414,7 @@ pub fn train(
             validation_rmse_mm,
             source: String::new(),
         },
+        uncertainty: None,
     };
     model.validate()?;
     Ok(Trained {

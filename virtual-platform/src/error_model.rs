@@ -83,15 +83,21 @@ pub enum ErrorVariant {
     GeometricOnly,
     /// As `Paper` with four times the pitch errors.
     StrongPitch,
+    /// A robot the physical model's settings were not chosen on (added after they were, for
+    /// blind figures): joint centres and leg zeros twice as far off as `Paper`'s, a lead-screw
+    /// periodic error of 60 mm wavelength and twice the amplitude, and twice the moving mass
+    /// with its centre of mass 40 mm further off the axis.
+    Unseen,
 }
 
 impl ErrorVariant {
     /// Every variant, for listing in help texts.
-    pub const ALL: [ErrorVariant; 4] = [
+    pub const ALL: [ErrorVariant; 5] = [
         ErrorVariant::Paper,
         ErrorVariant::NoiseFree,
         ErrorVariant::GeometricOnly,
         ErrorVariant::StrongPitch,
+        ErrorVariant::Unseen,
     ];
 
     /// The variant's name as used on the command line.
@@ -101,6 +107,7 @@ impl ErrorVariant {
             ErrorVariant::NoiseFree => "noise-free",
             ErrorVariant::GeometricOnly => "geometric-only",
             ErrorVariant::StrongPitch => "strong-pitch",
+            ErrorVariant::Unseen => "unseen",
         }
     }
 }
@@ -181,6 +188,23 @@ impl ErrorModel {
                     curvature_sigma_mm: 4.0 * paper.pitch.curvature_sigma_mm,
                     periodic_sigma_mm: 4.0 * paper.pitch.periodic_sigma_mm,
                     ..paper.pitch
+                },
+                ..paper
+            },
+            ErrorVariant::Unseen => Self {
+                base_joint_sigma_mm: 2.0 * paper.base_joint_sigma_mm,
+                platform_joint_sigma_mm: 2.0 * paper.platform_joint_sigma_mm,
+                leg_zero_sigma_mm: 2.0 * paper.leg_zero_sigma_mm,
+                pitch: PitchErrors {
+                    periodic_sigma_mm: 2.0 * paper.pitch.periodic_sigma_mm,
+                    periodic_wavelength_mm: 60.0,
+                    ..paper.pitch
+                },
+                compliance: Compliance {
+                    mass_kg: 2.0 * paper.compliance.mass_kg,
+                    centre_of_mass_mm: paper.compliance.centre_of_mass_mm
+                        + DVec3::new(40.0, 0.0, 0.0),
+                    ..paper.compliance
                 },
                 ..paper
             },

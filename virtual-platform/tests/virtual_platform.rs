@@ -250,7 +250,7 @@ fn variants_parse_by_name_and_unknown_names_are_listed() {
     }
     let err = "perfect".parse::<ErrorVariant>().unwrap_err().to_string();
     assert!(
-        err.contains("paper, noise-free, geometric-only, strong-pitch"),
+        err.contains("paper, noise-free, geometric-only, strong-pitch, unseen"),
         "{err}"
     );
 }

@@ -199,6 +199,7 @@ fn points_per_second(
         legs: [f64::NAN; 6],
         corrections: [f64::NAN; 6],
         status: PointStatus::InvalidInput,
+        uncertainty_mm: None,
     };
     let mut out = vec![unset; batch];
     let mut nanoseconds = 0u128;

@@ -10,11 +10,12 @@ use crate::session::{PathArgs, Session, SetupArgs, VariantKind};
 use crate::stream::{Pacing, StreamOptions, stream};
 
 /// The one-command demo: calibrate the virtual prototype (plan, simulated measurement, robust
-/// joint corrections, decoupled networks), start the service without a model, hot-swap the
+/// joint corrections, the physical model carried into networks with its uncertainty: the model
+/// `hexacomp-trainer calibrate` chooses there), start the service without a model, hot-swap the
 /// calibrated model in, stream an interpolated path at the interpolation rate through it, and
-/// print the path accuracy of the virtual machine before and after compensation and the latency
-/// next to the baselines streamed along the same path at the same rate. Nothing to prepare;
-/// reports go to --out-dir.
+/// print the path accuracy of the virtual machine before and after compensation, the service's
+/// uncertainty against the errors reached, and the latency next to the baselines streamed along
+/// the same path at the same rate. Nothing to prepare; reports go to --out-dir.
 #[derive(Debug, clap::Args)]
 pub struct DemoCommand {
     #[command(flatten)]
@@ -88,15 +89,21 @@ pub fn run(command: &DemoCommand) -> anyhow::Result<()> {
             before,
             after,
             floor,
+            uncertainty,
         }) => format!(
             "path error {:.4} → {:.4} mm mean, {:.4} → {:.4} mm max ({:.1}× better; the floor, \
-             exact legs with the machine's repeatability: {:.4} mm mean)",
+             exact legs with the machine's repeatability: {:.4} mm mean){}",
             before.position_mm.mean,
             after.position_mm.mean,
             before.position_mm.max,
             after.position_mm.max,
             before.position_mm.mean / after.position_mm.mean,
             floor.position_mm.mean,
+            uncertainty.map_or(String::new(), |u| format!(
+                "; the service's 1-σ uncertainty {:.4} mm mean, {:.1} % of the errors within 2σ",
+                u.mean_sigma_mm,
+                100.0 * u.within_two_sigma
+            )),
         ),
         None => "path error not measured: not every point was answered".to_string(),
     };

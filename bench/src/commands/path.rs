@@ -261,6 +261,15 @@ pub fn report_path(
             session.args.machine_seed,
             accuracy.before.len()
         );
+        match stats.uncertainty {
+            Some(u) => println!(
+                "the service's uncertainty: mean σ {:.4} mm; {:.1} % of the compensated errors \
+                 within 2σ (95.45 % if calibrated)",
+                u.mean_sigma_mm,
+                100.0 * u.within_two_sigma
+            ),
+            None => println!("the service's uncertainty: not given for every point"),
+        }
         written.push(write_into(
             dir,
             &format!("{stem}-accuracy.svg"),

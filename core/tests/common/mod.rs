@@ -6,6 +6,7 @@ use hexacomp_core::network::{Network, Normalisation};
 
 /// A small decoupled model for `geometry`: three hidden nodes per leg, weights within ±0.1,
 /// corrections well inside its ±1.5 mm bounds.
+#[allow(dead_code)]
 pub fn model(geometry: &Geometry) -> Model {
     let network = |seed: f64| {
         let count = Network::weight_count(3, 1);
@@ -36,5 +37,24 @@ pub fn model(geometry: &Geometry) -> Model {
             validation_rmse_mm: 0.0462,
             source: "test".into(),
         },
+        uncertainty: None,
+    }
+}
+
+/// An uncertainty whose leverage is the features' squared norm over 13 (the identity moment
+/// matrix), centred on the prototype's mid stroke: σ² = 2e-5 + 3e-5 · h mm².
+#[allow(dead_code)]
+pub fn uncertainty() -> hexacomp_core::uncertainty::PositionUncertainty {
+    use hexacomp_core::uncertainty::{FEATURES, PositionUncertainty};
+    let scale = 1.0 / (FEATURES as f64).sqrt();
+    let whitening = (0..FEATURES)
+        .flat_map(|r| (0..=r).map(move |c| if r == c { scale } else { 0.0 }))
+        .collect();
+    PositionUncertainty {
+        centre_mm: [355.0; 6],
+        half_span_mm: [60.0; 6],
+        whitening,
+        constant_variance_mm2: 2e-5,
+        leverage_variance_mm2: 3e-5,
     }
 }

@@ -31,6 +31,7 @@ pub fn generation(geometry: &Geometry, number: u64) -> Box<Generation> {
         correction_bounds: [[-1.0, 1.0]; 6],
         geometry: geometry.fingerprint(),
         provenance: Provenance::default(),
+        uncertainty: None,
     };
     Box::new(Generation::new(&model, number))
 }

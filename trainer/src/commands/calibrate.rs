@@ -13,9 +13,11 @@ use hexacomp_formats::{
     Records, read_measurements, read_registration, write_measurements, write_poses,
 };
 use hexacomp_trainer::distill::DistillOptions;
-use hexacomp_trainer::evaluate::drive;
+use hexacomp_trainer::evaluate::{UncertaintyCheck, drive};
 use hexacomp_trainer::identify::{IdentifyOptions, identify};
-use hexacomp_trainer::physical_candidate::physical_candidate;
+use hexacomp_trainer::physical_candidate::{
+    CandidateOptions, NetworksUncertainty, physical_candidate,
+};
 use hexacomp_trainer::pipeline::{Pipeline, Solved};
 use hexacomp_trainer::plan::PlanOptions;
 use hexacomp_trainer::train::{
@@ -70,6 +72,13 @@ pub struct CalibrateArgs {
     /// model's networks always take the equivalent legs, where they are trained exactly.
     #[arg(long, value_enum, default_value_t = InputArg::Equivalent)]
     input: InputArg,
+    /// The machine's repeatability, mm: σ (one standard deviation) of one leg's length error at
+    /// every move. It enters each point's position uncertainty. Not ISO 9283's RP, which is a
+    /// position figure of the mean plus three standard deviations: a leg's σ is of the order of
+    /// RP / 3 divided by the leg-to-tool gain of the pose. Default: the virtual machine's
+    /// (0.004 mm for the built-in variants with noise), also for --measurements, which says so.
+    #[arg(long, value_name = "MM", value_parser = repeatability)]
+    repeatability_mm: Option<f64>,
     /// Output folder, replaced as a whole when the calibration succeeds (a failed one leaves it
     /// as it was).
     #[arg(long, value_name = "DIR", default_value = "calibration")]
@@ -92,6 +101,16 @@ impl CalibrateArgs {
                 .collect(),
             outputs: vec![],
         }
+    }
+}
+
+/// Parses a repeatability: a finite number of millimetres, not negative.
+fn repeatability(text: &str) -> Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(mm) if mm.is_finite() && mm >= 0.0 => Ok(mm),
+        _ => Err(format!(
+            "{text:?} is not a repeatability in mm (a number, 0 or more)"
+        )),
     }
 }
 
@@ -127,6 +146,18 @@ pub fn run(geometry: &Geometry, args: &CalibrateArgs) -> anyhow::Result<()> {
     let folder = ResultsFolder::create(&args.out_dir, "calibrate", &CALIBRATION_FILES)?;
     let dir = folder.path();
     let error_model = ErrorModel::variant(args.error_variant);
+    let repeatability_mm = match (args.repeatability_mm, &args.measurements) {
+        (Some(given), _) => given,
+        (None, None) => error_model.repeatability_sigma_mm,
+        (None, Some(_)) => {
+            let assumed = ErrorModel::default().repeatability_sigma_mm;
+            println!(
+                "uncertainty: the machine's repeatability is taken as {assumed} mm per leg and \
+                 move (the virtual platform's); give --repeatability-mm for this machine's"
+            );
+            assumed
+        }
+    };
     let mut platform = VirtualPlatform::new(geometry, &error_model, args.machine_seed, args.seed)?;
     let pipeline = Pipeline {
         plan: PlanOptions {
@@ -173,15 +204,31 @@ pub fn run(geometry: &Geometry, args: &CalibrateArgs) -> anyhow::Result<()> {
         let start = Instant::now();
         // A physical model that cannot be identified or carried into networks leaves the
         // choice to the networks, and says why.
-        match physical(geometry, &pipeline, &solved, &measurements) {
-            Ok(candidate) => {
-                candidate
-                    .trained
-                    .model
-                    .save(&dir.join("model-physical.hxm"))?;
+        match physical(
+            geometry,
+            &pipeline,
+            &solved,
+            &measurements,
+            repeatability_mm,
+        ) {
+            Ok((candidate, Ok(uncertainty))) => {
+                for network in &mut candidates {
+                    match uncertainty.of_networks(geometry, network.score_mm, repeatability_mm) {
+                        Ok(u) => network.trained.model.uncertainty = Some(u),
+                        Err(e) => {
+                            println!("the {} networks carry no uncertainty: {e}", network.name)
+                        }
+                    }
+                }
                 candidates.push(candidate);
             }
-            Err(e) => println!("physical model left out: {e:#}"),
+            Ok((candidate, Err(e))) => {
+                println!("no model carries an uncertainty: {e}");
+                candidates.push(candidate);
+            }
+            Err(e) => println!(
+                "physical model left out: {e:#}; without it the models carry no uncertainty"
+            ),
         }
         stages.record("physical model", start);
     } else {
@@ -190,6 +237,12 @@ pub fn run(geometry: &Geometry, args: &CalibrateArgs) -> anyhow::Result<()> {
              {FOLDS} folds; the networks are compared by their holdout validation RMSE",
             solved.corrections.len()
         );
+    }
+    for candidate in &candidates {
+        candidate
+            .trained
+            .model
+            .save(&dir.join(format!("model-{}.hxm", candidate.name)))?;
     }
     let best = candidates
         .iter()
@@ -234,6 +287,14 @@ pub fn run(geometry: &Geometry, args: &CalibrateArgs) -> anyhow::Result<()> {
         best.name,
         args.out_dir.display()
     );
+    if let Some(u) = &best.trained.model.uncertainty {
+        println!(
+            "its 1-σ position uncertainty: {:.4} mm RMS over the measured configurations, \
+             growing outside them (legs repeating within {repeatability_mm} mm; `predict` and \
+             the service give it per point)",
+            (u.constant_variance_mm2 + u.leverage_variance_mm2).sqrt()
+        );
+    }
     let breakdown: Vec<String> = stages
         .0
         .iter()
@@ -328,8 +389,8 @@ fn source(configurations: usize) -> String {
     )
 }
 
-/// Trains the coupled and the decoupled networks on the solved corrections, writing each model
-/// and its selection curve into `dir`.
+/// Trains the coupled and the decoupled networks on the solved corrections, writing each
+/// model's selection curve into `dir`.
 fn train_both(
     geometry: &Geometry,
     pipeline: &Pipeline,
@@ -349,7 +410,6 @@ fn train_both(
             source(configurations),
         )?;
         let name = arch_name(architecture);
-        t.model.save(&dir.join(format!("model-{name}.hxm")))?;
         write_selection_plot(
             &t,
             architecture,
@@ -406,12 +466,20 @@ fn physical(
     pipeline: &Pipeline,
     solved: &Solved,
     measurements: &[MeasuredConfiguration],
-) -> anyhow::Result<Candidate> {
-    let options = DistillOptions::default();
+    repeatability_mm: f64,
+) -> anyhow::Result<(
+    Candidate,
+    hexacomp_trainer::error::Result<NetworksUncertainty>,
+)> {
+    let options = CandidateOptions {
+        folds: FOLDS,
+        distill: DistillOptions::default(),
+        repeatability_mm,
+    };
     // The drawn poses and the measured configurations' own.
-    let poses = options.samples + solved.corrections.len();
+    let poses = options.distill.samples + solved.corrections.len();
     let bar = work_bar(
-        training_work(poses, Architecture::Decoupled, &options.train),
+        training_work(poses, Architecture::Decoupled, &options.distill.train),
         "identifying the physical model, carrying it into networks".into(),
     );
     let identified = physical_candidate(
@@ -419,7 +487,6 @@ fn physical(
         &solved.kept_of(measurements),
         &solved.corrections,
         &pipeline.train,
-        FOLDS,
         &options,
         &|n| bar.inc(n),
     );
@@ -445,7 +512,7 @@ fn physical(
         f.max_mm,
         f.poses
     );
-    Ok(Candidate {
+    let candidate_of_physical = Candidate {
         name: "physical",
         label: "physical model (as networks)",
         summary: format!(
@@ -460,7 +527,8 @@ fn physical(
         ),
         score_mm: candidate.score_mm,
         trained: candidate.distilled,
-    })
+    };
+    Ok((candidate_of_physical, candidate.networks_uncertainty))
 }
 
 /// On fresh poses of the virtual machine: the pose errors uncompensated, with the identified
@@ -474,7 +542,7 @@ fn check_on_fresh_poses(
     measurements: &[MeasuredConfiguration],
     candidates: &[Candidate],
     args: &CalibrateArgs,
-) -> anyhow::Result<Table<6>> {
+) -> anyhow::Result<Table<8>> {
     let poses = WorkspaceSampler::new(
         geometry,
         args.seed.wrapping_add(1000),
@@ -485,17 +553,20 @@ fn check_on_fresh_poses(
     // The instrument draws its noise apart from the machine's moves; every method meets the same
     // machine and instrument states.
     let instrument = platform.reseeded(args.seed.wrapping_add(1));
-    let stats = |command: &dyn Fn(&hexacomp_core::Pose) -> [f64; 6]| {
+    let errors = |command: &dyn Fn(&hexacomp_core::Pose) -> [f64; 6]| {
         drive(
             &mut platform.clone(),
             &mut instrument.clone(),
             &poses,
             command,
         )
-        .map(|e| {
+    };
+    let stats = |command: &dyn Fn(&hexacomp_core::Pose) -> [f64; 6]| {
+        errors(command).map(|e| {
             (
                 PoseErrorStats::of(&e.reached),
                 PoseErrorStats::of(&e.measured),
+                None,
             )
         })
     };
@@ -510,9 +581,19 @@ fn check_on_fresh_poses(
         ),
     ];
     for candidate in candidates {
+        let model = &candidate.trained.model;
+        let e = errors(&|p| compensate_pose(geometry, Some(model), p).legs)?;
+        let uncertainty = model
+            .uncertainty
+            .is_some()
+            .then(|| UncertaintyCheck::of(geometry, model, &poses, &e.reached));
         rows.push((
             candidate.label.to_string(),
-            stats(&|p| compensate_pose(geometry, Some(&candidate.trained.model), p).legs)?,
+            (
+                PoseErrorStats::of(&e.reached),
+                PoseErrorStats::of(&e.measured),
+                uncertainty,
+            ),
         ));
     }
     let truth = platform.machine();
@@ -527,8 +608,10 @@ fn check_on_fresh_poses(
         "reached mean ‖ε‖ (deg)",
         "measured mean ‖δ_A‖ (mm)",
         "measured mean ‖ε‖ (deg)",
+        "mean σ (mm)",
+        "reached within 2σ",
     ]);
-    for (name, (reached, measured)) in rows {
+    for (name, (reached, measured, uncertainty)) in rows {
         table.row([
             name,
             format!("{:.4}", reached.position_mm.mean),
@@ -536,6 +619,10 @@ fn check_on_fresh_poses(
             format!("{:.4}", reached.orientation_deg.mean),
             format!("{:.4}", measured.position_mm.mean),
             format!("{:.4}", measured.orientation_deg.mean),
+            uncertainty.map_or("—".into(), |u| format!("{:.4}", u.mean_sigma_mm)),
+            uncertainty.map_or("—".into(), |u| {
+                format!("{:.1} %", 100.0 * u.within_two_sigma)
+            }),
         ]);
     }
     Ok(table)

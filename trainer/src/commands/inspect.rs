@@ -6,7 +6,7 @@ use std::time::{Duration, UNIX_EPOCH};
 use anyhow::Context;
 use hexacomp_core::Geometry;
 use hexacomp_core::error::Error;
-use hexacomp_core::model::{FORMAT_VERSION, Model, Networks};
+use hexacomp_core::model::{Model, Networks};
 
 /// Print a model file: architecture, hidden nodes, input, the geometry it is bound to, training
 /// joint ranges, correction bounds and provenance; or a registration file (`register`): the
@@ -69,9 +69,10 @@ pub fn run(geometry: &Geometry, args: &InspectArgs) -> anyhow::Result<()> {
         )
     };
     println!(
-        "model file     {} ({} bytes, format version {FORMAT_VERSION}, checksum ok)",
+        "model file     {} ({} bytes, format version {}, checksum ok)",
         args.model.display(),
-        bytes.len()
+        bytes.len(),
+        model.format_version()
     );
     println!("architecture   {architecture}");
     println!("hidden nodes   {:?}", model.hidden_nodes());
@@ -84,6 +85,16 @@ pub fn run(geometry: &Geometry, args: &InspectArgs) -> anyhow::Result<()> {
     );
     println!("validation     RMSE {:.4} mm", p.validation_rmse_mm);
     println!("source         {}", p.source);
+    match &model.uncertainty {
+        Some(u) => println!(
+            "uncertainty    1-σ position {:.4} mm RMS over the measured configurations \
+             ({:.3e} mm² + {:.3e} mm² per unit of leverage)",
+            (u.constant_variance_mm2 + u.leverage_variance_mm2).sqrt(),
+            u.constant_variance_mm2,
+            u.leverage_variance_mm2
+        ),
+        None => println!("uncertainty    none (points are answered without one)"),
+    }
     println!("leg   trained range (mm)         correction bounds (mm)");
     for leg in 0..6 {
         let [lo, hi] = model.training_range[leg];

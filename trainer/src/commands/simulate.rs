@@ -41,7 +41,7 @@ pub struct SimulateArgs {
     /// Seed that draws the virtual machine (its errors); 18 resembles the paper's prototype.
     #[arg(long, default_value_t = DEFAULT_MACHINE_SEED)]
     machine_seed: u64,
-    /// Error variant: paper, noise-free, geometric-only, strong-pitch.
+    /// Error variant: paper, noise-free, geometric-only, strong-pitch, unseen.
     #[arg(long, default_value_t = ErrorVariant::Paper)]
     error_variant: ErrorVariant,
     /// Output measurements CSV.

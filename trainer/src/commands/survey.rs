@@ -21,7 +21,8 @@ pub struct SurveyArgs {
     /// Seed of the random poses.
     #[arg(long, default_value_t = 1)]
     seed: u64,
-    /// Error variant of the virtual machine: paper, noise-free, geometric-only, strong-pitch.
+    /// Error variant of the virtual machine: paper, noise-free, geometric-only, strong-pitch,
+    /// unseen.
     #[arg(long, default_value_t = ErrorVariant::Paper)]
     error_variant: ErrorVariant,
     /// Seed that draws the virtual machine's errors (joint offsets, pitch, compliance).
