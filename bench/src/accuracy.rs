@@ -8,7 +8,7 @@ use hexacomp_client::CompensatedPoint;
 use hexacomp_core::stats::{PoseErrorNorm, PoseErrorStats};
 use hexacomp_core::{Pose, inverse_kinematics};
 use hexacomp_trainer::chart::{Axis, Chart, Series};
-use hexacomp_trainer::uncertainty::within_two_sigma;
+use hexacomp_trainer::uncertainty::Coverage;
 use hexacomp_virtual::VirtualPlatform;
 
 /// The path errors before and after compensation, and at the floor.
@@ -35,34 +35,26 @@ pub struct PathStats {
     /// With the exact legs.
     pub floor: PoseErrorStats,
     /// The service's uncertainty against the compensated errors, when every point had one.
-    pub uncertainty: Option<PathUncertainty>,
-}
-
-/// The service's 1-σ position uncertainty along the path against the errors reached.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct PathUncertainty {
-    /// Mean σ, mm.
-    pub mean_sigma_mm: f64,
-    /// The share of points whose compensated position error is within 2σ (95.45 % when the
-    /// uncertainty is calibrated).
-    pub within_two_sigma: f64,
+    pub uncertainty: Option<Coverage>,
 }
 
 impl PathAccuracy {
+    /// The service's uncertainty at every driven point (mm), when it gave one at each.
+    fn sigmas(&self) -> Option<Vec<f64>> {
+        let sigmas: Option<Vec<f64>> = self.sigma_mm.iter().copied().collect();
+        sigmas.filter(|s| !s.is_empty())
+    }
+
     /// Statistics before and after compensation and at the floor.
     pub fn stats(&self) -> PathStats {
-        let sigmas: Option<Vec<f64>> = self.sigma_mm.iter().copied().collect();
-        let uncertainty = sigmas.filter(|s| !s.is_empty()).map(|sigmas| {
+        let uncertainty = self.sigmas().map(|sigmas| {
             let pairs: Vec<(f64, f64)> = self
                 .after
                 .iter()
-                .zip(&sigmas)
-                .map(|(e, s)| (e.position_mm, *s))
+                .zip(sigmas)
+                .map(|(e, s)| (e.position_mm, s))
                 .collect();
-            PathUncertainty {
-                mean_sigma_mm: sigmas.iter().sum::<f64>() / sigmas.len() as f64,
-                within_two_sigma: within_two_sigma(&pairs),
-            }
+            Coverage::of(&pairs)
         });
         PathStats {
             before: PoseErrorStats::of(&self.before),
@@ -141,8 +133,7 @@ pub fn chart(accuracy: &PathAccuracy, seconds_per_point: f64, title: &str) -> Ch
         errors_line("compensated", &accuracy.after),
         errors_line("floor (exact legs)", &accuracy.floor),
     ];
-    let sigmas: Option<Vec<f64>> = accuracy.sigma_mm.iter().copied().collect();
-    if let Some(sigmas) = sigmas.filter(|s| !s.is_empty()) {
+    if let Some(sigmas) = accuracy.sigmas() {
         series.push(Series::line(
             "2σ (the service's uncertainty)",
             sigmas

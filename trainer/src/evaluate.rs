@@ -26,7 +26,7 @@ use crate::pipeline::Pipeline;
 use crate::plan::PlanOptions;
 use crate::screening::ScreeningOptions;
 use crate::train::{Architecture, TrainOptions, Trained};
-use crate::uncertainty::within_two_sigma;
+use crate::uncertainty::Coverage;
 
 /// A compensation method of the comparison.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -159,41 +159,26 @@ pub struct SizeResult {
     pub decoupled: Trained,
     /// How the physical model's networks' uncertainty held on the validation poses (`None`:
     /// they carry none, too few configurations to fit it).
-    pub uncertainty: Option<UncertaintyCheck>,
+    pub uncertainty: Option<Coverage>,
 }
 
-/// A model's 1-σ position uncertainty against its errors reached at the validation poses.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct UncertaintyCheck {
-    /// The share of poses whose reached position error is within twice the uncertainty (95.45 %
-    /// for a calibrated one).
-    pub within_two_sigma: f64,
-    /// The mean uncertainty, mm.
-    pub mean_sigma_mm: f64,
-}
-
-impl UncertaintyCheck {
-    /// The check of `model`'s uncertainty at `poses` against the position errors reached
-    /// there (same order). Points without an uncertainty count as 0 mm.
-    pub fn of(
-        geometry: &Geometry,
-        model: &hexacomp_core::model::Model,
-        poses: &[Pose],
-        errors: &[PoseErrorNorm],
-    ) -> Self {
-        let pairs: Vec<(f64, f64)> = poses
-            .iter()
-            .zip(errors)
-            .map(|(pose, e)| {
-                let sigma = compensate_pose(geometry, Some(model), pose).uncertainty_mm;
-                (e.position_mm, sigma.unwrap_or(0.0))
-            })
-            .collect();
-        Self {
-            within_two_sigma: within_two_sigma(&pairs),
-            mean_sigma_mm: pairs.iter().map(|(_, s)| s).sum::<f64>() / pairs.len().max(1) as f64,
-        }
-    }
+/// The coverage of `model`'s uncertainty at `poses` against the position errors reached there
+/// (same order). Points without an uncertainty count as 0 mm.
+pub fn uncertainty_coverage(
+    geometry: &Geometry,
+    model: &hexacomp_core::model::Model,
+    poses: &[Pose],
+    errors: &[PoseErrorNorm],
+) -> Coverage {
+    let pairs: Vec<(f64, f64)> = poses
+        .iter()
+        .zip(errors)
+        .map(|(pose, e)| {
+            let sigma = compensate_pose(geometry, Some(model), pose).uncertainty_mm;
+            (e.position_mm, sigma.unwrap_or(0.0))
+        })
+        .collect();
+    Coverage::of(&pairs)
 }
 
 impl SizeResult {
@@ -426,26 +411,22 @@ pub fn evaluate(
             inputs = vec![(input, own), (other, alt)];
         }
         platform = machine;
-        let uncertainty = distilled.model.uncertainty.is_some().then(|| {
-            UncertaintyCheck::of(
-                geometry,
-                &distilled.model,
-                &validation,
-                &errors
-                    .iter()
-                    .find(|(m, _)| *m == Method::PhysicalNetworks)
-                    .expect("every method")
-                    .1
-                    .reached,
-            )
-        });
-        sizes.push(SizeResult {
+        let mut size = SizeResult {
             configurations: n,
             errors,
             coupled,
             decoupled,
-            uncertainty,
-        });
+            uncertainty: None,
+        };
+        if distilled.model.uncertainty.is_some() {
+            size.uncertainty = Some(uncertainty_coverage(
+                geometry,
+                &distilled.model,
+                &validation,
+                &size.errors_of(Method::PhysicalNetworks).reached,
+            ));
+        }
+        sizes.push(size);
     }
     Ok(Evaluation {
         sizes,

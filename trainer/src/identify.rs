@@ -22,7 +22,7 @@
 use hexacomp_core::records::MeasuredConfiguration;
 use hexacomp_core::screw::{ActuationScrews, point_matrix};
 use hexacomp_core::{ForwardOptions, Geometry, LEGS, Pose, forward_kinematics};
-use nalgebra::{DMatrix, DVector};
+use nalgebra::{DMatrix, DVector, Dyn, SVD};
 
 use crate::error::{Error, Result};
 use crate::physical::{COMPLIANCE_TERMS, PhysicalModel, PitchCurves};
@@ -162,16 +162,11 @@ pub fn identify(
             break;
         }
         rms_previous = rms;
-        // The pitch and compliance columns are scaled to the geometric columns' typical norm
-        // before the truncated SVD, so that the cutoff judges what the data can see and not
-        // their units; the geometric columns (mm per mm) keep the baseline's minimum-norm answer.
-        let scales = column_scales(&jacobian);
-        let mut scaled = jacobian;
-        for (j, scale) in scales.iter().enumerate() {
-            scaled.column_mut(j).unscale_mut(*scale);
-        }
-        let svd = scaled.svd(true, true);
-        let cutoff = options.relative_cutoff * svd.singular_values.max();
+        let ScaledSvd {
+            svd,
+            scales,
+            cutoff,
+        } = scaled_svd(jacobian, options, true);
         rank = svd.singular_values.iter().filter(|s| **s > cutoff).count();
         let step = svd
             .solve(&residual, cutoff)
@@ -234,10 +229,43 @@ pub fn target_distance(geometry: &Geometry, row: &MeasuredConfiguration) -> Opti
     Some(row.observed.misfit(geometry, &pose).norm())
 }
 
+/// The truncated SVD the identification steps with.
+pub(crate) struct ScaledSvd {
+    /// The SVD of the Jacobian with its columns divided by `scales`.
+    pub svd: SVD<f64, Dyn, Dyn>,
+    /// The divisor of each column ([`column_scales`]).
+    pub scales: DVector<f64>,
+    /// Singular values at or below this are treated as zero (unidentifiable directions).
+    pub cutoff: f64,
+}
+
+/// The SVD of `jacobian` (`U` only when `compute_u`) after its pitch and compliance columns
+/// are scaled to the geometric columns' typical norm, so that `options`' relative cutoff judges
+/// what the data can see and not their units; the geometric columns (mm per mm) keep the
+/// baseline's minimum-norm answer.
+pub(crate) fn scaled_svd(
+    jacobian: DMatrix<f64>,
+    options: &IdentifyOptions,
+    compute_u: bool,
+) -> ScaledSvd {
+    let scales = column_scales(&jacobian);
+    let mut scaled = jacobian;
+    for (j, scale) in scales.iter().enumerate() {
+        scaled.column_mut(j).unscale_mut(*scale);
+    }
+    let svd = scaled.svd(compute_u, true);
+    let cutoff = options.relative_cutoff * svd.singular_values.max();
+    ScaledSvd {
+        svd,
+        scales,
+        cutoff,
+    }
+}
+
 /// The divisor of each column of `jacobian` before the truncated SVD: 1 for the geometric
 /// columns, and for the others their norm over the geometric columns' median norm (1 for a
 /// column the data does not touch).
-pub(crate) fn column_scales(jacobian: &DMatrix<f64>) -> DVector<f64> {
+fn column_scales(jacobian: &DMatrix<f64>) -> DVector<f64> {
     let norms: Vec<f64> = jacobian.column_iter().map(|c| c.norm()).collect();
     let mut geometric = norms[..PARAMETERS].to_vec();
     geometric.sort_by(f64::total_cmp);

@@ -163,7 +163,7 @@ pub fn carried_into_networks(
     let uncertainty =
         UncertaintySource::new(nominal, physical, &PHYSICAL, measurements, options.seed).and_then(
             |source| {
-                distilled.model.uncertainty = Some(source.fitted(nominal, leg_variance_mm2)?);
+                distilled.model.uncertainty = Some(source.fitted(leg_variance_mm2)?);
                 Ok(source)
             },
         );
@@ -179,7 +179,7 @@ pub fn carried_into_networks(
 /// the model's (on the same folds) as more variance on every leg.
 #[derive(Debug, Clone)]
 pub struct NetworksUncertainty {
-    /// The physical model's propagation and the poses it is fitted at.
+    /// The physical model's propagation at the poses it is fitted at, and the leverage.
     pub source: UncertaintySource,
     /// The physical model's cross-validated error, Eq. 21's units, mm.
     pub physical_cross_validated_mm: f64,
@@ -190,14 +190,12 @@ impl NetworksUncertainty {
     /// mm) on a machine whose legs repeat within `repeatability_mm` (1 σ per move, mm).
     pub fn of_networks(
         &self,
-        nominal: &Geometry,
         score_mm: f64,
         repeatability_mm: f64,
     ) -> Result<hexacomp_core::uncertainty::PositionUncertainty> {
         let excess =
             (score_mm.powi(2) - self.physical_cross_validated_mm.powi(2)).max(0.0) / LEGS as f64;
-        self.source
-            .fitted(nominal, repeatability_mm.powi(2) + excess)
+        self.source.fitted(repeatability_mm.powi(2) + excess)
     }
 }
 

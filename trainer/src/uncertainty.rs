@@ -32,7 +32,7 @@ use nalgebra::{DMatrix, Matrix3, SMatrix};
 
 use crate::distill::{draw, measured_range};
 use crate::error::{Error, Result};
-use crate::identify::{IdentifyOptions, column_scales, leg_sensitivities, linearise};
+use crate::identify::{IdentifyOptions, ScaledSvd, leg_sensitivities, linearise, scaled_svd};
 use crate::physical::PhysicalModel;
 
 /// Poses drawn over the measured range that the uncertainty is fitted at (the configurations'
@@ -60,14 +60,12 @@ impl Propagation {
     ) -> Result<Self> {
         let mut poses: Vec<Pose> = rows.iter().map(MeasuredConfiguration::pose).collect();
         let (jacobian, residual) = linearise(model, options, rows, &mut poses)?;
-        let scales = column_scales(&jacobian);
-        let mut scaled = jacobian;
-        for (j, scale) in scales.iter().enumerate() {
-            scaled.column_mut(j).unscale_mut(*scale);
-        }
-        let svd = scaled.svd(false, true);
+        let ScaledSvd {
+            svd,
+            scales,
+            cutoff,
+        } = scaled_svd(jacobian, options, false);
         let v_t = svd.v_t.expect("V was asked for");
-        let cutoff = options.relative_cutoff * svd.singular_values.max();
         let kept: Vec<usize> = (0..svd.singular_values.len())
             .filter(|k| svd.singular_values[*k] > cutoff)
             .collect();
@@ -96,22 +94,24 @@ impl Propagation {
         })
     }
 
-    /// `Σ`, the covariance of the position error (mm², base-frame axes) at `pose` commanded with
-    /// the model's legs, with independent leg errors of variance `leg_variance_mm2` (mm²) added
-    /// at every move. `None` at a singular pose.
-    pub fn position_covariance(&self, pose: &Pose, leg_variance_mm2: f64) -> Option<Matrix3<f64>> {
+    /// The covariance of the position error (mm², base-frame axes) at `pose` commanded with
+    /// the model's legs, in two parts: what the parameters' uncertainty gives, and what one
+    /// mm² of independent leg variance at every move gives (mm² per mm²); `Σ` is the first
+    /// plus the leg variance times the second. `None` at a singular pose.
+    pub fn position_covariances(&self, pose: &Pose) -> Option<(Matrix3<f64>, Matrix3<f64>)> {
         let geometry = &self.model.geometry;
         let commanded = self.model.command(pose);
         let screws = ActuationScrews::at(geometry, pose);
         let t = screws.motion_jacobian()?;
         let g = leg_sensitivities(&self.model, &self.options, &commanded, pose, &screws);
-        let mut legs = &g * &self.covariance * g.transpose();
-        for i in 0..LEGS {
-            legs[(i, i)] += leg_variance_mm2;
-        }
+        let legs = &g * &self.covariance * g.transpose();
         let legs = SMatrix::<f64, LEGS, LEGS>::from_iterator(legs.iter().copied());
-        let twist = t * legs * t.transpose();
-        Some(twist.fixed_view::<3, 3>(0, 0).into_owned())
+        let position = |m: SMatrix<f64, LEGS, LEGS>| {
+            (t * m * t.transpose())
+                .fixed_view::<3, 3>(0, 0)
+                .into_owned()
+        };
+        Some((position(legs), position(SMatrix::identity())))
     }
 }
 
@@ -137,16 +137,18 @@ pub fn one_sigma_mm(sigma: &Matrix3<f64>) -> f64 {
     (scale * quantile).sqrt() / 2.0
 }
 
-/// What a model file's uncertainty is fitted from: a physical model's [`Propagation`], the
-/// nominal legs of the configurations it was identified from, and poses over their range.
+/// What a model file's uncertainty is fitted from: a physical model's [`Propagation`] at the
+/// configurations it was identified from and at poses over their legs' range, and the leverage
+/// among the configurations' nominal legs.
 #[derive(Debug, Clone)]
 pub struct UncertaintySource {
-    /// The identified model and its parameters' covariance.
-    pub propagation: Propagation,
-    /// The configurations' nominal legs, mm.
-    configurations: Vec<[f64; LEGS]>,
-    /// The configurations' poses and [`FIT_POSES`] more drawn over their legs' range.
-    poses: Vec<Pose>,
+    /// The leverage's normalisation and whitening (variances zero).
+    leverage: PositionUncertainty,
+    /// At each pose the propagation is defined at: its leverage, and the position covariance's
+    /// two parts ([`Propagation::position_covariances`]).
+    samples: Vec<(f64, Matrix3<f64>, Matrix3<f64>)>,
+    /// The poses: the configurations' and [`FIT_POSES`] more.
+    poses: usize,
 }
 
 impl UncertaintySource {
@@ -161,17 +163,23 @@ impl UncertaintySource {
     ) -> Result<Self> {
         let propagation = Propagation::of(model, options, rows)?;
         let measured: Vec<Pose> = rows.iter().map(MeasuredConfiguration::pose).collect();
-        let configurations = measured
-            .iter()
-            .map(|pose| hexacomp_core::inverse_kinematics(nominal, pose).lengths)
-            .collect();
+        let nominal_legs = |pose: &Pose| hexacomp_core::inverse_kinematics(nominal, pose).lengths;
+        let configurations: Vec<[f64; LEGS]> = measured.iter().map(nominal_legs).collect();
+        let leverage = leverage_of(&configurations)?;
         let range = measured_range(nominal, &measured);
         let mut poses = measured;
         poses.extend(draw(nominal, &range, FIT_POSES, seed)?);
+        let samples = poses
+            .iter()
+            .filter_map(|pose| {
+                let (parameters, legs) = propagation.position_covariances(pose)?;
+                Some((leverage.leverage(&nominal_legs(pose)), parameters, legs))
+            })
+            .collect();
         Ok(Self {
-            propagation,
-            configurations,
-            poses,
+            leverage,
+            samples,
+            poses: poses.len(),
         })
     }
 
@@ -179,40 +187,54 @@ impl UncertaintySource {
     /// `leg_variance_mm2` (mm²) at every move: the leverage among the configurations' nominal
     /// legs, its two variances fitted, by least squares in relative terms, to the propagated
     /// `σ²` at the poses.
-    pub fn fitted(&self, nominal: &Geometry, leg_variance_mm2: f64) -> Result<PositionUncertainty> {
-        let mut uncertainty = leverage_of(&self.configurations)?;
-        let mut samples = Vec::with_capacity(self.poses.len());
-        for pose in &self.poses {
-            let Some(sigma) = self.propagation.position_covariance(pose, leg_variance_mm2) else {
-                continue;
-            };
-            let q = hexacomp_core::inverse_kinematics(nominal, pose).lengths;
-            let s = one_sigma_mm(&sigma);
-            if s > 0.0 {
-                samples.push((uncertainty.leverage(&q), s * s));
-            }
-        }
+    pub fn fitted(&self, leg_variance_mm2: f64) -> Result<PositionUncertainty> {
+        let samples: Vec<(f64, f64)> = self
+            .samples
+            .iter()
+            .map(|(h, parameters, legs)| {
+                (*h, one_sigma_mm(&(parameters + legs * leg_variance_mm2)))
+            })
+            .filter(|(_, s)| *s > 0.0)
+            .map(|(h, s)| (h, s * s))
+            .collect();
         if samples.len() < 2 {
             return Err(Error::InsufficientData(format!(
                 "the uncertainty is fitted at poses over the measured range; {} of {} could be \
                  used",
                 samples.len(),
-                self.poses.len()
+                self.poses
             )));
         }
         let [constant, leverage] = relative_least_squares(&samples);
-        uncertainty.constant_variance_mm2 = constant;
-        uncertainty.leverage_variance_mm2 = leverage;
+        let uncertainty = PositionUncertainty {
+            constant_variance_mm2: constant,
+            leverage_variance_mm2: leverage,
+            ..self.leverage.clone()
+        };
         uncertainty.validate()?;
         Ok(uncertainty)
     }
 }
 
-/// The share of `(error, σ)` pairs (mm) whose error is within `2σ`: 95.45 % for a calibrated
-/// uncertainty. 0 without pairs.
-pub fn within_two_sigma(pairs: &[(f64, f64)]) -> f64 {
-    let within = pairs.iter().filter(|(e, s)| *e <= 2.0 * s).count();
-    within as f64 / pairs.len().max(1) as f64
+/// A 1-σ position uncertainty against the position errors reached where it was given.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Coverage {
+    /// The share of points whose error is within `2σ` (95.45 % for a calibrated uncertainty).
+    pub within_two_sigma: f64,
+    /// The mean `σ`, mm.
+    pub mean_sigma_mm: f64,
+}
+
+impl Coverage {
+    /// The coverage of `(error, σ)` pairs (mm); 0 and 0 without pairs.
+    pub fn of(pairs: &[(f64, f64)]) -> Self {
+        let count = pairs.len().max(1) as f64;
+        let within = pairs.iter().filter(|(e, s)| *e <= 2.0 * s).count();
+        Self {
+            within_two_sigma: within as f64 / count,
+            mean_sigma_mm: pairs.iter().map(|(_, s)| s).sum::<f64>() / count,
+        }
+    }
 }
 
 /// `[a, b] ≥ 0` minimising `Σ ((a + b·h − y) / y)²` over samples `(h, y)`, `y > 0`.

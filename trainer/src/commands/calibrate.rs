@@ -13,7 +13,7 @@ use hexacomp_formats::{
     Records, read_measurements, read_registration, write_measurements, write_poses,
 };
 use hexacomp_trainer::distill::DistillOptions;
-use hexacomp_trainer::evaluate::{UncertaintyCheck, drive};
+use hexacomp_trainer::evaluate::{drive, uncertainty_coverage};
 use hexacomp_trainer::identify::{IdentifyOptions, identify};
 use hexacomp_trainer::physical_candidate::{
     CandidateOptions, NetworksUncertainty, physical_candidate,
@@ -213,7 +213,7 @@ pub fn run(geometry: &Geometry, args: &CalibrateArgs) -> anyhow::Result<()> {
         ) {
             Ok((candidate, Ok(uncertainty))) => {
                 for network in &mut candidates {
-                    match uncertainty.of_networks(geometry, network.score_mm, repeatability_mm) {
+                    match uncertainty.of_networks(network.score_mm, repeatability_mm) {
                         Ok(u) => network.trained.model.uncertainty = Some(u),
                         Err(e) => {
                             println!("the {} networks carry no uncertainty: {e}", network.name)
@@ -586,7 +586,7 @@ fn check_on_fresh_poses(
         let uncertainty = model
             .uncertainty
             .is_some()
-            .then(|| UncertaintyCheck::of(geometry, model, &poses, &e.reached));
+            .then(|| uncertainty_coverage(geometry, model, &poses, &e.reached));
         rows.push((
             candidate.label.to_string(),
             (
