@@ -11,8 +11,9 @@ use hexacomp_trainer::distill::DistillOptions;
 use hexacomp_trainer::identify::{PHYSICAL, identify};
 use hexacomp_trainer::physical_candidate::carried_into_networks;
 use hexacomp_trainer::pipeline::Pipeline;
+use hexacomp_trainer::pitch_resolution::chosen_if_cross_validated;
 use hexacomp_trainer::plan::PlanOptions;
-use hexacomp_trainer::train::{Architecture, training_work};
+use hexacomp_trainer::train::{Architecture, CROSS_VALIDATION_FOLDS, training_work};
 use hexacomp_virtual::{ErrorModel, ErrorVariant, VirtualPlatform};
 use indicatif::{ProgressBar, ProgressStyle};
 
@@ -89,12 +90,22 @@ pub fn calibrate(
         .expect("valid template")
         .progress_chars("=> "),
     );
-    let physical = identify(&geometry, &kept, &PHYSICAL)
+    let identification = chosen_if_cross_validated(
+        &geometry,
+        &kept,
+        &solved.corrections,
+        seed,
+        CROSS_VALIDATION_FOLDS,
+    )
+    .context("choosing the virtual platform's lead-screw resolution")?
+    .map_or(PHYSICAL, |r| r.options);
+    let physical = identify(&geometry, &kept, &identification)
         .context("identifying the virtual platform's physical model")?
         .model;
     let carried = carried_into_networks(
         &geometry,
         &physical,
+        &identification,
         &kept,
         &options,
         error_model().repeatability_sigma_mm,

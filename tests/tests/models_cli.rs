@@ -406,6 +406,29 @@ fn calibrate_runs_the_whole_pipeline_and_summarises() {
         report.contains("its 1-σ position uncertainty: "),
         "{report}"
     );
+    // The lead-screw resolution: each tried, the chosen one's error the model's.
+    let resolution = report
+        .lines()
+        .find_map(|l| l.strip_prefix("physical model: lead-screw curves of "))
+        .unwrap_or_else(|| panic!("{report}"));
+    let chosen = resolution.split_whitespace().next().unwrap();
+    let tried = resolution.split_once('(').unwrap().1;
+    for basis in ["8: ", "12: ", "16: "] {
+        assert!(tried.contains(basis), "{resolution}");
+    }
+    let chosen_error = tried
+        .split(", ")
+        .find_map(|s| s.strip_prefix(&format!("{chosen}: ")))
+        .unwrap()
+        .split_whitespace()
+        .next()
+        .unwrap();
+    assert!(
+        report.contains(&format!(
+            "physical model: {chosen_error} mm cross-validated"
+        )),
+        "{report}"
+    );
     // A repeatability that is not a length is refused before anything runs.
     for bad in ["--repeatability-mm=-0.1", "--repeatability-mm=nan"] {
         let refused = trainer(&["calibrate", bad, "--out-dir", p(&out_dir)]);

@@ -11,7 +11,7 @@
 use hexacomp_core::compensator::compensate_pose;
 use hexacomp_core::kinematics::pose_from_targets;
 use hexacomp_core::model::NetworkInput;
-use hexacomp_core::records::JointCorrection;
+use hexacomp_core::records::{JointCorrection, MeasuredConfiguration};
 use hexacomp_core::sampling::{SamplerOptions, WorkspaceSampler};
 use hexacomp_core::stats::{PoseErrorNorm, PoseErrorStats};
 use hexacomp_core::{Geometry, Pose, inverse_kinematics};
@@ -23,9 +23,10 @@ use crate::error::{Error, Result};
 use crate::identify::{IdentifyOptions, PHYSICAL, identify};
 use crate::physical_candidate::carried_into_networks;
 use crate::pipeline::Pipeline;
+use crate::pitch_resolution::{ResolutionChoice, chosen_if_cross_validated};
 use crate::plan::PlanOptions;
 use crate::screening::ScreeningOptions;
-use crate::train::{Architecture, TrainOptions, Trained};
+use crate::train::{Architecture, CROSS_VALIDATION_FOLDS, TrainOptions, Trained};
 use crate::uncertainty::Coverage;
 
 /// A compensation method of the comparison.
@@ -157,6 +158,9 @@ pub struct SizeResult {
     pub coupled: Trained,
     /// See `coupled`.
     pub decoupled: Trained,
+    /// The physical model's lead-screw resolution, chosen by cross-validation (`None`: too few
+    /// configurations to cross-validate, eight coefficients).
+    pub resolution: Option<ResolutionChoice>,
     /// How the physical model's networks' uncertainty held on the validation poses (`None`:
     /// they carry none, too few configurations to fit it).
     pub uncertainty: Option<Coverage>,
@@ -310,28 +314,47 @@ pub fn evaluate(
         ));
         let identified =
             identify(geometry, &measurements[..n], &IdentifyOptions::default())?.geometry;
-        let physical = identify(geometry, &measurements[..n], &PHYSICAL)?.model;
-        let left_by_physical: Vec<JointCorrection> = rows(&robust, n)
-            .into_iter()
+        // The physical model as `calibrate` makes it: its lead-screw resolution chosen by
+        // cross-validation on the configurations whose robust corrections were solved (eight
+        // with too few to cross-validate).
+        let robust_rows = rows(&robust, n);
+        let solved: Vec<MeasuredConfiguration> = robust_rows
+            .iter()
             .map(|row| {
-                let pose = measurements
+                measurements
                     .iter()
                     .find(|m| m.id == row.id)
                     .expect("a correction of a measured configuration")
-                    .pose();
-                let modelled = physical.command(&pose);
+                    .clone()
+            })
+            .collect();
+        let resolution = chosen_if_cross_validated(
+            geometry,
+            &solved,
+            &robust_rows,
+            options.train.seed,
+            CROSS_VALIDATION_FOLDS,
+        )?;
+        let identification = resolution.as_ref().map_or(PHYSICAL, |r| r.options);
+        let physical = identify(geometry, &solved, &identification)?.model;
+        let left_by_physical: Vec<JointCorrection> = robust_rows
+            .iter()
+            .zip(&solved)
+            .map(|(row, measured)| {
+                let modelled = physical.command(&measured.pose());
                 JointCorrection {
                     corrections: std::array::from_fn(|i| {
                         row.corrections[i] - (modelled[i] - row.legs[i])
                     }),
-                    ..row
+                    ..row.clone()
                 }
             })
             .collect();
         let distilled = carried_into_networks(
             geometry,
             &physical,
-            &measurements[..n],
+            &identification,
+            &solved,
             &options.distill,
             options.error_model.repeatability_sigma_mm,
             &|_| {},
@@ -416,6 +439,7 @@ pub fn evaluate(
             errors,
             coupled,
             decoupled,
+            resolution,
             uncertainty: None,
         };
         if distilled.model.uncertainty.is_some() {

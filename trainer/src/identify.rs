@@ -93,11 +93,12 @@ impl Default for IdentifyOptions {
     }
 }
 
-/// The physical model's identification (the default of `calibrate` and `evaluate`): eight B-spline coefficients per lead-screw curve (a
-/// knot every 30 mm of the prototype's 150 mm stroke; over 50, 100 and 150 configurations six,
-/// ten, twelve and sixteen measured worse, docs/accuracy.md), the compliance, and directions
-/// below 1e-6 of the largest singular value left alone (at 1e-9 the weakly seen ends of the
-/// curves diverged).
+/// The physical model's identification (the default of `calibrate` and `evaluate`): the
+/// compliance, directions below 1e-6 of the largest singular value left alone (at 1e-9 the
+/// weakly seen ends of the curves diverged), and eight B-spline coefficients per lead-screw
+/// curve (a knot every 30 mm of the prototype's 150 mm stroke), the coarsest resolution
+/// [`crate::pitch_resolution`] tries: it chooses a finer one for a machine whose
+/// cross-validation asks for it (docs/accuracy.md).
 pub const PHYSICAL: IdentifyOptions = IdentifyOptions {
     max_iterations: 30,
     step_tolerance_mm: 1e-10,

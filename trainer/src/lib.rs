@@ -20,7 +20,9 @@
 //! - [`identify`]: the model-based baseline — identification of the geometric parameters by
 //!   iterative least squares, compensation by the identified inverse kinematics; [`physical`]:
 //!   the model shaped further like the machine (lead-screw curves, compliance under the
-//!   weight), identified the same way;
+//!   weight), identified the same way; [`pitch_resolution`]: its lead-screw curves' resolution,
+//!   chosen per machine by cross-validation; [`physical_candidate`]: the physical model scored
+//!   against the networks and carried into networks for the model file;
 //! - [`registration`]: locating the instrument in the base frame from fiducials, and bringing
 //!   measurements from its frame into the base frame;
 //! - [`iso9283`], [`verify`], [`verify_report`]: the ISO 9283 pose test — its poses, running
@@ -53,6 +55,7 @@ pub mod manual;
 pub mod physical;
 pub mod physical_candidate;
 pub mod pipeline;
+pub mod pitch_resolution;
 pub mod plan;
 pub mod registration;
 pub mod screening;

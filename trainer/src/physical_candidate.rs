@@ -1,6 +1,6 @@
-//! The physical model as a candidate for the model file: cross-validated on the folds the
-//! networks are ([`crate::train::cross_validated_rmse`]), and carried into networks
-//! ([`crate::distill`]).
+//! The physical model as a candidate for the model file: its lead-screw resolution chosen and
+//! its error cross-validated on the folds the networks are ([`crate::pitch_resolution`],
+//! [`crate::train::cross_validated_rmse`]), and carried into networks ([`crate::distill`]).
 //!
 //! Its score is comparable with the networks' cross-validated error (Eq. 21,
 //! `√Σ_i RMSE_i²` over the six legs, mm): the physical model is identified without each fold,
@@ -11,13 +11,14 @@
 //! of what the model file will command.
 
 use hexacomp_core::records::{JointCorrection, MeasuredConfiguration};
-use hexacomp_core::{ForwardOptions, Geometry, LEGS, Pose, forward_kinematics};
+use hexacomp_core::{Geometry, LEGS, Pose};
 
 use crate::distill::{DistillOptions, Fidelity, distill, fidelity};
 use crate::error::{Error, Result};
-use crate::identify::{PHYSICAL, identify};
+use crate::identify::{IdentifyOptions, identify};
 use crate::physical::PhysicalModel;
-use crate::train::{TrainOptions, Trained, folds};
+use crate::pitch_resolution::{ResolutionChoice, chosen_resolution};
+use crate::train::{TrainOptions, Trained};
 use crate::uncertainty::UncertaintySource;
 
 /// Poses the distilled networks are checked on.
@@ -30,6 +31,9 @@ pub struct PhysicalCandidate {
     /// Eq. 21's `√Σ_i RMSE_i²` of the corrections the model predicts at each configuration
     /// when identified without its fold, against their robust corrections, mm.
     pub cross_validated_rmse_mm: f64,
+    /// The lead-screw resolution the model was identified with, chosen on the same folds, and
+    /// how every resolution tried scored.
+    pub resolution: ResolutionChoice,
     /// How closely the networks command what the model does, on fresh poses.
     pub fidelity: Fidelity,
     /// The score compared with the networks' cross-validated error on the same folds: the
@@ -55,10 +59,11 @@ pub struct CandidateOptions {
 }
 
 /// Identifies, scores and distills the physical model of the kept `measurements` and their
-/// robust `corrections` (one row per measurement, in the same order), cross-validated on the
-/// folds [`folds`]`(rows, options.folds, train.seed)` the networks are scored on. The networks
-/// carry the model's position uncertainty for the machine's repeatability, their own departure
-/// from the model added.
+/// robust `corrections` (one row per measurement, in the same order), its lead-screw resolution
+/// chosen and its error cross-validated on the folds
+/// [`crate::train::folds`]`(rows, options.folds, train.seed)` the networks are scored on. The
+/// networks carry the model's position uncertainty for the machine's repeatability, their own
+/// departure from the model added.
 pub fn physical_candidate(
     nominal: &Geometry,
     measurements: &[MeasuredConfiguration],
@@ -67,35 +72,22 @@ pub fn physical_candidate(
     options: &CandidateOptions,
     progress: &(dyn Fn(u64) + Sync),
 ) -> Result<PhysicalCandidate> {
-    let (fold_count, distill_options) = (options.folds, &options.distill);
     let start = std::time::Instant::now();
-    if measurements.len() != corrections.len()
-        || measurements
-            .iter()
-            .zip(corrections)
-            .any(|(m, c)| m.id != c.id)
-    {
-        return Err(Error::InvalidSetting(
-            "the physical model needs one robust correction per measured configuration, in \
-             the same order"
-                .into(),
-        ));
-    }
-    if fold_count < 2 || measurements.len() < 2 * fold_count {
-        return Err(Error::InvalidSetting(format!(
-            "cross-validating the physical model needs at least 2 folds ({fold_count} given) \
-             and two configurations per fold ({} configurations)",
-            measurements.len()
-        )));
-    }
-    let cross_validated_rmse_mm =
-        cross_validated_rmse(nominal, measurements, corrections, train, fold_count)?;
-    let physical = identify(nominal, measurements, &PHYSICAL)?.model;
+    let resolution = chosen_resolution(
+        nominal,
+        measurements,
+        corrections,
+        train.seed,
+        options.folds,
+    )?;
+    let cross_validated_rmse_mm = resolution.chosen().cross_validated_rmse_mm;
+    let physical = identify(nominal, measurements, &resolution.options)?.model;
     let carried = carried_into_networks(
         nominal,
         &physical,
+        &resolution.options,
         measurements,
-        distill_options,
+        &options.distill,
         options.repeatability_mm,
         progress,
     )?;
@@ -112,6 +104,7 @@ pub fn physical_candidate(
     Ok(PhysicalCandidate {
         distilled,
         cross_validated_rmse_mm,
+        resolution,
         fidelity,
         score_mm,
         networks_uncertainty: carried.uncertainty.map(|source| NetworksUncertainty {
@@ -135,12 +128,13 @@ pub struct CarriedModel {
     pub uncertainty: Result<UncertaintySource>,
 }
 
-/// Carries `physical`, identified on `measurements` with [`PHYSICAL`], into networks
+/// Carries `physical`, identified on `measurements` with `identification`, into networks
 /// ([`distill`]) that carry its position uncertainty for legs repeating within
 /// `repeatability_mm` (1 σ per move, mm), the networks' own departure from the model added.
 pub fn carried_into_networks(
     nominal: &Geometry,
     physical: &PhysicalModel,
+    identification: &IdentifyOptions,
     measurements: &[MeasuredConfiguration],
     options: &DistillOptions,
     repeatability_mm: f64,
@@ -160,13 +154,17 @@ pub fn carried_into_networks(
         FIDELITY_POSES,
     )?;
     let leg_variance_mm2 = repeatability_mm.powi(2) + fidelity.rms_mm.powi(2);
-    let uncertainty =
-        UncertaintySource::new(nominal, physical, &PHYSICAL, measurements, options.seed).and_then(
-            |source| {
-                distilled.model.uncertainty = Some(source.fitted(leg_variance_mm2)?);
-                Ok(source)
-            },
-        );
+    let uncertainty = UncertaintySource::new(
+        nominal,
+        physical,
+        identification,
+        measurements,
+        options.seed,
+    )
+    .and_then(|source| {
+        distilled.model.uncertainty = Some(source.fitted(leg_variance_mm2)?);
+        Ok(source)
+    });
     Ok(CarriedModel {
         distilled,
         fidelity,
@@ -197,50 +195,4 @@ impl NetworksUncertainty {
             (score_mm.powi(2) - self.physical_cross_validated_mm.powi(2)).max(0.0) / LEGS as f64;
         self.source.fitted(repeatability_mm.powi(2) + excess)
     }
-}
-
-/// Eq. 21 over every configuration of the physical model identified without its fold.
-fn cross_validated_rmse(
-    nominal: &Geometry,
-    measurements: &[MeasuredConfiguration],
-    corrections: &[JointCorrection],
-    train: &TrainOptions,
-    fold_count: usize,
-) -> Result<f64> {
-    let fold = folds(measurements.len(), fold_count, train.seed);
-    let mut squared = 0.0;
-    for f in 0..fold_count {
-        let fitted: Vec<MeasuredConfiguration> = measurements
-            .iter()
-            .zip(&fold)
-            .filter(|(_, of)| **of != f)
-            .map(|(m, _)| m.clone())
-            .collect();
-        let model = identify(nominal, &fitted, &PHYSICAL)?.model;
-        for (k, _) in fold.iter().enumerate().filter(|(_, of)| **of == f) {
-            squared += squared_miss(nominal, &model, &measurements[k], &corrections[k])?;
-        }
-    }
-    Ok((squared / measurements.len() as f64).sqrt())
-}
-
-/// The squared difference, summed over the legs, between `row`'s robust correction and the one
-/// `model` predicts where it is exact: at the pose the machine reached, whose nominal legs are
-/// the equivalent legs `q − Δq`; there the machine needed the commanded legs `q`, and the model
-/// commands `q_model`, so the predicted correction is `Δq + (q_model − q)`.
-fn squared_miss(
-    nominal: &Geometry,
-    model: &PhysicalModel,
-    measured: &MeasuredConfiguration,
-    row: &JointCorrection,
-) -> Result<f64> {
-    let equivalent: [f64; LEGS] = std::array::from_fn(|i| row.legs[i] - row.corrections[i]);
-    let reached = forward_kinematics(
-        nominal,
-        &equivalent,
-        &measured.pose(),
-        &ForwardOptions::default(),
-    )?;
-    let modelled = model.command(&reached);
-    Ok((0..LEGS).map(|i| (modelled[i] - row.legs[i]).powi(2)).sum())
 }

@@ -277,6 +277,10 @@ fn fit_work(samples: usize, outputs: usize, hidden: usize, options: &TrainOption
         .saturating_mul(options.restarts as u64)
 }
 
+/// Folds of the cross-validation that compares one calibration's models (`calibrate`'s
+/// candidates) and chooses the physical model's lead-screw resolution.
+pub const CROSS_VALIDATION_FOLDS: usize = 5;
+
 /// The fold (`0..folds`) of each of `count` rows for a `folds`-fold cross-validation: the rows
 /// in a seeded random order, dealt out in turn, so fold sizes differ by one at most.
 pub fn folds(count: usize, folds: usize, seed: u64) -> Vec<usize> {

@@ -11,7 +11,7 @@ use hexacomp_core::{ForwardOptions, forward_kinematics};
 use hexacomp_core::{Geometry, LEGS, Pose, inverse_kinematics};
 use hexacomp_trainer::distill::{DistillOptions, distill, fidelity, measured_range};
 use hexacomp_trainer::evaluate::{EvaluationOptions, Method, Protocol, SizeResult, evaluate};
-use hexacomp_trainer::identify::{PHYSICAL, identify};
+use hexacomp_trainer::identify::identify;
 use hexacomp_trainer::physical::{PhysicalModel, PitchCurves};
 use hexacomp_trainer::physical_candidate::{CandidateOptions, physical_candidate};
 use hexacomp_trainer::pipeline::Pipeline;
@@ -208,7 +208,7 @@ fn a_measured_range_no_workspace_pose_fills_cannot_be_distilled_and_says_so() {
 
 #[test]
 fn the_physical_models_cross_validation_predicts_each_fold_without_it() {
-    // 20 configurations for 114 parameters: identified on all of them, the model fits their
+    // 20 configurations for 108 parameters or more: identified on all of them, the model fits their
     // noise; predicting each fold from the others, it cannot.
     let g = Geometry::prototype();
     let pipeline = Pipeline {
@@ -251,7 +251,9 @@ fn the_physical_models_cross_validation_predicts_each_fold_without_it() {
     .unwrap();
     // In sample, by hand: the model identified on all twenty, compared where each robust
     // correction is exact (the pose reached, the nominal legs q − Δq).
-    let all = identify(&g, &kept, &PHYSICAL).unwrap().model;
+    let all = identify(&g, &kept, &candidate.resolution.options)
+        .unwrap()
+        .model;
     let squared: f64 = kept
         .iter()
         .zip(&solved.corrections)

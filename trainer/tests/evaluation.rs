@@ -21,7 +21,8 @@ use hexacomp_trainer::evaluate::{
     Evaluation, EvaluationOptions, Method, Protocol, ValidationErrors, evaluate,
 };
 use hexacomp_trainer::identify::{IdentifyOptions, PHYSICAL, identify};
-use hexacomp_trainer::train::{Architecture, TrainOptions, train};
+use hexacomp_trainer::pitch_resolution::{PITCH_RESOLUTIONS, chosen_if_cross_validated};
+use hexacomp_trainer::train::{Architecture, CROSS_VALIDATION_FOLDS, TrainOptions, train};
 use hexacomp_virtual::{DEFAULT_MACHINE_SEED, ErrorModel, ErrorVariant, VirtualPlatform};
 
 fn options(sizes: Vec<usize>, error_model: ErrorModel) -> EvaluationOptions {
@@ -127,7 +128,19 @@ fn redo(g: &Geometry, o: &EvaluationOptions) -> Redone {
         let identified = identify(g, &measurements[..n], &IdentifyOptions::default())
             .unwrap()
             .geometry;
-        let physical = identify(g, &measurements[..n], &PHYSICAL).unwrap().model;
+        // The physical model with the lead-screw resolution its cross-validation chooses.
+        let identification = chosen_if_cross_validated(
+            g,
+            &measurements[..n],
+            &first(&robust, n),
+            o.train.seed,
+            CROSS_VALIDATION_FOLDS,
+        )
+        .unwrap()
+        .map_or(PHYSICAL, |r| r.options);
+        let physical = identify(g, &measurements[..n], &identification)
+            .unwrap()
+            .model;
         // What the physical model leaves of the robust corrections, for the networks after it.
         let left: Vec<JointCorrection> = first(&robust, n)
             .into_iter()
@@ -512,6 +525,37 @@ fn the_evaluate_command_prints_the_tables_of_the_largest_size_and_writes_the_fig
     let evaluation = evaluate(&g, &o, &|_| {}).unwrap();
     let largest = &evaluation.sizes[0];
     assert_eq!(largest.configurations, 12);
+
+    // The lead-screw resolution: chosen at 12 configurations, eight at 9 (too few to hold two
+    // out of each of five folds).
+    let chosen = largest.resolution.as_ref().unwrap();
+    assert_eq!(chosen.scores.len(), PITCH_RESOLUTIONS.len());
+    assert!(evaluation.sizes[1].resolution.is_none());
+    let resolution = section(&stdout, "The physical model's lead-screw resolution");
+    let resolution_row = |n: &str| {
+        resolution
+            .lines()
+            .find(|l| l.split_whitespace().next() == Some(n))
+            .unwrap_or_else(|| panic!("{resolution}"))
+            .to_string()
+    };
+    let cells: Vec<String> = resolution_row("12")
+        .split_whitespace()
+        .map(String::from)
+        .collect();
+    let mut expected = vec!["12".to_string(), chosen.options.pitch_basis.to_string()];
+    for s in &chosen.scores {
+        expected.extend([
+            format!("{:.4}", s.cross_validated_rmse_mm),
+            "±".into(),
+            format!("{:.4}", s.standard_error_mm),
+        ]);
+    }
+    assert_eq!(cells, expected, "{resolution}");
+    assert!(
+        resolution_row("9").contains("8 (too few to cross-validate)"),
+        "{resolution}"
+    );
 
     // Table 2.
     assert!(

@@ -5,6 +5,7 @@ mod common;
 use hexacomp_core::{Geometry, inverse_kinematics};
 use hexacomp_trainer::Error;
 use hexacomp_trainer::identify::{IdentifyOptions, PARAMETERS, PHYSICAL, identify};
+use hexacomp_trainer::pitch_resolution::{PITCH_RESOLUTIONS, chosen_resolution};
 use hexacomp_virtual::{DEFAULT_MACHINE_SEED, ErrorModel, ErrorVariant};
 
 #[test]
@@ -118,4 +119,88 @@ fn a_machine_whose_errors_the_physical_model_can_express_is_recovered_and_comman
         geometry_only > 0.01,
         "geometry alone misses by {geometry_only} mm"
     );
+}
+
+#[test]
+fn the_lead_screw_resolution_is_chosen_by_held_out_error_and_follows_a_short_period() {
+    // A lead screw whose periodic error repeats every 45 mm (the default machine's: 90 mm), at
+    // three times the amplitude: eight coefficients over the 150 mm stroke cannot follow it.
+    let g = Geometry::prototype();
+    let paper = ErrorModel::default();
+    let short_period = ErrorModel {
+        pitch: hexacomp_virtual::PitchErrors {
+            periodic_sigma_mm: 3.0 * paper.pitch.periodic_sigma_mm,
+            periodic_wavelength_mm: 45.0,
+            ..paper.pitch
+        },
+        ..paper
+    };
+    let pipeline = common::campaign_of_150();
+    let mut platform =
+        hexacomp_virtual::VirtualPlatform::new(&g, &short_period, DEFAULT_MACHINE_SEED, 3).unwrap();
+    let (_, measurements) = pipeline.measure_virtual(&mut platform).unwrap();
+    let solved = pipeline.solve(&g, &measurements).unwrap();
+    let kept = solved.kept_of(&measurements);
+    let choice = chosen_resolution(&g, &kept, &solved.corrections, 1, 5).unwrap();
+    let tried: Vec<usize> = choice.scores.iter().map(|s| s.pitch_basis).collect();
+    assert_eq!(tried, PITCH_RESOLUTIONS, "{choice:?}");
+    // The coarsest within one standard error of the lowest held-out error wins, and the chosen
+    // options are the physical model's.
+    let best = choice
+        .scores
+        .iter()
+        .min_by(|a, b| {
+            a.cross_validated_rmse_mm
+                .total_cmp(&b.cross_validated_rmse_mm)
+        })
+        .unwrap();
+    let chosen = choice.chosen();
+    assert!(
+        chosen.cross_validated_rmse_mm <= best.cross_validated_rmse_mm + best.standard_error_mm,
+        "{choice:?}"
+    );
+    for coarser in choice
+        .scores
+        .iter()
+        .filter(|s| s.pitch_basis < chosen.pitch_basis)
+    {
+        assert!(
+            coarser.cross_validated_rmse_mm > best.cross_validated_rmse_mm + best.standard_error_mm,
+            "{choice:?}"
+        );
+    }
+    // A standard error that means something: a few per cent of the error.
+    for s in &choice.scores {
+        assert!(
+            (0.01..0.3).contains(&(s.standard_error_mm / s.cross_validated_rmse_mm)),
+            "{choice:?}"
+        );
+    }
+    assert_eq!(
+        IdentifyOptions {
+            pitch_basis: PHYSICAL.pitch_basis,
+            ..choice.options
+        },
+        PHYSICAL
+    );
+    // The short period needs the finer curves: eight misses the held-out corrections by far more.
+    assert!(chosen.pitch_basis > 8, "{choice:?}");
+    assert!(
+        choice.scores[0].cross_validated_rmse_mm > 1.2 * chosen.cross_validated_rmse_mm,
+        "{choice:?}"
+    );
+    // The same choice whichever cores ran which fold.
+    assert_eq!(
+        chosen_resolution(&g, &kept, &solved.corrections, 1, 5).unwrap(),
+        choice
+    );
+    // Rows out of step with their corrections, or too few folds, are refused.
+    let mut shuffled = solved.corrections.clone();
+    shuffled.swap(0, 1);
+    for (rows, folds) in [(&shuffled, 5), (&solved.corrections, 1)] {
+        assert!(matches!(
+            chosen_resolution(&g, &kept, rows, 1, folds),
+            Err(Error::InvalidSetting(_))
+        ));
+    }
 }

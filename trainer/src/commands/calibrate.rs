@@ -21,7 +21,8 @@ use hexacomp_trainer::physical_candidate::{
 use hexacomp_trainer::pipeline::{Pipeline, Solved};
 use hexacomp_trainer::plan::PlanOptions;
 use hexacomp_trainer::train::{
-    Architecture, TrainOptions, Trained, cross_validated_rmse, training_work,
+    Architecture, CROSS_VALIDATION_FOLDS, TrainOptions, Trained, cross_validated_rmse,
+    training_work,
 };
 use hexacomp_virtual::{DEFAULT_MACHINE_SEED, ErrorModel, ErrorVariant, VirtualPlatform};
 
@@ -234,7 +235,7 @@ pub fn run(geometry: &Geometry, args: &CalibrateArgs) -> anyhow::Result<()> {
     } else {
         println!(
             "physical model left out: {} configurations are too few to cross-validate it on \
-             {FOLDS} folds; the networks are compared by their holdout validation RMSE",
+             {CROSS_VALIDATION_FOLDS} folds; the networks are compared by their holdout validation RMSE",
             solved.corrections.len()
         );
     }
@@ -364,7 +365,7 @@ struct Candidate {
     label: &'static str,
     /// The model.
     trained: Trained,
-    /// Its error on configurations it was not fitted on ([`FOLDS`]-fold cross-validation,
+    /// Its error on configurations it was not fitted on ([`CROSS_VALIDATION_FOLDS`]-fold cross-validation,
     /// Eq. 21; the holdout validation RMSE when there are too few to cross-validate), mm: what
     /// the candidates are compared by.
     score_mm: f64,
@@ -372,13 +373,10 @@ struct Candidate {
     summary: String,
 }
 
-/// Folds of the cross-validation the candidates are compared by.
-const FOLDS: usize = 5;
-
 /// Whether the candidates are compared by cross-validation: with two configurations per fold
 /// or more (otherwise the networks by their holdout, without the physical model).
 fn cross_validated(solved: &Solved) -> bool {
-    solved.corrections.len() >= 2 * FOLDS
+    solved.corrections.len() >= 2 * CROSS_VALIDATION_FOLDS
 }
 
 /// The model's source line in its file.
@@ -430,7 +428,7 @@ fn train_both(
                 architecture,
                 &t.model.hidden_nodes(),
                 &pipeline.train,
-                FOLDS,
+                CROSS_VALIDATION_FOLDS,
             )
             .with_context(|| format!("cross-validating the {name} networks"))?;
             (score_mm, format!(", cross-validated {score_mm:.4} mm"))
@@ -472,7 +470,7 @@ fn physical(
     hexacomp_trainer::error::Result<NetworksUncertainty>,
 )> {
     let options = CandidateOptions {
-        folds: FOLDS,
+        folds: CROSS_VALIDATION_FOLDS,
         distill: DistillOptions::default(),
         repeatability_mm,
     };
@@ -494,10 +492,29 @@ fn physical(
     let mut candidate = identified?;
     let model = &mut candidate.distilled.model;
     model.provenance.source = format!(
-        "{}: physical model as networks, {} poses, cross-validated {:.4} mm",
+        "{}: physical model ({} lead-screw coefficients per leg) as networks, {} poses, \
+         cross-validated {:.4} mm",
         source(measurements.len()),
+        candidate.resolution.options.pitch_basis,
         poses,
         candidate.score_mm
+    );
+    let tried: Vec<String> = candidate
+        .resolution
+        .scores
+        .iter()
+        .map(|s| {
+            format!(
+                "{}: {:.4} ± {:.4} mm",
+                s.pitch_basis, s.cross_validated_rmse_mm, s.standard_error_mm
+            )
+        })
+        .collect();
+    println!(
+        "physical model: lead-screw curves of {} B-spline coefficients per leg, the fewest \
+         cross-validated within one standard error of the best ({})",
+        candidate.resolution.options.pitch_basis,
+        tried.join(", ")
     );
     let f = candidate.fidelity;
     // The departure's RMS enters the score; its largest value is where the networks follow the

@@ -9,7 +9,9 @@ use hexacomp_trainer::distill::DistillOptions;
 use hexacomp_trainer::evaluate::{
     Evaluation, EvaluationOptions, Method, Protocol, SizeResult, evaluate,
 };
-use hexacomp_trainer::train::TrainOptions;
+use hexacomp_trainer::identify::PHYSICAL;
+use hexacomp_trainer::pitch_resolution::PITCH_RESOLUTIONS;
+use hexacomp_trainer::train::{CROSS_VALIDATION_FOLDS, TrainOptions};
 use hexacomp_virtual::{DEFAULT_MACHINE_SEED, ErrorModel, ErrorVariant};
 
 use super::ResultsFolder;
@@ -167,6 +169,41 @@ pub fn print_evaluation(evaluation: &Evaluation, validation: usize) {
             }
         }));
         table.row(row.try_into().expect("a cell per method"));
+    }
+    println!("{table}");
+
+    println!(
+        "The physical model's lead-screw resolution: B-spline coefficients per leg, the fewest \
+         whose {CROSS_VALIDATION_FOLDS}-fold cross-validated error (Eq. 21, mm, ± its standard \
+         error) is within one standard error of the best"
+    );
+    let mut header = vec!["configurations".to_string(), "chosen".to_string()];
+    header.extend(PITCH_RESOLUTIONS.iter().map(|n| format!("{n} (mm)")));
+    let refs: Vec<&str> = header.iter().map(String::as_str).collect();
+    let mut table = Table::<{ PITCH_RESOLUTIONS.len() + 2 }>::new(
+        refs.try_into().expect("a column per resolution"),
+    );
+    for size in &evaluation.sizes {
+        let mut row = vec![size.configurations.to_string()];
+        match &size.resolution {
+            Some(resolution) => {
+                row.push(resolution.options.pitch_basis.to_string());
+                row.extend(resolution.scores.iter().map(|s| {
+                    format!(
+                        "{:.4} ± {:.4}",
+                        s.cross_validated_rmse_mm, s.standard_error_mm
+                    )
+                }));
+            }
+            None => {
+                row.push(format!(
+                    "{} (too few to cross-validate)",
+                    PHYSICAL.pitch_basis
+                ));
+                row.extend(PITCH_RESOLUTIONS.iter().map(|_| "—".to_string()));
+            }
+        }
+        table.row(row.try_into().expect("a cell per resolution"));
     }
     println!("{table}");
 

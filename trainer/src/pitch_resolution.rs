@@ -1,0 +1,299 @@
+//! How finely the physical model's lead-screw curves are resolved, chosen per machine by
+//! cross-validation.
+//!
+//! A curve of few B-spline coefficients cannot follow a short lead-screw period; one of many
+//! fits the noise of few configurations (docs/accuracy.md: on the paper's robot eight did best,
+//! on a robot with a 60 mm period sixteen). Each resolution of [`PITCH_RESOLUTIONS`] is
+//! identified without each fold, and predicts the fold's robust corrections where they are
+//! exact (Eq. 21's `√Σ_i RMSE_i²`, mm). The machine's resolution is the coarsest whose error is
+//! within one standard error of the lowest (the one-standard-error rule of cross-validation:
+//! a finer curve has to beat the coarser by more than the estimate's own noise). Its score is
+//! on the folds the networks are scored on, so the physical model stays comparable with them.
+
+use hexacomp_core::records::{JointCorrection, MeasuredConfiguration};
+use hexacomp_core::{ForwardOptions, Geometry, LEGS, forward_kinematics};
+
+use crate::error::{Error, Result};
+use crate::identify::{IdentifyOptions, PHYSICAL, identify};
+use crate::physical::PhysicalModel;
+use crate::train::folds;
+
+/// The lead-screw resolutions tried: B-spline coefficients per leg's curve (a knot every 30,
+/// 20 and 15 mm of the prototype's 150 mm stroke).
+pub const PITCH_RESOLUTIONS: [usize; 3] = [8, 12, 16];
+
+/// How one resolution predicted the configurations held out of its identification.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ResolutionScore {
+    /// B-spline coefficients per leg's lead-screw curve.
+    pub pitch_basis: usize,
+    /// Eq. 21's `√Σ_i RMSE_i²` over every configuration, each predicted by the model identified
+    /// without its fold, mm.
+    pub cross_validated_rmse_mm: f64,
+    /// The standard error of that estimate over the configurations (of the mean squared miss,
+    /// carried to the RMSE to first order: `SE(m)/(2·RMSE)`), mm.
+    pub standard_error_mm: f64,
+}
+
+/// The resolution chosen for a machine, and how every one tried scored.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ResolutionChoice {
+    /// [`PHYSICAL`] with the chosen resolution: the physical model's identification.
+    pub options: IdentifyOptions,
+    /// Every resolution tried, in the order of [`PITCH_RESOLUTIONS`].
+    pub scores: Vec<ResolutionScore>,
+}
+
+impl ResolutionChoice {
+    /// The chosen resolution's score.
+    pub fn chosen(&self) -> &ResolutionScore {
+        self.scores
+            .iter()
+            .find(|s| s.pitch_basis == self.options.pitch_basis)
+            .expect("the chosen resolution was scored")
+    }
+}
+
+/// Chooses the lead-screw resolution of the physical model of the kept `measurements` and their
+/// robust `corrections` (one row per measurement, in the same order) on the folds
+/// [`folds`]`(rows, fold_count, seed)`: the coarsest whose model, identified without each fold,
+/// predicts the fold's corrections within one standard error of the best. The
+/// identifications run on the machine's cores.
+pub fn chosen_resolution(
+    nominal: &Geometry,
+    measurements: &[MeasuredConfiguration],
+    corrections: &[JointCorrection],
+    seed: u64,
+    fold_count: usize,
+) -> Result<ResolutionChoice> {
+    if measurements.len() != corrections.len()
+        || measurements
+            .iter()
+            .zip(corrections)
+            .any(|(m, c)| m.id != c.id)
+    {
+        return Err(Error::InvalidSetting(
+            "the physical model needs one robust correction per measured configuration, in \
+             the same order"
+                .into(),
+        ));
+    }
+    if fold_count < 2 || measurements.len() < 2 * fold_count {
+        return Err(Error::InvalidSetting(format!(
+            "cross-validating the physical model needs at least 2 folds ({fold_count} given) \
+             and two configurations per fold ({} configurations)",
+            measurements.len()
+        )));
+    }
+    let fold = folds(measurements.len(), fold_count, seed);
+    let jobs: Vec<(usize, usize)> = PITCH_RESOLUTIONS
+        .iter()
+        .flat_map(|&basis| (0..fold_count).map(move |f| (basis, f)))
+        .collect();
+    let missed = in_parallel(&jobs, |&(basis, f)| {
+        let options = IdentifyOptions {
+            pitch_basis: basis,
+            ..PHYSICAL
+        };
+        fold_miss(nominal, measurements, corrections, &fold, f, &options)
+    });
+    let mut missed = missed.into_iter();
+    let mut scores = Vec::with_capacity(PITCH_RESOLUTIONS.len());
+    for basis in PITCH_RESOLUTIONS {
+        // Each configuration's squared miss in the plan's order: the score does not depend on
+        // which core ran which fold.
+        let mut squared = vec![0.0; measurements.len()];
+        for result in missed.by_ref().take(fold_count) {
+            for (k, miss) in result? {
+                squared[k] = miss;
+            }
+        }
+        let score = score_of(basis, &squared);
+        if !(score.cross_validated_rmse_mm.is_finite() && score.standard_error_mm.is_finite()) {
+            return Err(Error::InvalidSetting(format!(
+                "the physical model with {basis} lead-screw coefficients per leg \
+                 cross-validates to {} mm",
+                score.cross_validated_rmse_mm
+            )));
+        }
+        scores.push(score);
+    }
+    Ok(ResolutionChoice {
+        options: IdentifyOptions {
+            pitch_basis: coarsest_within_one_standard_error(&scores).pitch_basis,
+            ..PHYSICAL
+        },
+        scores,
+    })
+}
+
+/// [`chosen_resolution`] when every fold has two configurations or more to hold out, `None`
+/// with fewer (then the physical model is identified with [`PHYSICAL`]'s eight coefficients).
+pub fn chosen_if_cross_validated(
+    nominal: &Geometry,
+    measurements: &[MeasuredConfiguration],
+    corrections: &[JointCorrection],
+    seed: u64,
+    fold_count: usize,
+) -> Result<Option<ResolutionChoice>> {
+    if measurements.len() < 2 * fold_count {
+        return Ok(None);
+    }
+    chosen_resolution(nominal, measurements, corrections, seed, fold_count).map(Some)
+}
+
+/// The score with the fewest coefficients whose error is within one standard error of the
+/// lowest error's.
+fn coarsest_within_one_standard_error(scores: &[ResolutionScore]) -> &ResolutionScore {
+    let best = scores
+        .iter()
+        .min_by(|a, b| {
+            a.cross_validated_rmse_mm
+                .total_cmp(&b.cross_validated_rmse_mm)
+        })
+        .expect("resolutions are tried");
+    let within = best.cross_validated_rmse_mm + best.standard_error_mm;
+    scores
+        .iter()
+        .filter(|s| s.cross_validated_rmse_mm <= within)
+        .min_by_key(|s| s.pitch_basis)
+        .expect("the best is within its own standard error")
+}
+
+/// The score of `basis` from each configuration's squared miss (summed over the legs, mm²).
+fn score_of(basis: usize, squared: &[f64]) -> ResolutionScore {
+    let n = squared.len() as f64;
+    let mean = squared.iter().sum::<f64>() / n;
+    let variance = squared.iter().map(|s| (s - mean).powi(2)).sum::<f64>() / (n - 1.0);
+    let rmse = mean.sqrt();
+    ResolutionScore {
+        pitch_basis: basis,
+        cross_validated_rmse_mm: rmse,
+        standard_error_mm: (variance / n).sqrt() / (2.0 * rmse),
+    }
+}
+
+/// `run` on every job, spread over the machine's cores; the results in the jobs' order.
+fn in_parallel<J: Sync, R: Send>(jobs: &[J], run: impl Fn(&J) -> R + Sync) -> Vec<R> {
+    let workers = std::thread::available_parallelism()
+        .map_or(1, |n| n.get())
+        .clamp(1, jobs.len().max(1));
+    let run = &run;
+    let mut indexed: Vec<(usize, R)> = std::thread::scope(|scope| {
+        let handles: Vec<_> = (0..workers)
+            .map(|w| {
+                scope.spawn(move || {
+                    (w..jobs.len())
+                        .step_by(workers)
+                        .map(|j| (j, run(&jobs[j])))
+                        .collect::<Vec<_>>()
+                })
+            })
+            .collect();
+        handles
+            .into_iter()
+            .flat_map(|h| h.join().expect("identification worker"))
+            .collect()
+    });
+    indexed.sort_by_key(|(j, _)| *j);
+    indexed.into_iter().map(|(_, r)| r).collect()
+}
+
+/// The squared miss, summed over the legs, of each of fold `f`'s configurations (by index) by
+/// the model identified with `options` on the other folds.
+fn fold_miss(
+    nominal: &Geometry,
+    measurements: &[MeasuredConfiguration],
+    corrections: &[JointCorrection],
+    fold: &[usize],
+    f: usize,
+    options: &IdentifyOptions,
+) -> Result<Vec<(usize, f64)>> {
+    let fitted: Vec<MeasuredConfiguration> = measurements
+        .iter()
+        .zip(fold)
+        .filter(|(_, of)| **of != f)
+        .map(|(m, _)| m.clone())
+        .collect();
+    let model = identify(nominal, &fitted, options)?.model;
+    fold.iter()
+        .enumerate()
+        .filter(|(_, of)| **of == f)
+        .map(|(k, _)| {
+            Ok((
+                k,
+                squared_miss(nominal, &model, &measurements[k], &corrections[k])?,
+            ))
+        })
+        .collect()
+}
+
+/// The squared difference, summed over the legs, between `row`'s robust correction and the one
+/// `model` predicts where it is exact: at the pose the machine reached, whose nominal legs are
+/// the equivalent legs `q − Δq`; there the machine needed the commanded legs `q`, and the model
+/// commands `q_model`, so the predicted correction is `Δq + (q_model − q)`.
+fn squared_miss(
+    nominal: &Geometry,
+    model: &PhysicalModel,
+    measured: &MeasuredConfiguration,
+    row: &JointCorrection,
+) -> Result<f64> {
+    let equivalent: [f64; LEGS] = std::array::from_fn(|i| row.legs[i] - row.corrections[i]);
+    let reached = forward_kinematics(
+        nominal,
+        &equivalent,
+        &measured.pose(),
+        &ForwardOptions::default(),
+    )?;
+    let modelled = model.command(&reached);
+    Ok((0..LEGS).map(|i| (modelled[i] - row.legs[i]).powi(2)).sum())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn score(pitch_basis: usize, rmse: f64, se: f64) -> ResolutionScore {
+        ResolutionScore {
+            pitch_basis,
+            cross_validated_rmse_mm: rmse,
+            standard_error_mm: se,
+        }
+    }
+
+    #[test]
+    fn a_finer_curve_must_beat_the_coarser_by_more_than_one_standard_error() {
+        // The default robot at 150 configurations: twelve is lower by less than the noise.
+        let level = [
+            score(8, 0.0366, 0.0015),
+            score(12, 0.0365, 0.0015),
+            score(16, 0.0378, 0.0016),
+        ];
+        assert_eq!(coarsest_within_one_standard_error(&level).pitch_basis, 8);
+        // A short lead-screw period: eight misses by far more.
+        let short = [
+            score(8, 0.0475, 0.0020),
+            score(12, 0.0367, 0.0015),
+            score(16, 0.0377, 0.0016),
+        ];
+        assert_eq!(coarsest_within_one_standard_error(&short).pitch_basis, 12);
+        // Only the finest within reach of itself.
+        let finest = [
+            score(8, 0.0475, 0.0020),
+            score(12, 0.0420, 0.0015),
+            score(16, 0.0377, 0.0016),
+        ];
+        assert_eq!(coarsest_within_one_standard_error(&finest).pitch_basis, 16);
+    }
+
+    #[test]
+    fn the_score_is_the_rmse_over_configurations_with_its_standard_error() {
+        // Squared misses 1, 1, 4, 4 mm²: mean 2.5, sample variance 3, so SE(mean) = √(3/4)
+        // and the RMSE's √2.5 carries SE(mean)/(2√2.5).
+        let s = score_of(12, &[1.0, 1.0, 4.0, 4.0]);
+        assert_eq!(s.pitch_basis, 12);
+        assert!((s.cross_validated_rmse_mm - 2.5_f64.sqrt()).abs() < 1e-15);
+        let expected = (0.75_f64).sqrt() / (2.0 * 2.5_f64.sqrt());
+        assert!((s.standard_error_mm - expected).abs() < 1e-15);
+    }
+}
