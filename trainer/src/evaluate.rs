@@ -316,7 +316,8 @@ pub fn evaluate(
             identify(geometry, &measurements[..n], &IdentifyOptions::default())?.geometry;
         // The physical model as `calibrate` makes it: its lead-screw resolution chosen by
         // cross-validation on the configurations whose robust corrections were solved (eight
-        // with too few to cross-validate).
+        // with too few to cross-validate), on the folds of the training seed (`calibrate`'s
+        // when it is given the same seed).
         let robust_rows = rows(&robust, n);
         let solved: Vec<MeasuredConfiguration> = robust_rows
             .iter()

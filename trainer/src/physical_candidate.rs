@@ -140,6 +140,13 @@ pub fn carried_into_networks(
     repeatability_mm: f64,
     progress: &(dyn Fn(u64) + Sync),
 ) -> Result<CarriedModel> {
+    if physical.pitch.basis() != identification.pitch_basis {
+        return Err(Error::InvalidSetting(format!(
+            "the physical model has {} lead-screw coefficients per leg, its identification {}",
+            physical.pitch.basis(),
+            identification.pitch_basis
+        )));
+    }
     let measured: Vec<Pose> = measurements
         .iter()
         .map(MeasuredConfiguration::pose)

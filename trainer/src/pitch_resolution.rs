@@ -2,8 +2,8 @@
 //! cross-validation.
 //!
 //! A curve of few B-spline coefficients cannot follow a short lead-screw period; one of many
-//! fits the noise of few configurations (docs/accuracy.md: on the paper's robot eight did best,
-//! on a robot with a 60 mm period sixteen). Each resolution of [`PITCH_RESOLUTIONS`] is
+//! fits the noise of few configurations (docs/accuracy.md: on the paper's robot eight do best,
+//! on a robot with a 60 mm period twelve). Each resolution of [`PITCH_RESOLUTIONS`] is
 //! identified without each fold, and predicts the fold's robust corrections where they are
 //! exact (Eq. 21's `√Σ_i RMSE_i²`, mm). The machine's resolution is the coarsest whose error is
 //! within one standard error of the lowest (the one-standard-error rule of cross-validation:
@@ -19,7 +19,7 @@ use crate::physical::PhysicalModel;
 use crate::train::folds;
 
 /// The lead-screw resolutions tried: B-spline coefficients per leg's curve (a knot every 30,
-/// 20 and 15 mm of the prototype's 150 mm stroke).
+/// 16.7 and 11.5 mm of the prototype's 150 mm stroke: the stroke over `n − 3` spacings).
 pub const PITCH_RESOLUTIONS: [usize; 3] = [8, 12, 16];
 
 /// How one resolution predicted the configurations held out of its identification.
@@ -40,11 +40,32 @@ pub struct ResolutionScore {
 pub struct ResolutionChoice {
     /// [`PHYSICAL`] with the chosen resolution: the physical model's identification.
     pub options: IdentifyOptions,
-    /// Every resolution tried, in the order of [`PITCH_RESOLUTIONS`].
+    /// Every resolution that could be cross-validated, in the order of [`PITCH_RESOLUTIONS`].
     pub scores: Vec<ResolutionScore>,
+    /// Every resolution that could not (an identification without a fold failed, or its
+    /// error is not finite), with why: left out of the choice.
+    pub failed: Vec<(usize, String)>,
 }
 
 impl ResolutionChoice {
+    /// What resolution `pitch_basis` gave: its score, or why it has none. `None` for one not
+    /// tried.
+    pub fn outcome(
+        &self,
+        pitch_basis: usize,
+    ) -> Option<std::result::Result<&ResolutionScore, &str>> {
+        self.scores
+            .iter()
+            .find(|s| s.pitch_basis == pitch_basis)
+            .map(Ok)
+            .or_else(|| {
+                self.failed
+                    .iter()
+                    .find(|(basis, _)| *basis == pitch_basis)
+                    .map(|(_, why)| Err(why.as_str()))
+            })
+    }
+
     /// The chosen resolution's score.
     pub fn chosen(&self) -> &ResolutionScore {
         self.scores
@@ -99,24 +120,23 @@ pub fn chosen_resolution(
     });
     let mut missed = missed.into_iter();
     let mut scores = Vec::with_capacity(PITCH_RESOLUTIONS.len());
+    let mut failed = Vec::new();
     for basis in PITCH_RESOLUTIONS {
-        // Each configuration's squared miss in the plan's order: the score does not depend on
-        // which core ran which fold.
-        let mut squared = vec![0.0; measurements.len()];
-        for result in missed.by_ref().take(fold_count) {
-            for (k, miss) in result? {
-                squared[k] = miss;
-            }
+        let folds: Vec<_> = missed.by_ref().take(fold_count).collect();
+        match scored(basis, measurements.len(), folds) {
+            Ok(score) => scores.push(score),
+            Err(why) => failed.push((basis, why)),
         }
-        let score = score_of(basis, &squared);
-        if !(score.cross_validated_rmse_mm.is_finite() && score.standard_error_mm.is_finite()) {
-            return Err(Error::InvalidSetting(format!(
-                "the physical model with {basis} lead-screw coefficients per leg \
-                 cross-validates to {} mm",
-                score.cross_validated_rmse_mm
-            )));
-        }
-        scores.push(score);
+    }
+    if scores.is_empty() {
+        let reasons: Vec<String> = failed
+            .iter()
+            .map(|(basis, why)| format!("{basis} coefficients: {why}"))
+            .collect();
+        return Err(Error::InsufficientData(format!(
+            "no lead-screw resolution of the physical model could be cross-validated ({})",
+            reasons.join("; ")
+        )));
     }
     Ok(ResolutionChoice {
         options: IdentifyOptions {
@@ -124,7 +144,33 @@ pub fn chosen_resolution(
             ..PHYSICAL
         },
         scores,
+        failed,
     })
+}
+
+/// The score of `basis` from its folds' misses (in fold order), or why it has none.
+fn scored(
+    basis: usize,
+    configurations: usize,
+    folds: Vec<Result<Vec<(usize, f64)>>>,
+) -> std::result::Result<ResolutionScore, String> {
+    // Each configuration's squared miss in the plan's order: the score does not depend on
+    // which core ran which fold.
+    let mut squared = vec![0.0; configurations];
+    for (f, result) in folds.into_iter().enumerate() {
+        let misses = result.map_err(|e| format!("identified without fold {}: {e}", f + 1))?;
+        for (k, miss) in misses {
+            squared[k] = miss;
+        }
+    }
+    let score = score_of(basis, &squared);
+    if !(score.cross_validated_rmse_mm.is_finite() && score.standard_error_mm.is_finite()) {
+        return Err(format!(
+            "cross-validated to {} mm",
+            score.cross_validated_rmse_mm
+        ));
+    }
+    Ok(score)
 }
 
 /// [`chosen_resolution`] when every fold has two configurations or more to hold out, `None`
@@ -169,7 +215,12 @@ fn score_of(basis: usize, squared: &[f64]) -> ResolutionScore {
     ResolutionScore {
         pitch_basis: basis,
         cross_validated_rmse_mm: rmse,
-        standard_error_mm: (variance / n).sqrt() / (2.0 * rmse),
+        // No miss at all: nothing to be uncertain about.
+        standard_error_mm: if rmse > 0.0 {
+            (variance / n).sqrt() / (2.0 * rmse)
+        } else {
+            0.0
+        },
     }
 }
 
@@ -265,25 +316,48 @@ mod tests {
     fn a_finer_curve_must_beat_the_coarser_by_more_than_one_standard_error() {
         // The default robot at 150 configurations: twelve is lower by less than the noise.
         let level = [
-            score(8, 0.0366, 0.0015),
-            score(12, 0.0365, 0.0015),
-            score(16, 0.0378, 0.0016),
+            score(8, 0.0366, 0.0010),
+            score(12, 0.0365, 0.0009),
+            score(16, 0.0378, 0.0010),
         ];
         assert_eq!(coarsest_within_one_standard_error(&level).pitch_basis, 8);
         // A short lead-screw period: eight misses by far more.
         let short = [
-            score(8, 0.0475, 0.0020),
-            score(12, 0.0367, 0.0015),
-            score(16, 0.0377, 0.0016),
+            score(8, 0.0475, 0.0012),
+            score(12, 0.0367, 0.0009),
+            score(16, 0.0377, 0.0010),
         ];
         assert_eq!(coarsest_within_one_standard_error(&short).pitch_basis, 12);
         // Only the finest within reach of itself.
         let finest = [
-            score(8, 0.0475, 0.0020),
-            score(12, 0.0420, 0.0015),
-            score(16, 0.0377, 0.0016),
+            score(8, 0.0475, 0.0012),
+            score(12, 0.0420, 0.0011),
+            score(16, 0.0377, 0.0010),
         ];
         assert_eq!(coarsest_within_one_standard_error(&finest).pitch_basis, 16);
+    }
+
+    #[test]
+    fn a_resolution_whose_fold_fails_or_misses_without_bound_is_left_out_and_says_why() {
+        let fold = |misses: &[(usize, f64)]| Ok(misses.to_vec());
+        let good = scored(8, 4, vec![fold(&[(0, 1.0), (2, 4.0)]), fold(&[(1, 1.0), (3, 4.0)])]);
+        assert_eq!(good, Ok(score_of(8, &[1.0, 1.0, 4.0, 4.0])));
+        let failed = scored(
+            12,
+            4,
+            vec![
+                fold(&[(0, 1.0), (2, 4.0)]),
+                Err(Error::InsufficientData("leg 3 outside the stroke".into())),
+            ],
+        );
+        assert_eq!(
+            failed,
+            Err("identified without fold 2: insufficient data: leg 3 outside the stroke".into())
+        );
+        let unbounded = scored(16, 2, vec![fold(&[(0, f64::INFINITY)]), fold(&[(1, 1.0)])]);
+        assert!(unbounded.unwrap_err().contains("cross-validated to inf"));
+        // Nothing missed: a zero error with a zero standard error, not an undefined one.
+        assert_eq!(score_of(8, &[0.0, 0.0]).standard_error_mm, 0.0);
     }
 
     #[test]

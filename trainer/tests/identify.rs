@@ -4,8 +4,11 @@ mod common;
 
 use hexacomp_core::{Geometry, inverse_kinematics};
 use hexacomp_trainer::Error;
+use hexacomp_trainer::distill::DistillOptions;
 use hexacomp_trainer::identify::{IdentifyOptions, PARAMETERS, PHYSICAL, identify};
+use hexacomp_trainer::physical_candidate::{CandidateOptions, physical_candidate};
 use hexacomp_trainer::pitch_resolution::{PITCH_RESOLUTIONS, chosen_resolution};
+use hexacomp_trainer::train::TrainOptions;
 use hexacomp_virtual::{DEFAULT_MACHINE_SEED, ErrorModel, ErrorVariant};
 
 #[test]
@@ -189,11 +192,39 @@ fn the_lead_screw_resolution_is_chosen_by_held_out_error_and_follows_a_short_per
         choice.scores[0].cross_validated_rmse_mm > 1.2 * chosen.cross_validated_rmse_mm,
         "{choice:?}"
     );
-    // The same choice whichever cores ran which fold.
+    // The physical candidate is identified, scored and carried with the chosen resolution.
+    let cheap = DistillOptions {
+        samples: 40,
+        seed: 1,
+        train: TrainOptions {
+            hidden_sizes: vec![2],
+            restarts: 1,
+            max_iterations: 10,
+            ..DistillOptions::default().train
+        },
+    };
+    let candidate = physical_candidate(
+        &g,
+        &kept,
+        &solved.corrections,
+        &TrainOptions {
+            seed: 1,
+            ..TrainOptions::default()
+        },
+        &CandidateOptions {
+            folds: 5,
+            distill: cheap,
+            repeatability_mm: 0.004,
+        },
+        &|_| {},
+    )
+    .unwrap();
+    assert_eq!(candidate.resolution, choice);
     assert_eq!(
-        chosen_resolution(&g, &kept, &solved.corrections, 1, 5).unwrap(),
-        choice
+        candidate.cross_validated_rmse_mm,
+        chosen.cross_validated_rmse_mm
     );
+    assert!(candidate.networks_uncertainty.is_ok());
     // Rows out of step with their corrections, or too few folds, are refused.
     let mut shuffled = solved.corrections.clone();
     shuffled.swap(0, 1);

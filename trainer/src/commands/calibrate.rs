@@ -19,6 +19,7 @@ use hexacomp_trainer::physical_candidate::{
     CandidateOptions, NetworksUncertainty, physical_candidate,
 };
 use hexacomp_trainer::pipeline::{Pipeline, Solved};
+use hexacomp_trainer::pitch_resolution::PITCH_RESOLUTIONS;
 use hexacomp_trainer::plan::PlanOptions;
 use hexacomp_trainer::train::{
     Architecture, CROSS_VALIDATION_FOLDS, TrainOptions, Trained, cross_validated_rmse,
@@ -499,23 +500,26 @@ fn physical(
         poses,
         candidate.score_mm
     );
-    let tried: Vec<String> = candidate
-        .resolution
-        .scores
+    let resolution = &candidate.resolution;
+    let tried: Vec<String> = PITCH_RESOLUTIONS
         .iter()
-        .map(|s| {
-            format!(
-                "{}: {:.4} ± {:.4} mm",
-                s.pitch_basis, s.cross_validated_rmse_mm, s.standard_error_mm
-            )
+        .filter_map(|&basis| {
+            Some(match resolution.outcome(basis)? {
+                Ok(s) => format!(
+                    "{basis}: {:.4} ± {:.4} mm",
+                    s.cross_validated_rmse_mm, s.standard_error_mm
+                ),
+                Err(why) => format!("{basis}: left out, {why}"),
+            })
         })
         .collect();
     println!(
         "physical model: lead-screw curves of {} B-spline coefficients per leg, the fewest \
          cross-validated within one standard error of the best ({})",
-        candidate.resolution.options.pitch_basis,
+        resolution.options.pitch_basis,
         tried.join(", ")
     );
+
     let f = candidate.fidelity;
     // The departure's RMS enters the score; its largest value is where the networks follow the
     // model least, at the edge of the measured range.

@@ -175,7 +175,8 @@ pub fn print_evaluation(evaluation: &Evaluation, validation: usize) {
     println!(
         "The physical model's lead-screw resolution: B-spline coefficients per leg, the fewest \
          whose {CROSS_VALIDATION_FOLDS}-fold cross-validated error (Eq. 21, mm, ± its standard \
-         error) is within one standard error of the best"
+         error) is within one standard error of the best (\"left out\": could not be \
+         cross-validated)"
     );
     let mut header = vec!["configurations".to_string(), "chosen".to_string()];
     header.extend(PITCH_RESOLUTIONS.iter().map(|n| format!("{n} (mm)")));
@@ -188,12 +189,16 @@ pub fn print_evaluation(evaluation: &Evaluation, validation: usize) {
         match &size.resolution {
             Some(resolution) => {
                 row.push(resolution.options.pitch_basis.to_string());
-                row.extend(resolution.scores.iter().map(|s| {
-                    format!(
-                        "{:.4} ± {:.4}",
-                        s.cross_validated_rmse_mm, s.standard_error_mm
-                    )
-                }));
+                row.extend(PITCH_RESOLUTIONS.iter().map(
+                    |&basis| match resolution.outcome(basis) {
+                        Some(Ok(s)) => format!(
+                            "{:.4} ± {:.4}",
+                            s.cross_validated_rmse_mm, s.standard_error_mm
+                        ),
+                        Some(Err(_)) => "left out".to_string(),
+                        None => "—".to_string(),
+                    },
+                ));
             }
             None => {
                 row.push(format!(
