@@ -11,7 +11,7 @@ use hexacomp_trainer::distill::DistillOptions;
 use hexacomp_trainer::identify::{PHYSICAL, identify};
 use hexacomp_trainer::physical_candidate::carried_into_networks;
 use hexacomp_trainer::pipeline::Pipeline;
-use hexacomp_trainer::pitch_resolution::chosen_if_cross_validated;
+use hexacomp_trainer::pitch_resolution::{chosen_if_cross_validated, identifications};
 use hexacomp_trainer::plan::PlanOptions;
 use hexacomp_trainer::train::{Architecture, CROSS_VALIDATION_FOLDS, training_work};
 use hexacomp_virtual::{ErrorModel, ErrorVariant, VirtualPlatform};
@@ -51,8 +51,21 @@ pub struct Calibration {
     pub seconds: f64,
 }
 
+/// A progress bar on standard error of `total` units, with what it measures and the time left.
+fn work_bar(total: u64, what: &str) -> ProgressBar {
+    let bar = ProgressBar::new(total);
+    bar.set_style(
+        ProgressStyle::with_template(&format!(
+            "{what} [{{bar:30}}] {{percent}}% ({{elapsed}}, about {{eta}} left)"
+        ))
+        .expect("valid template")
+        .progress_chars("=> "),
+    );
+    bar
+}
+
 /// Calibrates `platform` on `configurations` planned poses, identifies the physical model and
-/// carries it into networks, with a progress bar on standard error.
+/// carries it into networks, with progress bars on standard error.
 pub fn calibrate(
     platform: &mut VirtualPlatform,
     configurations: usize,
@@ -77,18 +90,9 @@ pub fn calibrate(
         seed,
         ..DistillOptions::default()
     };
-    let bar = ProgressBar::new(training_work(
-        options.samples + kept.len(),
-        Architecture::Decoupled,
-        &options.train,
-    ));
-    bar.set_style(
-        ProgressStyle::with_template(
-            "identifying the physical model, carrying it into networks [{bar:30}] {percent}% \
-             ({elapsed}, about {eta} left)",
-        )
-        .expect("valid template")
-        .progress_chars("=> "),
+    let choosing = work_bar(
+        identifications(CROSS_VALIDATION_FOLDS),
+        "choosing the physical model's lead-screw resolution",
     );
     let identification = chosen_if_cross_validated(
         &geometry,
@@ -96,9 +100,19 @@ pub fn calibrate(
         &solved.corrections,
         seed,
         CROSS_VALIDATION_FOLDS,
+        &|n| choosing.inc(n),
     )
     .context("choosing the virtual platform's lead-screw resolution")?
     .map_or(PHYSICAL, |r| r.options);
+    choosing.finish_and_clear();
+    let bar = work_bar(
+        training_work(
+            options.samples + kept.len(),
+            Architecture::Decoupled,
+            &options.train,
+        ),
+        "identifying the physical model, carrying it into networks",
+    );
     let physical = identify(&geometry, &kept, &identification)
         .context("identifying the virtual platform's physical model")?
         .model;
@@ -120,8 +134,9 @@ pub fn calibrate(
     model.provenance.configurations = kept.len();
     model.provenance.source = format!(
         "hexacomp-bench {} virtual calibration ({configurations} configurations): physical \
-         model as networks",
-        env!("CARGO_PKG_VERSION")
+         model ({} lead-screw coefficients per leg) as networks",
+        env!("CARGO_PKG_VERSION"),
+        identification.pitch_basis
     );
     Ok(Calibration {
         model,

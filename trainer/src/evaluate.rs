@@ -335,6 +335,7 @@ pub fn evaluate(
             &robust_rows,
             options.train.seed,
             CROSS_VALIDATION_FOLDS,
+            &|_| {},
         )?;
         let identification = resolution.as_ref().map_or(PHYSICAL, |r| r.options);
         let physical = identify(geometry, &solved, &identification)?.model;

@@ -52,6 +52,7 @@ pub mod iso9283;
 pub mod linuxcnc;
 pub mod linuxcnc_machine;
 pub mod manual;
+mod parallel;
 pub mod physical;
 pub mod physical_candidate;
 pub mod pipeline;

@@ -10,15 +10,15 @@
 //! departure from the model (measured on fresh poses) is added in quadrature: the score is that
 //! of what the model file will command.
 
-use hexacomp_core::records::{JointCorrection, MeasuredConfiguration};
+use hexacomp_core::records::MeasuredConfiguration;
 use hexacomp_core::{Geometry, LEGS, Pose};
 
 use crate::distill::{DistillOptions, Fidelity, distill, fidelity};
 use crate::error::{Error, Result};
 use crate::identify::{IdentifyOptions, identify};
 use crate::physical::PhysicalModel;
-use crate::pitch_resolution::{ResolutionChoice, chosen_resolution};
-use crate::train::{TrainOptions, Trained};
+use crate::pitch_resolution::ResolutionChoice;
+use crate::train::Trained;
 use crate::uncertainty::UncertaintySource;
 
 /// Poses the distilled networks are checked on.
@@ -43,43 +43,33 @@ pub struct PhysicalCandidate {
     /// The uncertainty of networks trained on the same configurations (the distilled networks
     /// carry theirs already), or why there is none (then neither has one).
     pub networks_uncertainty: Result<NetworksUncertainty>,
-    /// Wall-clock seconds of the identifications, the distillation and the uncertainty.
+    /// Wall-clock seconds of the identification, the distillation and the uncertainty (the
+    /// choice of the resolution before them not included).
     pub seconds: f64,
 }
 
-/// How the physical model is scored, carried into networks and given its uncertainty.
+/// How the physical model is carried into networks and given its uncertainty.
 #[derive(Debug, Clone, PartialEq)]
 pub struct CandidateOptions {
-    /// Folds of the cross-validation (those the networks are scored on).
-    pub folds: usize,
     /// How the model is carried into networks.
     pub distill: DistillOptions,
     /// The machine's repeatability: σ of one leg's length error at every move, mm.
     pub repeatability_mm: f64,
 }
 
-/// Identifies, scores and distills the physical model of the kept `measurements` and their
-/// robust `corrections` (one row per measurement, in the same order), its lead-screw resolution
-/// chosen and its error cross-validated on the folds
-/// [`crate::train::folds`]`(rows, options.folds, train.seed)` the networks are scored on. The
-/// networks carry the model's position uncertainty for the machine's repeatability, their own
-/// departure from the model added.
+/// Identifies, scores and distills the physical model of the kept `measurements` with the
+/// lead-screw resolution `resolution` chose on them
+/// ([`crate::pitch_resolution::chosen_resolution`], on the folds the networks are scored on),
+/// its cross-validated error the chosen one's. The networks carry the model's position
+/// uncertainty for the machine's repeatability, their own departure from the model added.
 pub fn physical_candidate(
     nominal: &Geometry,
     measurements: &[MeasuredConfiguration],
-    corrections: &[JointCorrection],
-    train: &TrainOptions,
+    resolution: ResolutionChoice,
     options: &CandidateOptions,
     progress: &(dyn Fn(u64) + Sync),
 ) -> Result<PhysicalCandidate> {
     let start = std::time::Instant::now();
-    let resolution = chosen_resolution(
-        nominal,
-        measurements,
-        corrections,
-        train.seed,
-        options.folds,
-    )?;
     let cross_validated_rmse_mm = resolution.chosen().cross_validated_rmse_mm;
     let physical = identify(nominal, measurements, &resolution.options)?.model;
     let carried = carried_into_networks(

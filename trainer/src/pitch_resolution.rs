@@ -15,6 +15,7 @@ use hexacomp_core::{ForwardOptions, Geometry, LEGS, forward_kinematics};
 
 use crate::error::{Error, Result};
 use crate::identify::{IdentifyOptions, PHYSICAL, identify};
+use crate::parallel::in_parallel;
 use crate::physical::PhysicalModel;
 use crate::train::folds;
 
@@ -79,13 +80,15 @@ impl ResolutionChoice {
 /// robust `corrections` (one row per measurement, in the same order) on the folds
 /// [`folds`]`(rows, fold_count, seed)`: the coarsest whose model, identified without each fold,
 /// predicts the fold's corrections within one standard error of the best. The
-/// identifications run on the machine's cores.
+/// identifications run on the machine's cores; `progress(1)` reports each one done (of
+/// [`identifications`]).
 pub fn chosen_resolution(
     nominal: &Geometry,
     measurements: &[MeasuredConfiguration],
     corrections: &[JointCorrection],
     seed: u64,
     fold_count: usize,
+    progress: &(dyn Fn(u64) + Sync),
 ) -> Result<ResolutionChoice> {
     if measurements.len() != corrections.len()
         || measurements
@@ -116,7 +119,9 @@ pub fn chosen_resolution(
             pitch_basis: basis,
             ..PHYSICAL
         };
-        fold_miss(nominal, measurements, corrections, &fold, f, &options)
+        let missed = fold_miss(nominal, measurements, corrections, &fold, f, &options);
+        progress(1);
+        missed
     });
     let mut missed = missed.into_iter();
     let mut scores = Vec::with_capacity(PITCH_RESOLUTIONS.len());
@@ -173,6 +178,12 @@ fn scored(
     Ok(score)
 }
 
+/// The identifications [`chosen_resolution`] runs on `fold_count` folds: each resolution
+/// without each fold.
+pub fn identifications(fold_count: usize) -> u64 {
+    (PITCH_RESOLUTIONS.len() * fold_count) as u64
+}
+
 /// [`chosen_resolution`] when every fold has two configurations or more to hold out, `None`
 /// with fewer (then the physical model is identified with [`PHYSICAL`]'s eight coefficients).
 pub fn chosen_if_cross_validated(
@@ -181,11 +192,20 @@ pub fn chosen_if_cross_validated(
     corrections: &[JointCorrection],
     seed: u64,
     fold_count: usize,
+    progress: &(dyn Fn(u64) + Sync),
 ) -> Result<Option<ResolutionChoice>> {
     if measurements.len() < 2 * fold_count {
         return Ok(None);
     }
-    chosen_resolution(nominal, measurements, corrections, seed, fold_count).map(Some)
+    chosen_resolution(
+        nominal,
+        measurements,
+        corrections,
+        seed,
+        fold_count,
+        progress,
+    )
+    .map(Some)
 }
 
 /// The score with the fewest coefficients whose error is within one standard error of the
@@ -222,32 +242,6 @@ fn score_of(basis: usize, squared: &[f64]) -> ResolutionScore {
             0.0
         },
     }
-}
-
-/// `run` on every job, spread over the machine's cores; the results in the jobs' order.
-fn in_parallel<J: Sync, R: Send>(jobs: &[J], run: impl Fn(&J) -> R + Sync) -> Vec<R> {
-    let workers = std::thread::available_parallelism()
-        .map_or(1, |n| n.get())
-        .clamp(1, jobs.len().max(1));
-    let run = &run;
-    let mut indexed: Vec<(usize, R)> = std::thread::scope(|scope| {
-        let handles: Vec<_> = (0..workers)
-            .map(|w| {
-                scope.spawn(move || {
-                    (w..jobs.len())
-                        .step_by(workers)
-                        .map(|j| (j, run(&jobs[j])))
-                        .collect::<Vec<_>>()
-                })
-            })
-            .collect();
-        handles
-            .into_iter()
-            .flat_map(|h| h.join().expect("identification worker"))
-            .collect()
-    });
-    indexed.sort_by_key(|(j, _)| *j);
-    indexed.into_iter().map(|(_, r)| r).collect()
 }
 
 /// The squared miss, summed over the legs, of each of fold `f`'s configurations (by index) by
@@ -340,7 +334,11 @@ mod tests {
     #[test]
     fn a_resolution_whose_fold_fails_or_misses_without_bound_is_left_out_and_says_why() {
         let fold = |misses: &[(usize, f64)]| Ok(misses.to_vec());
-        let good = scored(8, 4, vec![fold(&[(0, 1.0), (2, 4.0)]), fold(&[(1, 1.0), (3, 4.0)])]);
+        let good = scored(
+            8,
+            4,
+            vec![fold(&[(0, 1.0), (2, 4.0)]), fold(&[(1, 1.0), (3, 4.0)])],
+        );
         assert_eq!(good, Ok(score_of(8, &[1.0, 1.0, 4.0, 4.0])));
         let failed = scored(
             12,

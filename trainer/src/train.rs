@@ -22,6 +22,7 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 
 use crate::error::{Error, Result};
+use crate::parallel::in_parallel;
 
 /// The two architectures of Fig. 3–4.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -551,37 +552,15 @@ fn sweep(
     network: u64,
     progress: &(dyn Fn(u64) + Sync),
 ) -> (Vec<SweepPoint>, FitStops) {
-    let workers = std::thread::available_parallelism()
-        .map_or(1, |n| n.get())
-        .min(options.hidden_sizes.len());
-    let results: Vec<(SweepPoint, FitStops)> = std::thread::scope(|scope| {
-        let handles: Vec<_> = (0..workers)
-            .map(|w| {
-                scope.spawn(move || {
-                    options
-                        .hidden_sizes
-                        .iter()
-                        .skip(w)
-                        .step_by(workers)
-                        .map(|&hidden| {
-                            let seed = seed_for(options.seed, network, hidden);
-                            let (net, training_rmse_mm, stops) =
-                                fit(training, hidden, options, seed, progress);
-                            let point = SweepPoint {
-                                hidden,
-                                training_rmse_mm,
-                                validation_rmse_mm: rmse(&net, validation),
-                            };
-                            (point, stops)
-                        })
-                        .collect::<Vec<_>>()
-                })
-            })
-            .collect();
-        handles
-            .into_iter()
-            .flat_map(|h| h.join().expect("sweep worker"))
-            .collect()
+    let results = in_parallel(&options.hidden_sizes, |&hidden| {
+        let seed = seed_for(options.seed, network, hidden);
+        let (net, training_rmse_mm, stops) = fit(training, hidden, options, seed, progress);
+        let point = SweepPoint {
+            hidden,
+            training_rmse_mm,
+            validation_rmse_mm: rmse(&net, validation),
+        };
+        (point, stops)
     });
     let stops = results
         .iter()

@@ -15,6 +15,7 @@ use hexacomp_trainer::identify::identify;
 use hexacomp_trainer::physical::{PhysicalModel, PitchCurves};
 use hexacomp_trainer::physical_candidate::{CandidateOptions, physical_candidate};
 use hexacomp_trainer::pipeline::Pipeline;
+use hexacomp_trainer::pitch_resolution::chosen_resolution;
 use hexacomp_trainer::plan::PlanOptions;
 use hexacomp_trainer::train::{Architecture, TrainOptions, cross_validated_rmse, folds};
 use hexacomp_virtual::{DEFAULT_MACHINE_SEED, ErrorModel, ErrorVariant, VirtualPlatform};
@@ -225,30 +226,21 @@ fn the_physical_models_cross_validation_predicts_each_fold_without_it() {
     let solved = pipeline.solve(&g, &measurements).unwrap();
     let kept = solved.kept_of(&measurements);
     assert_eq!(kept.len(), 20);
-    let cheap = DistillOptions {
-        samples: 40,
-        seed: 1,
-        train: TrainOptions {
-            hidden_sizes: vec![2],
-            restarts: 1,
-            max_iterations: 10,
-            ..DistillOptions::default().train
-        },
+    let choose = |folds| {
+        chosen_resolution(
+            &g,
+            &kept,
+            &solved.corrections,
+            pipeline.train.seed,
+            folds,
+            &|_| {},
+        )
     };
-    let options = |folds| CandidateOptions {
-        folds,
-        distill: cheap.clone(),
+    let options = CandidateOptions {
+        distill: common::cheap_distill(),
         repeatability_mm: 0.004,
     };
-    let candidate = physical_candidate(
-        &g,
-        &kept,
-        &solved.corrections,
-        &pipeline.train,
-        &options(5),
-        &|_| {},
-    )
-    .unwrap();
+    let candidate = physical_candidate(&g, &kept, choose(5).unwrap(), &options, &|_| {}).unwrap();
     // In sample, by hand: the model identified on all twenty, compared where each robust
     // correction is exact (the pose reached, the nominal legs q − Δq).
     let all = identify(&g, &kept, &candidate.resolution.options)
@@ -277,18 +269,7 @@ fn the_physical_models_cross_validation_predicts_each_fold_without_it() {
     assert!(candidate.score_mm >= cross_validated);
     // No folds, or one, cannot score it.
     for folds in [0, 1] {
-        assert!(
-            physical_candidate(
-                &g,
-                &kept,
-                &solved.corrections,
-                &pipeline.train,
-                &options(folds),
-                &|_| {}
-            )
-            .is_err(),
-            "{folds} folds"
-        );
+        assert!(choose(folds).is_err(), "{folds} folds");
     }
 }
 

@@ -11,9 +11,10 @@ use hexacomp_core::records::{MeasuredConfiguration, NamedPose};
 use hexacomp_core::sampling::{SamplerOptions, WorkspaceSampler};
 use hexacomp_core::stats::{PoseErrorNorm, PoseErrorStats};
 use hexacomp_trainer::acquire::measure_plan;
+use hexacomp_trainer::distill::DistillOptions;
 use hexacomp_trainer::pipeline::{Calibration, Pipeline};
 use hexacomp_trainer::plan::{PlanOptions, numbered_rows, plan};
-use hexacomp_trainer::train::Architecture;
+use hexacomp_trainer::train::{Architecture, TrainOptions};
 use hexacomp_virtual::{ErrorModel, VirtualPlatform};
 
 /// `count` planned poses as file rows (ids 1..).
@@ -105,4 +106,19 @@ pub fn blind_decoupled(
             })
             .collect();
     (PoseErrorStats::of(&errors), calibration)
+}
+
+/// Distillation settings that run in a fraction of a second: for tests of what surrounds the
+/// networks, not of their fit.
+pub fn cheap_distill() -> DistillOptions {
+    DistillOptions {
+        samples: 40,
+        seed: 1,
+        train: TrainOptions {
+            hidden_sizes: vec![2],
+            restarts: 1,
+            max_iterations: 10,
+            ..DistillOptions::default().train
+        },
+    }
 }

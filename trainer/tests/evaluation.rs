@@ -135,6 +135,7 @@ fn redo(g: &Geometry, o: &EvaluationOptions) -> Redone {
             &first(&robust, n),
             o.train.seed,
             CROSS_VALIDATION_FOLDS,
+            &|_| {},
         )
         .unwrap()
         .map_or(PHYSICAL, |r| r.options);

@@ -4,11 +4,9 @@ mod common;
 
 use hexacomp_core::{Geometry, inverse_kinematics};
 use hexacomp_trainer::Error;
-use hexacomp_trainer::distill::DistillOptions;
 use hexacomp_trainer::identify::{IdentifyOptions, PARAMETERS, PHYSICAL, identify};
 use hexacomp_trainer::physical_candidate::{CandidateOptions, physical_candidate};
-use hexacomp_trainer::pitch_resolution::{PITCH_RESOLUTIONS, chosen_resolution};
-use hexacomp_trainer::train::TrainOptions;
+use hexacomp_trainer::pitch_resolution::{PITCH_RESOLUTIONS, chosen_resolution, identifications};
 use hexacomp_virtual::{DEFAULT_MACHINE_SEED, ErrorModel, ErrorVariant};
 
 #[test]
@@ -144,7 +142,13 @@ fn the_lead_screw_resolution_is_chosen_by_held_out_error_and_follows_a_short_per
     let (_, measurements) = pipeline.measure_virtual(&mut platform).unwrap();
     let solved = pipeline.solve(&g, &measurements).unwrap();
     let kept = solved.kept_of(&measurements);
-    let choice = chosen_resolution(&g, &kept, &solved.corrections, 1, 5).unwrap();
+    let done = std::sync::atomic::AtomicU64::new(0);
+    let choice = chosen_resolution(&g, &kept, &solved.corrections, 1, 5, &|n| {
+        done.fetch_add(n, std::sync::atomic::Ordering::Relaxed);
+    })
+    .unwrap();
+    // Every identification reported once.
+    assert_eq!(done.into_inner(), identifications(5));
     let tried: Vec<usize> = choice.scores.iter().map(|s| s.pitch_basis).collect();
     assert_eq!(tried, PITCH_RESOLUTIONS, "{choice:?}");
     // The coarsest within one standard error of the lowest held-out error wins, and the chosen
@@ -193,27 +197,12 @@ fn the_lead_screw_resolution_is_chosen_by_held_out_error_and_follows_a_short_per
         "{choice:?}"
     );
     // The physical candidate is identified, scored and carried with the chosen resolution.
-    let cheap = DistillOptions {
-        samples: 40,
-        seed: 1,
-        train: TrainOptions {
-            hidden_sizes: vec![2],
-            restarts: 1,
-            max_iterations: 10,
-            ..DistillOptions::default().train
-        },
-    };
     let candidate = physical_candidate(
         &g,
         &kept,
-        &solved.corrections,
-        &TrainOptions {
-            seed: 1,
-            ..TrainOptions::default()
-        },
+        choice.clone(),
         &CandidateOptions {
-            folds: 5,
-            distill: cheap,
+            distill: common::cheap_distill(),
             repeatability_mm: 0.004,
         },
         &|_| {},
@@ -230,7 +219,7 @@ fn the_lead_screw_resolution_is_chosen_by_held_out_error_and_follows_a_short_per
     shuffled.swap(0, 1);
     for (rows, folds) in [(&shuffled, 5), (&solved.corrections, 1)] {
         assert!(matches!(
-            chosen_resolution(&g, &kept, rows, 1, folds),
+            chosen_resolution(&g, &kept, rows, 1, folds, &|_| {}),
             Err(Error::InvalidSetting(_))
         ));
     }

@@ -19,7 +19,7 @@ use hexacomp_trainer::physical_candidate::{
     CandidateOptions, NetworksUncertainty, physical_candidate,
 };
 use hexacomp_trainer::pipeline::{Pipeline, Solved};
-use hexacomp_trainer::pitch_resolution::PITCH_RESOLUTIONS;
+use hexacomp_trainer::pitch_resolution::{PITCH_RESOLUTIONS, chosen_resolution, identifications};
 use hexacomp_trainer::plan::PlanOptions;
 use hexacomp_trainer::train::{
     Architecture, CROSS_VALIDATION_FOLDS, TrainOptions, Trained, cross_validated_rmse,
@@ -471,24 +471,33 @@ fn physical(
     hexacomp_trainer::error::Result<NetworksUncertainty>,
 )> {
     let options = CandidateOptions {
-        folds: CROSS_VALIDATION_FOLDS,
         distill: DistillOptions::default(),
         repeatability_mm,
     };
+    let kept = solved.kept_of(measurements);
+    let choosing = Instant::now();
+    let bar = work_bar(
+        identifications(CROSS_VALIDATION_FOLDS),
+        "choosing the physical model's lead-screw resolution (each without each fold)".into(),
+    );
+    let resolution = chosen_resolution(
+        geometry,
+        &kept,
+        &solved.corrections,
+        pipeline.train.seed,
+        CROSS_VALIDATION_FOLDS,
+        &|n| bar.inc(n),
+    );
+    bar.finish_and_clear();
+    let resolution = resolution?;
+    let choosing = choosing.elapsed().as_secs_f64();
     // The drawn poses and the measured configurations' own.
     let poses = options.distill.samples + solved.corrections.len();
     let bar = work_bar(
         training_work(poses, Architecture::Decoupled, &options.distill.train),
         "identifying the physical model, carrying it into networks".into(),
     );
-    let identified = physical_candidate(
-        geometry,
-        &solved.kept_of(measurements),
-        &solved.corrections,
-        &pipeline.train,
-        &options,
-        &|n| bar.inc(n),
-    );
+    let identified = physical_candidate(geometry, &kept, resolution, &options, &|n| bar.inc(n));
     bar.finish_and_clear();
     let mut candidate = identified?;
     let model = &mut candidate.distilled.model;
@@ -543,7 +552,7 @@ fn physical(
             model.hidden_nodes(),
             candidate.score_mm,
             f.rms_mm,
-            candidate.seconds,
+            choosing + candidate.seconds,
             candidate.distilled.stops
         ),
         score_mm: candidate.score_mm,
