@@ -94,28 +94,31 @@ pub fn calibrate(
         identifications(CROSS_VALIDATION_FOLDS),
         "choosing the physical model's lead-screw resolution",
     );
-    let identification = chosen_if_cross_validated(
+    let resolution = chosen_if_cross_validated(
         &geometry,
         &kept,
         &solved.corrections,
         seed,
         CROSS_VALIDATION_FOLDS,
         &|n| choosing.inc(n),
-    )
-    .context("choosing the virtual platform's lead-screw resolution")?
-    .map_or(PHYSICAL, |r| r.options);
+    );
     choosing.finish_and_clear();
+    let resolution = resolution.context("choosing the virtual platform's lead-screw resolution")?;
+    for (basis, why) in resolution.iter().flat_map(|r| &r.failed) {
+        eprintln!("{basis} lead-screw coefficients per leg left out: {why}");
+    }
+    let identification = resolution.map_or(PHYSICAL, |r| r.options);
+    let physical = identify(&geometry, &kept, &identification)
+        .context("identifying the virtual platform's physical model")?
+        .model;
     let bar = work_bar(
         training_work(
             options.samples + kept.len(),
             Architecture::Decoupled,
             &options.train,
         ),
-        "identifying the physical model, carrying it into networks",
+        "carrying the physical model into networks",
     );
-    let physical = identify(&geometry, &kept, &identification)
-        .context("identifying the virtual platform's physical model")?
-        .model;
     let carried = carried_into_networks(
         &geometry,
         &physical,
@@ -124,9 +127,10 @@ pub fn calibrate(
         &options,
         error_model().repeatability_sigma_mm,
         &|n| bar.inc(n),
-    )
-    .context("carrying the virtual platform's physical model into networks")?;
+    );
     bar.finish_and_clear();
+    let carried =
+        carried.context("carrying the virtual platform's physical model into networks")?;
     if let Err(e) = &carried.uncertainty {
         eprintln!("the model carries no uncertainty: {e}");
     }

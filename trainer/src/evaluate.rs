@@ -316,8 +316,9 @@ pub fn evaluate(
             identify(geometry, &measurements[..n], &IdentifyOptions::default())?.geometry;
         // The physical model as `calibrate` makes it: its lead-screw resolution chosen by
         // cross-validation on the configurations whose robust corrections were solved (eight
-        // with too few to cross-validate), on the folds of the training seed (`calibrate`'s
-        // when it is given the same seed).
+        // with too few to cross-validate), on the folds of the training seed (the command's
+        // default, 1: `calibrate --seed 1`'s folds). No resolution scored at a size ends the
+        // evaluation, naming the size.
         let robust_rows = rows(&robust, n);
         let solved: Vec<MeasuredConfiguration> = robust_rows
             .iter()
@@ -336,7 +337,8 @@ pub fn evaluate(
             options.train.seed,
             CROSS_VALIDATION_FOLDS,
             &|_| {},
-        )?;
+        )
+        .map_err(|e| Error::InsufficientData(format!("at {n} configurations: {e}")))?;
         let identification = resolution.as_ref().map_or(PHYSICAL, |r| r.options);
         let physical = identify(geometry, &solved, &identification)?.model;
         let left_by_physical: Vec<JointCorrection> = robust_rows

@@ -4,9 +4,18 @@
 
 /// `run` on every job, spread over the machine's cores; the results in the jobs' order.
 pub(crate) fn in_parallel<J: Sync, R: Send>(jobs: &[J], run: impl Fn(&J) -> R + Sync) -> Vec<R> {
-    let workers = std::thread::available_parallelism()
-        .map_or(1, |n| n.get())
-        .clamp(1, jobs.len().max(1));
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    in_parallel_on(cores, jobs, run)
+}
+
+/// `run` on every job, spread over `workers` threads (at least one, at most one per job); the
+/// results in the jobs' order.
+fn in_parallel_on<J: Sync, R: Send>(
+    workers: usize,
+    jobs: &[J],
+    run: impl Fn(&J) -> R + Sync,
+) -> Vec<R> {
+    let workers = workers.clamp(1, jobs.len().max(1));
     let run = &run;
     let mut indexed: Vec<(usize, R)> = std::thread::scope(|scope| {
         let handles: Vec<_> = (0..workers)
@@ -21,7 +30,10 @@ pub(crate) fn in_parallel<J: Sync, R: Send>(jobs: &[J], run: impl Fn(&J) -> R + 
             .collect();
         handles
             .into_iter()
-            .flat_map(|h| h.join().expect("a worker panicked"))
+            .flat_map(|h| {
+                h.join()
+                    .unwrap_or_else(|panic| std::panic::resume_unwind(panic))
+            })
             .collect()
     });
     indexed.sort_by_key(|(j, _)| *j);
@@ -33,14 +45,17 @@ mod tests {
     use super::*;
 
     #[test]
-    fn the_results_come_back_in_the_jobs_order() {
+    fn the_results_come_back_in_the_jobs_order_on_any_number_of_workers() {
         let jobs: Vec<u64> = (0..37).collect();
-        let squares = in_parallel(&jobs, |j| {
-            // Later jobs finish first.
-            std::thread::sleep(std::time::Duration::from_micros(40 - j));
-            j * j
-        });
-        assert_eq!(squares, jobs.iter().map(|j| j * j).collect::<Vec<_>>());
-        assert!(in_parallel(&[] as &[u64], |j| *j).is_empty());
+        let squares: Vec<u64> = jobs.iter().map(|j| j * j).collect();
+        for workers in [0, 1, 2, 3, 5, 40] {
+            assert_eq!(
+                in_parallel_on(workers, &jobs, |j| j * j),
+                squares,
+                "{workers}"
+            );
+            assert!(in_parallel_on(workers, &[] as &[u64], |j| *j).is_empty());
+        }
+        assert_eq!(in_parallel(&jobs, |j| j * j), squares);
     }
 }

@@ -1,6 +1,7 @@
-//! The physical model as a candidate for the model file: its lead-screw resolution chosen and
-//! its error cross-validated on the folds the networks are ([`crate::pitch_resolution`],
-//! [`crate::train::cross_validated_rmse`]), and carried into networks ([`crate::distill`]).
+//! The physical model as a candidate for the model file: identified with the lead-screw
+//! resolution chosen, and its error cross-validated, on the folds the networks are
+//! ([`crate::pitch_resolution`], beside [`crate::train::cross_validated_rmse`]), and carried
+//! into networks ([`crate::distill`]).
 //!
 //! Its score is comparable with the networks' cross-validated error (Eq. 21,
 //! `√Σ_i RMSE_i²` over the six legs, mm): the physical model is identified without each fold,
@@ -191,5 +192,41 @@ impl NetworksUncertainty {
         let excess =
             (score_mm.powi(2) - self.physical_cross_validated_mm.powi(2)).max(0.0) / LEGS as f64;
         self.source.fitted(repeatability_mm.powi(2) + excess)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::identify::PHYSICAL;
+    use crate::physical::PitchCurves;
+
+    #[test]
+    fn a_model_is_not_carried_with_the_options_of_another_resolution() {
+        let nominal = Geometry::prototype();
+        let mut physical = PhysicalModel::geometric(nominal.clone());
+        physical.pitch = PitchCurves::zero(nominal.leg_range, 8);
+        let twelve = IdentifyOptions {
+            pitch_basis: 12,
+            ..PHYSICAL
+        };
+        let refused = carried_into_networks(
+            &nominal,
+            &physical,
+            &twelve,
+            &[],
+            &DistillOptions::default(),
+            0.004,
+            &|_| {},
+        );
+        match refused {
+            Err(Error::InvalidSetting(why)) => {
+                assert!(
+                    why.contains("has 8") && why.contains("identification 12"),
+                    "{why}"
+                )
+            }
+            other => panic!("expected a refusal, got {:?}", other.map(|c| c.fidelity)),
+        }
     }
 }

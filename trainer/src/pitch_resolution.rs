@@ -123,12 +123,23 @@ pub fn chosen_resolution(
         progress(1);
         missed
     });
+    choice_of(measurements.len(), fold_count, missed)
+}
+
+/// The choice from every job's result (each resolution of [`PITCH_RESOLUTIONS`] in turn, its
+/// folds in order) over `configurations` configurations: the resolutions that could not be
+/// scored left out and named; an error when none could.
+fn choice_of(
+    configurations: usize,
+    fold_count: usize,
+    missed: Vec<Result<Vec<(usize, f64)>>>,
+) -> Result<ResolutionChoice> {
     let mut missed = missed.into_iter();
     let mut scores = Vec::with_capacity(PITCH_RESOLUTIONS.len());
     let mut failed = Vec::new();
     for basis in PITCH_RESOLUTIONS {
-        let folds: Vec<_> = missed.by_ref().take(fold_count).collect();
-        match scored(basis, measurements.len(), folds) {
+        let fold_results: Vec<_> = missed.by_ref().take(fold_count).collect();
+        match scored(basis, configurations, fold_results) {
             Ok(score) => scores.push(score),
             Err(why) => failed.push((basis, why)),
         }
@@ -171,8 +182,8 @@ fn scored(
     let score = score_of(basis, &squared);
     if !(score.cross_validated_rmse_mm.is_finite() && score.standard_error_mm.is_finite()) {
         return Err(format!(
-            "cross-validated to {} mm",
-            score.cross_validated_rmse_mm
+            "cross-validated to {} ± {} mm",
+            score.cross_validated_rmse_mm, score.standard_error_mm
         ));
     }
     Ok(score)
@@ -353,7 +364,7 @@ mod tests {
             Err("identified without fold 2: insufficient data: leg 3 outside the stroke".into())
         );
         let unbounded = scored(16, 2, vec![fold(&[(0, f64::INFINITY)]), fold(&[(1, 1.0)])]);
-        assert!(unbounded.unwrap_err().contains("cross-validated to inf"));
+        assert!(unbounded.unwrap_err().contains("cross-validated to inf ±"));
         // Nothing missed: a zero error with a zero standard error, not an undefined one.
         assert_eq!(score_of(8, &[0.0, 0.0]).standard_error_mm, 0.0);
     }
@@ -367,5 +378,60 @@ mod tests {
         assert!((s.cross_validated_rmse_mm - 2.5_f64.sqrt()).abs() < 1e-15);
         let expected = (0.75_f64).sqrt() / (2.0 * 2.5_f64.sqrt());
         assert!((s.standard_error_mm - expected).abs() < 1e-15);
+    }
+
+    /// Two folds of four configurations: resolution `basis` misses each by `miss` (mm² over
+    /// the legs), or its second fold fails.
+    fn folds_of(miss: Option<f64>) -> Vec<Result<Vec<(usize, f64)>>> {
+        match miss {
+            Some(m) => vec![Ok(vec![(0, m), (2, m)]), Ok(vec![(1, m), (3, m)])],
+            None => vec![
+                Ok(vec![(0, 1.0), (2, 1.0)]),
+                Err(Error::InsufficientData("leg 3 outside the stroke".into())),
+            ],
+        }
+    }
+
+    #[test]
+    fn the_choice_leaves_out_resolutions_that_failed_and_refuses_when_all_did() {
+        // Eight fails; twelve and sixteen are scored in their own folds, twelve the coarser of
+        // the two within reach.
+        let missed = [folds_of(None), folds_of(Some(1.0)), folds_of(Some(1.0))].concat();
+        let choice = choice_of(4, 2, missed).unwrap();
+        assert_eq!(choice.options.pitch_basis, 12);
+        assert_eq!(
+            choice.options,
+            IdentifyOptions {
+                pitch_basis: 12,
+                ..PHYSICAL
+            }
+        );
+        assert_eq!(choice.scores.len(), 2);
+        assert_eq!(choice.failed.len(), 1);
+        assert!(matches!(choice.outcome(8), Some(Err(why)) if why.contains("fold 2")));
+        assert!(matches!(choice.outcome(16), Some(Ok(s)) if s.cross_validated_rmse_mm == 1.0));
+        assert!(choice.outcome(10).is_none());
+        // Each resolution's folds are its own: sixteen far worse than twelve, twelve chosen.
+        let missed = [
+            folds_of(Some(4.0)),
+            folds_of(Some(1.0)),
+            folds_of(Some(9.0)),
+        ]
+        .concat();
+        let choice = choice_of(4, 2, missed).unwrap();
+        assert_eq!(choice.options.pitch_basis, 12);
+        assert!(choice.failed.is_empty());
+        let errors: Vec<f64> = choice
+            .scores
+            .iter()
+            .map(|s| s.cross_validated_rmse_mm)
+            .collect();
+        assert_eq!(errors, [2.0, 1.0, 3.0]);
+        // None scored: refused, each named.
+        let missed = [folds_of(None), folds_of(None), folds_of(None)].concat();
+        let e = choice_of(4, 2, missed).unwrap_err().to_string();
+        for basis in ["8 coefficients", "12 coefficients", "16 coefficients"] {
+            assert!(e.contains(basis), "{e}");
+        }
     }
 }

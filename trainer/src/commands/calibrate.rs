@@ -19,7 +19,7 @@ use hexacomp_trainer::physical_candidate::{
     CandidateOptions, NetworksUncertainty, physical_candidate,
 };
 use hexacomp_trainer::pipeline::{Pipeline, Solved};
-use hexacomp_trainer::pitch_resolution::{PITCH_RESOLUTIONS, chosen_resolution, identifications};
+use hexacomp_trainer::pitch_resolution::{chosen_resolution, identifications};
 use hexacomp_trainer::plan::PlanOptions;
 use hexacomp_trainer::train::{
     Architecture, CROSS_VALIDATION_FOLDS, TrainOptions, Trained, cross_validated_rmse,
@@ -510,16 +510,14 @@ fn physical(
         candidate.score_mm
     );
     let resolution = &candidate.resolution;
-    let tried: Vec<String> = PITCH_RESOLUTIONS
+    let tried: Vec<String> = resolution
+        .scores
         .iter()
-        .filter_map(|&basis| {
-            Some(match resolution.outcome(basis)? {
-                Ok(s) => format!(
-                    "{basis}: {:.4} ± {:.4} mm",
-                    s.cross_validated_rmse_mm, s.standard_error_mm
-                ),
-                Err(why) => format!("{basis}: left out, {why}"),
-            })
+        .map(|s| {
+            format!(
+                "{}: {:.4} ± {:.4} mm",
+                s.pitch_basis, s.cross_validated_rmse_mm, s.standard_error_mm
+            )
         })
         .collect();
     println!(
@@ -528,6 +526,9 @@ fn physical(
         resolution.options.pitch_basis,
         tried.join(", ")
     );
+    for (basis, why) in &resolution.failed {
+        println!("physical model: {basis} lead-screw coefficients per leg left out: {why}");
+    }
 
     let f = candidate.fidelity;
     // The departure's RMS enters the score; its largest value is where the networks follow the

@@ -211,6 +211,14 @@ pub fn print_evaluation(evaluation: &Evaluation, validation: usize) {
         table.row(row.try_into().expect("a cell per resolution"));
     }
     println!("{table}");
+    for size in &evaluation.sizes {
+        for (basis, why) in size.resolution.iter().flat_map(|r| &r.failed) {
+            println!(
+                "{} configurations: {basis} coefficients left out: {why}",
+                size.configurations
+            );
+        }
+    }
 
     println!(
         "Uncertainty of the physical model's networks: the share of validation poses whose \
