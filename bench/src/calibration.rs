@@ -122,7 +122,6 @@ pub fn calibrate(
     let carried = carried_into_networks(
         &geometry,
         &physical,
-        &identification,
         &kept,
         &options,
         error_model().repeatability_sigma_mm,

@@ -101,6 +101,9 @@ pub struct EvaluationOptions {
     pub validation_count: usize,
     /// Seed of the plan.
     pub plan_seed: u64,
+    /// Start the plan with each leg's shortest and longest reach
+    /// ([`PlanOptions::leg_extremes`]; `false`: best-candidate sampling alone, to compare).
+    pub leg_extremes: bool,
     /// Seed of the validation poses.
     pub validation_seed: u64,
     /// The virtual machine's errors.
@@ -228,6 +231,7 @@ pub fn evaluate(
         plan: PlanOptions {
             count: largest,
             seed: options.plan_seed,
+            leg_extremes: options.leg_extremes,
             ..Default::default()
         },
         train: options.train.clone(),
@@ -357,7 +361,6 @@ pub fn evaluate(
         let distilled = carried_into_networks(
             geometry,
             &physical,
-            &identification,
             &solved,
             &options.distill,
             options.error_model.repeatability_sigma_mm,

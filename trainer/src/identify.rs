@@ -108,6 +108,17 @@ pub const PHYSICAL: IdentifyOptions = IdentifyOptions {
     compliance: true,
 };
 
+impl IdentifyOptions {
+    /// [`PHYSICAL`] with `pitch_basis` B-spline coefficients per lead-screw curve: the physical
+    /// model's identification at another resolution.
+    pub const fn physical(pitch_basis: usize) -> Self {
+        Self {
+            pitch_basis,
+            ..PHYSICAL
+        }
+    }
+}
+
 /// The identified geometry and how the identification went.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Identification {

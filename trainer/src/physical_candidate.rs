@@ -76,7 +76,6 @@ pub fn physical_candidate(
     let carried = carried_into_networks(
         nominal,
         &physical,
-        &resolution.options,
         measurements,
         &options.distill,
         options.repeatability_mm,
@@ -119,25 +118,20 @@ pub struct CarriedModel {
     pub uncertainty: Result<UncertaintySource>,
 }
 
-/// Carries `physical`, identified on `measurements` with `identification`, into networks
-/// ([`distill`]) that carry its position uncertainty for legs repeating within
-/// `repeatability_mm` (1 σ per move, mm), the networks' own departure from the model added.
+/// Carries `physical`, identified on `measurements` with [`IdentifyOptions::physical`] at its own
+/// lead-screw resolution (the precondition: its uncertainty is propagated with those options'
+/// cutoff and compliance terms), into networks ([`distill`]) that carry its position uncertainty
+/// for legs repeating within `repeatability_mm` (1 σ per move, mm), the networks' own departure
+/// from the model added.
 pub fn carried_into_networks(
     nominal: &Geometry,
     physical: &PhysicalModel,
-    identification: &IdentifyOptions,
     measurements: &[MeasuredConfiguration],
     options: &DistillOptions,
     repeatability_mm: f64,
     progress: &(dyn Fn(u64) + Sync),
 ) -> Result<CarriedModel> {
-    if physical.pitch.basis() != identification.pitch_basis {
-        return Err(Error::InvalidSetting(format!(
-            "the physical model has {} lead-screw coefficients per leg, its identification {}",
-            physical.pitch.basis(),
-            identification.pitch_basis
-        )));
-    }
+    let identification = IdentifyOptions::physical(physical.pitch.basis());
     let measured: Vec<Pose> = measurements
         .iter()
         .map(MeasuredConfiguration::pose)
@@ -155,7 +149,7 @@ pub fn carried_into_networks(
     let uncertainty = UncertaintySource::new(
         nominal,
         physical,
-        identification,
+        &identification,
         measurements,
         options.seed,
     )
@@ -192,41 +186,5 @@ impl NetworksUncertainty {
         let excess =
             (score_mm.powi(2) - self.physical_cross_validated_mm.powi(2)).max(0.0) / LEGS as f64;
         self.source.fitted(repeatability_mm.powi(2) + excess)
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::identify::PHYSICAL;
-    use crate::physical::PitchCurves;
-
-    #[test]
-    fn a_model_is_not_carried_with_the_options_of_another_resolution() {
-        let nominal = Geometry::prototype();
-        let mut physical = PhysicalModel::geometric(nominal.clone());
-        physical.pitch = PitchCurves::zero(nominal.leg_range, 8);
-        let twelve = IdentifyOptions {
-            pitch_basis: 12,
-            ..PHYSICAL
-        };
-        let refused = carried_into_networks(
-            &nominal,
-            &physical,
-            &twelve,
-            &[],
-            &DistillOptions::default(),
-            0.004,
-            &|_| {},
-        );
-        match refused {
-            Err(Error::InvalidSetting(why)) => {
-                assert!(
-                    why.contains("has 8") && why.contains("identification 12"),
-                    "{why}"
-                )
-            }
-            other => panic!("expected a refusal, got {:?}", other.map(|c| c.fidelity)),
-        }
     }
 }

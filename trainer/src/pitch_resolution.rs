@@ -14,10 +14,10 @@ use hexacomp_core::records::{JointCorrection, MeasuredConfiguration};
 use hexacomp_core::{ForwardOptions, Geometry, LEGS, forward_kinematics};
 
 use crate::error::{Error, Result};
-use crate::identify::{IdentifyOptions, PHYSICAL, identify};
+use crate::identify::{IdentifyOptions, identify};
 use crate::parallel::in_parallel;
 use crate::physical::PhysicalModel;
-use crate::train::folds;
+use crate::train::{can_cross_validate, folds};
 
 /// The lead-screw resolutions tried: B-spline coefficients per leg's curve (a knot every 30,
 /// 16.7 and 11.5 mm of the prototype's 150 mm stroke: the stroke over `n − 3` spacings).
@@ -39,7 +39,8 @@ pub struct ResolutionScore {
 /// The resolution chosen for a machine, and how every one tried scored.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ResolutionChoice {
-    /// [`PHYSICAL`] with the chosen resolution: the physical model's identification.
+    /// [`crate::identify::PHYSICAL`] with the chosen resolution: the physical model's
+    /// identification.
     pub options: IdentifyOptions,
     /// Every resolution that could be cross-validated, in the order of [`PITCH_RESOLUTIONS`].
     pub scores: Vec<ResolutionScore>,
@@ -78,8 +79,9 @@ impl ResolutionChoice {
 
 /// Chooses the lead-screw resolution of the physical model of the kept `measurements` and their
 /// robust `corrections` (one row per measurement, in the same order) on the folds
-/// [`folds`]`(rows, fold_count, seed)`: the coarsest whose model, identified without each fold,
-/// predicts the fold's corrections within one standard error of the best. The
+/// [`folds`] of the corrections' commanded legs (the legs' extremes never held out): the
+/// coarsest whose model, identified without each fold, predicts the fold's corrections within
+/// one standard error of the best. The
 /// identifications run on the machine's cores; `progress(1)` reports each one done (of
 /// [`identifications`]).
 pub fn chosen_resolution(
@@ -102,23 +104,22 @@ pub fn chosen_resolution(
                 .into(),
         ));
     }
-    if fold_count < 2 || measurements.len() < 2 * fold_count {
+    let legs = commanded_legs(corrections);
+    if !can_cross_validate(&legs, fold_count) {
         return Err(Error::InvalidSetting(format!(
             "cross-validating the physical model needs at least 2 folds ({fold_count} given) \
-             and two configurations per fold ({} configurations)",
+             and two configurations per fold to hold out besides the legs' extremes ({} \
+             configurations)",
             measurements.len()
         )));
     }
-    let fold = folds(measurements.len(), fold_count, seed);
+    let fold = folds(&legs, fold_count, seed);
     let jobs: Vec<(usize, usize)> = PITCH_RESOLUTIONS
         .iter()
         .flat_map(|&basis| (0..fold_count).map(move |f| (basis, f)))
         .collect();
     let missed = in_parallel(&jobs, |&(basis, f)| {
-        let options = IdentifyOptions {
-            pitch_basis: basis,
-            ..PHYSICAL
-        };
+        let options = IdentifyOptions::physical(basis);
         let missed = fold_miss(nominal, measurements, corrections, &fold, f, &options);
         progress(1);
         missed
@@ -155,10 +156,7 @@ fn choice_of(
         )));
     }
     Ok(ResolutionChoice {
-        options: IdentifyOptions {
-            pitch_basis: coarsest_within_one_standard_error(&scores).pitch_basis,
-            ..PHYSICAL
-        },
+        options: IdentifyOptions::physical(coarsest_within_one_standard_error(&scores).pitch_basis),
         scores,
         failed,
     })
@@ -170,15 +168,16 @@ fn scored(
     configurations: usize,
     folds: Vec<Result<Vec<(usize, f64)>>>,
 ) -> std::result::Result<ResolutionScore, String> {
-    // Each configuration's squared miss in the plan's order: the score does not depend on
-    // which core ran which fold.
-    let mut squared = vec![0.0; configurations];
+    // Each held-out configuration's squared miss in the plan's order: the score does not
+    // depend on which core ran which fold.
+    let mut squared = vec![None; configurations];
     for (f, result) in folds.into_iter().enumerate() {
         let misses = result.map_err(|e| format!("identified without fold {}: {e}", f + 1))?;
         for (k, miss) in misses {
-            squared[k] = miss;
+            squared[k] = Some(miss);
         }
     }
+    let squared: Vec<f64> = squared.into_iter().flatten().collect();
     let score = score_of(basis, &squared);
     if !(score.cross_validated_rmse_mm.is_finite() && score.standard_error_mm.is_finite()) {
         return Err(format!(
@@ -195,8 +194,9 @@ pub fn identifications(fold_count: usize) -> u64 {
     (PITCH_RESOLUTIONS.len() * fold_count) as u64
 }
 
-/// [`chosen_resolution`] when every fold has two configurations or more to hold out, `None`
-/// with fewer (then the physical model is identified with [`PHYSICAL`]'s eight coefficients).
+/// [`chosen_resolution`] when every fold has two configurations or more to hold out besides the
+/// legs' extremes ([`can_cross_validate`]), `None` with fewer (then the physical model is
+/// identified with [`crate::identify::PHYSICAL`]'s eight coefficients).
 pub fn chosen_if_cross_validated(
     nominal: &Geometry,
     measurements: &[MeasuredConfiguration],
@@ -205,7 +205,7 @@ pub fn chosen_if_cross_validated(
     fold_count: usize,
     progress: &(dyn Fn(u64) + Sync),
 ) -> Result<Option<ResolutionChoice>> {
-    if measurements.len() < 2 * fold_count {
+    if !can_cross_validate(&commanded_legs(corrections), fold_count) {
         return Ok(None);
     }
     chosen_resolution(
@@ -217,6 +217,11 @@ pub fn chosen_if_cross_validated(
         progress,
     )
     .map(Some)
+}
+
+/// The commanded legs of each row, mm.
+fn commanded_legs(rows: &[JointCorrection]) -> Vec<[f64; LEGS]> {
+    rows.iter().map(|row| row.legs).collect()
 }
 
 /// The score with the fewest coefficients whose error is within one standard error of the
@@ -308,6 +313,7 @@ fn squared_miss(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::identify::PHYSICAL;
 
     fn score(pitch_basis: usize, rmse: f64, se: f64) -> ResolutionScore {
         ResolutionScore {
@@ -378,6 +384,16 @@ mod tests {
         assert!((s.cross_validated_rmse_mm - 2.5_f64.sqrt()).abs() < 1e-15);
         let expected = (0.75_f64).sqrt() / (2.0 * 2.5_f64.sqrt());
         assert!((s.standard_error_mm - expected).abs() < 1e-15);
+    }
+
+    #[test]
+    fn configurations_never_held_out_are_not_scored() {
+        // Six configurations, the last two a leg's extremes (never held out): the two folds
+        // miss the other four by 1 and 4 mm². The score is theirs alone.
+        let folds = vec![Ok(vec![(0, 1.0), (2, 4.0)]), Ok(vec![(1, 1.0), (3, 4.0)])];
+        let s = scored(8, 6, folds).unwrap();
+        assert_eq!(s, score_of(8, &[1.0, 1.0, 4.0, 4.0]));
+        assert!((s.cross_validated_rmse_mm - 2.5_f64.sqrt()).abs() < 1e-15);
     }
 
     /// Two folds of four configurations: resolution `basis` misses each by `miss` (mm² over

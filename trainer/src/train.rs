@@ -282,22 +282,55 @@ fn fit_work(samples: usize, outputs: usize, hidden: usize, options: &TrainOption
 /// candidates) and chooses the physical model's lead-screw resolution.
 pub const CROSS_VALIDATION_FOLDS: usize = 5;
 
-/// The fold (`0..folds`) of each of `count` rows for a `folds`-fold cross-validation: the rows
-/// in a seeded random order, dealt out in turn, so fold sizes differ by one at most.
-pub fn folds(count: usize, folds: usize, seed: u64) -> Vec<usize> {
-    let mut fold = vec![0; count];
-    for (position, row) in shuffled(count, seed).into_iter().enumerate() {
+/// The fold of a row that [`folds`] never holds out: it is fitted in every fold.
+pub const ALWAYS_FITTED: usize = usize::MAX;
+
+/// The fold (`0..folds`) of each row for a `folds`-fold cross-validation, given each row's
+/// commanded legs (mm). A row that holds a leg's shortest or longest length among all the rows
+/// is never held out ([`ALWAYS_FITTED`]): held out, it would ask the models fitted without it
+/// for a leg beyond the ones they saw, which no pose within the measured legs asks (a plan
+/// starts with each leg's extremes; docs/accuracy.md). The other rows in a seeded random order,
+/// dealt out in turn, so fold sizes differ by one at most.
+pub fn folds(legs: &[[f64; LEGS]], folds: usize, seed: u64) -> Vec<usize> {
+    let extreme = extreme_rows(legs);
+    let mut fold = vec![ALWAYS_FITTED; legs.len()];
+    let dealt = shuffled(legs.len(), seed)
+        .into_iter()
+        .filter(|&row| !extreme[row]);
+    for (position, row) in dealt.enumerate() {
         fold[row] = position % folds.max(1);
     }
     fold
 }
 
+/// Whether `folds` folds of the rows with commanded legs `legs` (mm) can cross-validate: two
+/// folds or more, each holding out two rows or more (the legs' extremes are never held out).
+pub fn can_cross_validate(legs: &[[f64; LEGS]], folds: usize) -> bool {
+    let extremes = extreme_rows(legs).iter().filter(|&&e| e).count();
+    folds >= 2 && legs.len() - extremes >= 2 * folds
+}
+
+/// Which rows hold a leg's shortest or longest length (the first such row where several tie).
+fn extreme_rows(legs: &[[f64; LEGS]]) -> Vec<bool> {
+    let mut extreme = vec![false; legs.len()];
+    for leg in 0..LEGS {
+        let by_leg = |a: &usize, b: &usize| legs[*a][leg].total_cmp(&legs[*b][leg]);
+        let indices = 0..legs.len();
+        let longest = indices.clone().min_by(|a, b| by_leg(a, b).reverse());
+        for row in [indices.min_by(by_leg), longest].into_iter().flatten() {
+            extreme[row] = true;
+        }
+    }
+    extreme
+}
+
 /// The error of networks of `architecture` and the hidden sizes `hidden` (one per network) on
-/// configurations they were not fitted on: every fold of [`folds`]`(rows, folds, seed)` is
-/// predicted by networks fitted on the others, and the out-of-fold errors over every row give
-/// Eq. 21's `√Σ_i RMSE_i²`, mm. Comparable with another model's cross-validated error on the
-/// same folds (the hidden sizes were chosen on a holdout of these rows, and the inputs are
-/// normalised over every row: small advantages to the networks).
+/// configurations they were not fitted on: every fold of [`folds`] of the rows' commanded legs is
+/// predicted by networks fitted on the others (and on the legs' extremes, never held out), and the
+/// out-of-fold errors over every row held out give Eq. 21's `√Σ_i RMSE_i²`, mm. Comparable with
+/// another model's cross-validated error on the same folds (the hidden sizes were chosen on a
+/// holdout of these rows, and the inputs are normalised over every row: small advantages to the
+/// networks).
 pub fn cross_validated_rmse(
     rows: &[JointCorrection],
     architecture: Architecture,
@@ -306,10 +339,12 @@ pub fn cross_validated_rmse(
     fold_count: usize,
 ) -> Result<f64> {
     let networks = network_outputs(architecture);
-    if fold_count < 2 || rows.len() < 2 * fold_count || hidden.len() != networks.len() {
+    let legs: Vec<[f64; LEGS]> = rows.iter().map(|row| row.legs).collect();
+    if !can_cross_validate(&legs, fold_count) || hidden.len() != networks.len() {
         return Err(Error::InvalidSetting(format!(
             "cross-validation of {} networks needs one size per network ({} given), at least 2 \
-             folds ({fold_count}) and two rows per fold ({} rows)",
+             folds ({fold_count}) and two rows per fold to hold out besides the legs' extremes \
+             ({} rows)",
             networks.len(),
             hidden.len(),
             rows.len()
@@ -319,7 +354,8 @@ pub fn cross_validated_rmse(
     let normalisation = Normalisation::of(&inputs)?;
     // The split's normalised samples; its own holdout is not used here.
     let split = Split::new(&inputs, &targets, &normalisation, options);
-    let fold = folds(rows.len(), fold_count, options.seed);
+    let fold = folds(&legs, fold_count, options.seed);
+    let held_out = fold.iter().filter(|&&f| f != ALWAYS_FITTED).count();
     let mut squared = 0.0;
     for f in 0..fold_count {
         let (held, fitted): (Vec<usize>, Vec<usize>) = (0..rows.len()).partition(|&k| fold[k] == f);
@@ -330,7 +366,7 @@ pub fn cross_validated_rmse(
             squared += squared_error(&network, &split.data(&held, legs));
         }
     }
-    Ok((squared / rows.len() as f64).sqrt())
+    Ok((squared / held_out as f64).sqrt())
 }
 
 /// The legs each network of `architecture` outputs.

@@ -8,7 +8,7 @@ use hexacomp_core::compensator::compensate_pose;
 use hexacomp_core::records::MeasuredConfiguration;
 use hexacomp_core::sampling::{SamplerOptions, WorkspaceSampler};
 use hexacomp_core::stats::PoseErrorStats;
-use hexacomp_core::{Geometry, inverse_kinematics};
+use hexacomp_core::{Geometry, LEGS, inverse_kinematics};
 use hexacomp_formats::{
     Records, read_measurements, read_registration, write_measurements, write_poses,
 };
@@ -22,8 +22,8 @@ use hexacomp_trainer::pipeline::{Pipeline, Solved};
 use hexacomp_trainer::pitch_resolution::{chosen_resolution, identifications};
 use hexacomp_trainer::plan::PlanOptions;
 use hexacomp_trainer::train::{
-    Architecture, CROSS_VALIDATION_FOLDS, TrainOptions, Trained, cross_validated_rmse,
-    training_work,
+    Architecture, CROSS_VALIDATION_FOLDS, TrainOptions, Trained, can_cross_validate,
+    cross_validated_rmse, training_work,
 };
 use hexacomp_virtual::{DEFAULT_MACHINE_SEED, ErrorModel, ErrorVariant, VirtualPlatform};
 
@@ -236,7 +236,9 @@ pub fn run(geometry: &Geometry, args: &CalibrateArgs) -> anyhow::Result<()> {
     } else {
         println!(
             "physical model left out: {} configurations are too few to cross-validate it on \
-             {CROSS_VALIDATION_FOLDS} folds; the networks are compared by their holdout validation RMSE",
+             {CROSS_VALIDATION_FOLDS} folds (two per fold to hold out besides those holding a \
+             leg's shortest or longest length, never held out); the networks are compared by \
+             their holdout validation RMSE",
             solved.corrections.len()
         );
     }
@@ -375,9 +377,11 @@ struct Candidate {
 }
 
 /// Whether the candidates are compared by cross-validation: with two configurations per fold
-/// or more (otherwise the networks by their holdout, without the physical model).
+/// or more to hold out besides the legs' extremes (otherwise the networks by their holdout,
+/// without the physical model).
 fn cross_validated(solved: &Solved) -> bool {
-    solved.corrections.len() >= 2 * CROSS_VALIDATION_FOLDS
+    let legs: Vec<[f64; LEGS]> = solved.corrections.iter().map(|row| row.legs).collect();
+    can_cross_validate(&legs, CROSS_VALIDATION_FOLDS)
 }
 
 /// The model's source line in its file.

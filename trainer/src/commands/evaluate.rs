@@ -46,6 +46,10 @@ pub struct EvaluateArgs {
     /// Seed of the measuring plan and of the machine's noise while it is measured.
     #[arg(long, default_value_t = 1)]
     seed: u64,
+    /// Plan without first taking each leg's shortest and longest reach (every configuration by
+    /// best-candidate sampling, as before), to compare with the default.
+    #[arg(long)]
+    no_leg_extremes: bool,
     /// Seed of the validation poses.
     #[arg(long, default_value_t = 1001)]
     validation_seed: u64,
@@ -72,6 +76,7 @@ pub fn run(geometry: &Geometry, args: &EvaluateArgs) -> anyhow::Result<()> {
         training_sizes: args.sizes.clone(),
         validation_count: args.validation,
         plan_seed: args.seed,
+        leg_extremes: !args.no_leg_extremes,
         validation_seed: args.validation_seed,
         error_model: ErrorModel::variant(args.error_variant),
         machine_seed: args.machine_seed,

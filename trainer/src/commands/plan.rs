@@ -12,10 +12,14 @@ use hexacomp_formats::write_file;
 
 /// Plan N measuring configurations spread over the task workspace (like the paper's Fig. 8).
 ///
-/// Each configuration is the best of several uniform random candidates (the one farthest from
-/// those already chosen), so the plan is random but evenly spread; poses whose legs come within
-/// the stroke margin of a stroke end are never chosen. The time this takes grows with the square
-/// of the count (a progress bar shows the time left); with --candidates 1 it grows linearly.
+/// The plan starts with each leg's shortest and longest reach over the workspace (12
+/// configurations, the extremes among 2000 random poses; with --count below 12, only the first
+/// legs' extremes), so that the model is rarely asked beyond the leg lengths it was measured at,
+/// and then by a fraction of a millimetre. Each further configuration is the best of several
+/// uniform random candidates (the one farthest from those already chosen), so the plan is
+/// random but evenly spread; poses whose legs come within the stroke margin of a stroke end are
+/// never chosen. The time this takes grows with the square of the count (a progress bar shows
+/// the time left); with --candidates 1 it grows linearly.
 /// Output: a poses CSV, `id,x,y,z,a,b,c` (mm, degrees), ids 1..N.
 #[derive(Debug, clap::Args)]
 pub struct PlanArgs {
@@ -31,6 +35,11 @@ pub struct PlanArgs {
     /// Keep every leg at least this far from both stroke ends, mm.
     #[arg(long, default_value_t = 2.0)]
     stroke_margin: f64,
+    /// Do not start with each leg's shortest and longest reach: every configuration by
+    /// best-candidate sampling (with --candidates 1, plain uniform draws as in the paper's
+    /// Fig. 8).
+    #[arg(long)]
+    no_leg_extremes: bool,
     /// Output poses CSV.
     #[arg(long, value_name = "FILE")]
     out: PathBuf,
@@ -56,6 +65,7 @@ pub fn run(geometry: &Geometry, args: &PlanArgs) -> anyhow::Result<()> {
             stroke_margin_mm: args.stroke_margin,
             ..Default::default()
         },
+        leg_extremes: !args.no_leg_extremes,
     };
     let bar = ProgressBar::new(plan_work(&options));
     bar.set_style(
