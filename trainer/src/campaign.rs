@@ -25,6 +25,7 @@ use hexacomp_virtual::{VirtualPlatform, measure_fiducials};
 use crate::acquire::as_instrument_reports;
 use crate::drift::{Decision, DriftCheck, ReferenceEvent, ReferenceMeasurement, deviation};
 use crate::error::{Error, Result};
+use crate::plan::rows_holding_leg_extremes;
 
 /// Where the machine went for a configuration.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -308,30 +309,36 @@ pub fn combine(readings: &[Observation], outlier_factor: f64) -> Combined {
     }
 }
 
-/// The order to visit `plan` in: a nearest-neighbour tour in leg space from `start`, so that
-/// consecutive moves are short (the indices into `plan`; each once).
+/// The order to visit `plan` in (the indices into `plan`; each once): first the configurations
+/// holding a leg's shortest or longest length among the plan's, so that a campaign cut short
+/// has still measured the legs' whole range; then the others. Each part is a nearest-neighbour
+/// tour in leg space, from `start` and then from where the first ended, so that consecutive
+/// moves are short.
 pub fn tour(geometry: &Geometry, plan: &[NamedPose], start: &Pose) -> Vec<usize> {
     let legs: Vec<[f64; LEGS]> = plan
         .iter()
         .map(|row| inverse_kinematics(geometry, &row.pose()).lengths)
         .collect();
+    let extreme = rows_holding_leg_extremes(&legs);
+    let (extremes, others): (Vec<usize>, Vec<usize>) = (0..plan.len()).partition(|&k| extreme[k]);
     let mut at = inverse_kinematics(geometry, start).lengths;
-    let mut left: Vec<usize> = (0..plan.len()).collect();
     let mut order = Vec::with_capacity(plan.len());
-    while !left.is_empty() {
-        let travel = |k: usize| {
-            (0..LEGS)
-                .map(|i| (legs[k][i] - at[i]).abs())
-                .fold(0.0, f64::max)
-        };
-        let (slot, _) = left
-            .iter()
-            .enumerate()
-            .min_by(|(_, a), (_, b)| travel(**a).total_cmp(&travel(**b)))
-            .expect("not empty");
-        let next = left.swap_remove(slot);
-        at = legs[next];
-        order.push(next);
+    for mut left in [extremes, others] {
+        while !left.is_empty() {
+            let travel = |k: usize| {
+                (0..LEGS)
+                    .map(|i| (legs[k][i] - at[i]).abs())
+                    .fold(0.0, f64::max)
+            };
+            let (slot, _) = left
+                .iter()
+                .enumerate()
+                .min_by(|(_, a), (_, b)| travel(**a).total_cmp(&travel(**b)))
+                .expect("not empty");
+            let next = left.swap_remove(slot);
+            at = legs[next];
+            order.push(next);
+        }
     }
     order
 }
@@ -974,7 +981,7 @@ mod tests {
     }
 
     #[test]
-    fn the_tour_visits_every_configuration_once_and_travels_less_than_the_plan_order() {
+    fn the_tour_visits_the_legs_extremes_first_and_every_configuration_once_in_less_travel() {
         let g = Geometry::prototype();
         let plan = crate::plan::numbered_rows(
             &crate::plan::plan(
@@ -1007,6 +1014,26 @@ mod tests {
             "{} vs {}",
             travel(&order),
             travel(&planned)
+        );
+        // The legs' extremes first: the first configurations measured span every leg's range
+        // over the plan, so a campaign cut short has measured it.
+        let legs: Vec<[f64; LEGS]> = plan
+            .iter()
+            .map(|row| inverse_kinematics(&g, &row.pose()).lengths)
+            .collect();
+        let range = |rows: &[usize], leg: usize| {
+            let lengths = rows.iter().map(|&k| legs[k][leg]);
+            (
+                lengths.clone().fold(f64::INFINITY, f64::min),
+                lengths.fold(f64::NEG_INFINITY, f64::max),
+            )
+        };
+        let spanning = (1..=60)
+            .find(|&n| (0..LEGS).all(|i| range(&order[..n], i) == range(&planned, i)))
+            .expect("the whole tour spans the plan");
+        assert!(
+            spanning <= crate::plan::EXTREMES,
+            "the legs' range spanned after {spanning} configurations"
         );
     }
 

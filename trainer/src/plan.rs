@@ -13,7 +13,7 @@
 //! turn, its shortest and its longest among [`EXTREMES_POOL`] uniform draws over the workspace
 //! (each not already chosen); the rest follow by best-candidate sampling, spread away from them
 //! too. Every prefix of twelve or more configurations of the plan then spans the legs'
-//! workspace range (a campaign measures them in its own order: cut short, it may not).
+//! workspace range, and a campaign measures those twelve first (`campaign::tour`).
 
 use hexacomp_core::records::NamedPose;
 use hexacomp_core::sampling::{SamplerOptions, WorkspaceSampler};
@@ -166,6 +166,21 @@ fn legs_extremes(geometry: &Geometry, pool: &[Pose], count: usize) -> Vec<Pose> 
         }
     }
     chosen
+}
+
+/// Which of the rows of legs `legs` (mm) hold a leg's shortest or longest length among them
+/// (the first such row where several tie).
+pub fn rows_holding_leg_extremes(legs: &[[f64; LEGS]]) -> Vec<bool> {
+    let mut extreme = vec![false; legs.len()];
+    for leg in 0..LEGS {
+        let by_leg = |a: &usize, b: &usize| legs[*a][leg].total_cmp(&legs[*b][leg]);
+        let indices = 0..legs.len();
+        let longest = indices.clone().min_by(|a, b| by_leg(a, b).reverse());
+        for row in [indices.min_by(by_leg), longest].into_iter().flatten() {
+            extreme[row] = true;
+        }
+    }
+    extreme
 }
 
 /// Poses as rows of a poses file, with ids 1, 2, … in order.

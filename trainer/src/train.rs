@@ -23,6 +23,7 @@ use rand_distr::{Distribution, StandardNormal};
 
 use crate::error::{Error, Result};
 use crate::parallel::in_parallel;
+use crate::plan::rows_holding_leg_extremes;
 
 /// The two architectures of Fig. 3–4.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -292,7 +293,7 @@ pub const ALWAYS_FITTED: usize = usize::MAX;
 /// starts with each leg's extremes; docs/accuracy.md). The other rows in a seeded random order,
 /// dealt out in turn, so fold sizes differ by one at most.
 pub fn folds(legs: &[[f64; LEGS]], folds: usize, seed: u64) -> Vec<usize> {
-    let extreme = extreme_rows(legs);
+    let extreme = rows_holding_leg_extremes(legs);
     let mut fold = vec![ALWAYS_FITTED; legs.len()];
     let dealt = shuffled(legs.len(), seed)
         .into_iter()
@@ -306,22 +307,11 @@ pub fn folds(legs: &[[f64; LEGS]], folds: usize, seed: u64) -> Vec<usize> {
 /// Whether `folds` folds of the rows with commanded legs `legs` (mm) can cross-validate: two
 /// folds or more, each holding out two rows or more (the legs' extremes are never held out).
 pub fn can_cross_validate(legs: &[[f64; LEGS]], folds: usize) -> bool {
-    let extremes = extreme_rows(legs).iter().filter(|&&e| e).count();
+    let extremes = rows_holding_leg_extremes(legs)
+        .iter()
+        .filter(|&&e| e)
+        .count();
     folds >= 2 && legs.len() - extremes >= 2 * folds
-}
-
-/// Which rows hold a leg's shortest or longest length (the first such row where several tie).
-fn extreme_rows(legs: &[[f64; LEGS]]) -> Vec<bool> {
-    let mut extreme = vec![false; legs.len()];
-    for leg in 0..LEGS {
-        let by_leg = |a: &usize, b: &usize| legs[*a][leg].total_cmp(&legs[*b][leg]);
-        let indices = 0..legs.len();
-        let longest = indices.clone().min_by(|a, b| by_leg(a, b).reverse());
-        for row in [indices.min_by(by_leg), longest].into_iter().flatten() {
-            extreme[row] = true;
-        }
-    }
-    extreme
 }
 
 /// The error of networks of `architecture` and the hidden sizes `hidden` (one per network) on
