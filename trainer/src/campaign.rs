@@ -1022,11 +1022,8 @@ mod tests {
             .map(|row| inverse_kinematics(&g, &row.pose()).lengths)
             .collect();
         let range = |rows: &[usize], leg: usize| {
-            let lengths = rows.iter().map(|&k| legs[k][leg]);
-            (
-                lengths.clone().fold(f64::INFINITY, f64::min),
-                lengths.fold(f64::NEG_INFINITY, f64::max),
-            )
+            let of_rows: Vec<[f64; LEGS]> = rows.iter().map(|&k| legs[k]).collect();
+            crate::train::leg_range(&of_rows, leg)
         };
         let spanning = (1..=60)
             .find(|&n| (0..LEGS).all(|i| range(&order[..n], i) == range(&planned, i)))

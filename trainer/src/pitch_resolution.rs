@@ -17,7 +17,7 @@ use crate::error::{Error, Result};
 use crate::identify::{IdentifyOptions, identify};
 use crate::parallel::in_parallel;
 use crate::physical::PhysicalModel;
-use crate::train::{can_cross_validate, folds};
+use crate::train::{can_cross_validate, commanded_legs, folds};
 
 /// The lead-screw resolutions tried: B-spline coefficients per leg's curve (a knot every 30,
 /// 16.7 and 11.5 mm of the prototype's 150 mm stroke: the stroke over `n − 3` spacings).
@@ -217,11 +217,6 @@ pub fn chosen_if_cross_validated(
         progress,
     )
     .map(Some)
-}
-
-/// The commanded legs of each row, mm.
-fn commanded_legs(rows: &[JointCorrection]) -> Vec<[f64; LEGS]> {
-    rows.iter().map(|row| row.legs).collect()
 }
 
 /// The score with the fewest coefficients whose error is within one standard error of the

@@ -346,17 +346,12 @@ mod tests {
     /// How far (mm) the legs of `poses` reach beyond those of `plan`, at most over the legs.
     fn reach_beyond(g: &Geometry, plan: &[Pose], poses: &[Pose]) -> f64 {
         let legs = |p: &Pose| inverse_kinematics(g, p).lengths;
-        let (mut lo, mut hi) = ([f64::INFINITY; LEGS], [f64::NEG_INFINITY; LEGS]);
-        for q in plan.iter().map(legs) {
-            for i in 0..LEGS {
-                lo[i] = lo[i].min(q[i]);
-                hi[i] = hi[i].max(q[i]);
-            }
-        }
+        let planned: Vec<[f64; LEGS]> = plan.iter().map(legs).collect();
+        let range: [[f64; 2]; LEGS] = std::array::from_fn(|i| crate::train::leg_range(&planned, i));
         poses
             .iter()
             .map(legs)
-            .flat_map(|q| (0..LEGS).map(move |i| (lo[i] - q[i]).max(q[i] - hi[i])))
+            .flat_map(|q| (0..LEGS).map(move |i| (range[i][0] - q[i]).max(q[i] - range[i][1])))
             .fold(0.0, f64::max)
     }
 

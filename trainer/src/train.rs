@@ -304,6 +304,11 @@ pub fn folds(legs: &[[f64; LEGS]], folds: usize, seed: u64) -> Vec<usize> {
     fold
 }
 
+/// The commanded legs of each row, mm (what [`folds`] and [`can_cross_validate`] take).
+pub fn commanded_legs(rows: &[JointCorrection]) -> Vec<[f64; LEGS]> {
+    rows.iter().map(|row| row.legs).collect()
+}
+
 /// Whether `folds` folds of the rows with commanded legs `legs` (mm) can cross-validate: two
 /// folds or more, each holding out two rows or more (the legs' extremes are never held out).
 pub fn can_cross_validate(legs: &[[f64; LEGS]], folds: usize) -> bool {
@@ -329,7 +334,7 @@ pub fn cross_validated_rmse(
     fold_count: usize,
 ) -> Result<f64> {
     let networks = network_outputs(architecture);
-    let legs: Vec<[f64; LEGS]> = rows.iter().map(|row| row.legs).collect();
+    let legs = commanded_legs(rows);
     if !can_cross_validate(&legs, fold_count) || hidden.len() != networks.len() {
         return Err(Error::InvalidSetting(format!(
             "cross-validation of {} networks needs one size per network ({} given), at least 2 \

@@ -8,7 +8,7 @@ use hexacomp_core::compensator::compensate_pose;
 use hexacomp_core::records::MeasuredConfiguration;
 use hexacomp_core::sampling::{SamplerOptions, WorkspaceSampler};
 use hexacomp_core::stats::PoseErrorStats;
-use hexacomp_core::{Geometry, LEGS, inverse_kinematics};
+use hexacomp_core::{Geometry, inverse_kinematics};
 use hexacomp_formats::{
     Records, read_measurements, read_registration, write_measurements, write_poses,
 };
@@ -23,7 +23,7 @@ use hexacomp_trainer::pitch_resolution::{chosen_resolution, identifications};
 use hexacomp_trainer::plan::PlanOptions;
 use hexacomp_trainer::train::{
     Architecture, CROSS_VALIDATION_FOLDS, TrainOptions, Trained, can_cross_validate,
-    cross_validated_rmse, training_work,
+    commanded_legs, cross_validated_rmse, training_work,
 };
 use hexacomp_virtual::{DEFAULT_MACHINE_SEED, ErrorModel, ErrorVariant, VirtualPlatform};
 
@@ -380,8 +380,7 @@ struct Candidate {
 /// or more to hold out besides the legs' extremes (otherwise the networks by their holdout,
 /// without the physical model).
 fn cross_validated(solved: &Solved) -> bool {
-    let legs: Vec<[f64; LEGS]> = solved.corrections.iter().map(|row| row.legs).collect();
-    can_cross_validate(&legs, CROSS_VALIDATION_FOLDS)
+    can_cross_validate(&commanded_legs(&solved.corrections), CROSS_VALIDATION_FOLDS)
 }
 
 /// The model's source line in its file.
