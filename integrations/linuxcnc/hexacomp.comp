@@ -24,6 +24,10 @@ corrections change far slower and are followed exactly; a jump (a fault clearing
 moved, a new model after a deploy or a service restart, the end of a clamped stretch) reaches the
 drives as a ramp, never as a step.
 
+\\fBuncertainty\\fR is the model's 1-sigma position uncertainty at the legs of the held corrections
+(from the service's answer; 0 when the model file has none): wire it to a comparator or a display
+to see where the model extrapolates, beyond the configurations it was trained on.
+
 The feedback pins remove the applied correction from the drive feedback again, so that motion sees
 the nominal joint positions and computes no following error from the correction.
 
@@ -55,6 +59,7 @@ pin out u32 model_generation "Generation of the service's model that computed th
 pin out u32 point_status "Status of the last answered point (HEXACOMP_STATUS_*: 0 ok, 1 out of stroke, 2 outside trained range, 3 clamped, 4 invalid input, 5 no model)";
 pin out s32 last_error "Result of the last call to the service (HexacompError: 0 ok, 3 service absent, 4 timeout, ...)";
 pin out float blend "Share of the held correction applied, 0 to 1";
+pin out float uncertainty "The model's 1-sigma position uncertainty at the point of the held corrections, machine units (the position error lies within twice it for 95 % of points; it grows where the model extrapolates); 0 when the model has none or nothing is held";
 
 param rw bit enable = 1 "Use compensation (changes ramp over ramp-time); 0 asks nothing and is no fault";
 param rw float ramp_time = 1.0 "Seconds for blend to go from 0 to 1 and back (the correction itself may take longer: max-rate bounds it too)";
@@ -247,6 +252,8 @@ static int ask_service(struct __comp_state *__comp_inst) {
     for (i = 0; i < 6; i++)
         if (!isfinite(answer.corrections[i] / mm_per_unit)) return 0;
     for (i = 0; i < 6; i++) held[i] = answer.corrections[i] / mm_per_unit;
+    /* 0 from the service where the model has no uncertainty: the pin then reads 0 too. */
+    uncertainty = answer.uncertainty_mm / mm_per_unit;
     model_generation = answer.generation;
     return 1;
 }
@@ -268,8 +275,10 @@ FUNCTION(_) {
     if (blend > share) blend = blend - share_step < share ? share : blend - share_step;
     /* Ramped out and not used: forget the held corrections, computed for legs long gone, so
        that using compensation again ramps in only what the service answers then. */
-    if (!used && blend == 0)
+    if (!used && blend == 0) {
         for (i = 0; i < 6; i++) held[i] = 0;
+        uncertainty = 0;
+    }
     for (i = 0; i < 6; i++) {
         /* The correction pin is the applied correction: it moves towards its target. */
         double change = blend * held[i] - correction(i);

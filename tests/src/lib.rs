@@ -148,11 +148,20 @@ pub fn smooth_model_for(
 /// A position uncertainty with the identity moment matrix, centred on the prototype's mid
 /// stroke: `σ² = 2e-5 + 3e-5 · h` mm², `h` the squared norm of the legs' features over 13.
 pub fn test_uncertainty() -> hexacomp_core::uncertainty::PositionUncertainty {
+    test_uncertainty_over([280.0, 430.0])
+}
+
+/// [`test_uncertainty`] for legs whose stroke is `leg_range` (mm): centred on its middle, with
+/// features of 1 at 40 % of the stroke either side.
+pub fn test_uncertainty_over(
+    leg_range: [f64; 2],
+) -> hexacomp_core::uncertainty::PositionUncertainty {
     use hexacomp_core::uncertainty::{FEATURES, PositionUncertainty};
     let scale = 1.0 / (FEATURES as f64).sqrt();
+    let [min, max] = leg_range;
     PositionUncertainty {
-        centre_mm: [355.0; 6],
-        half_span_mm: [60.0; 6],
+        centre_mm: [(min + max) / 2.0; 6],
+        half_span_mm: [0.4 * (max - min); 6],
         whitening: (0..FEATURES)
             .flat_map(|r| (0..=r).map(move |c| if r == c { scale } else { 0.0 }))
             .collect(),

@@ -22,7 +22,7 @@ use hexacomp_core::Geometry;
 use hexacomp_core::model::Model;
 
 use crate::installed::{ServiceUnit, installed};
-use crate::{binary, library_dir, smooth_model_for};
+use crate::{binary, library_dir, smooth_model_for, test_uncertainty_over};
 
 /// The unprivileged user LinuxCNC runs as when the tests run as root (`.ci/run` creates it).
 pub const LINUXCNC_USER: &str = "hexacnc";
@@ -275,7 +275,11 @@ impl SimConfig {
             String::from_utf8_lossy(&output.stderr)
         );
         let geometry = Geometry::load(&geometry_file).expect("the converted geometry");
-        let model = smooth_model_for(&geometry, 3);
+        // With an uncertainty, for the component's `uncertainty` pin.
+        let model = Model {
+            uncertainty: Some(test_uncertainty_over(geometry.leg_range)),
+            ..smooth_model_for(&geometry, 3)
+        };
         model
             .save(&dir.join("model.hxm"))
             .expect("saving the model");

@@ -3,7 +3,8 @@
 //! HAL component between motion and the drives), driven headless by `drive.py`.
 //!
 //! - inverse kinematics: poses commanded by MDI give the joint positions hexacomp's nominal
-//!   inverse kinematics computes for the geometry converted from the configuration;
+//!   inverse kinematics computes for the geometry converted from the configuration, and the
+//!   component's `uncertainty` pin the service's uncertainty for those legs;
 //! - a G-code program with the component in the loop: every servo period's motor command out of
 //!   the component is the command into it plus the service's correction for that period's legs;
 //! - the service killed mid-program: fault raised, correction held, machine stopped, program
@@ -62,6 +63,20 @@ fn service_correction(sim: &SimConfig, model: &Model, sample: &Sample) -> [f64; 
     assert_eq!(answer.status, PointStatus::Ok, "legs {legs_mm:?} mm");
     answer.corrections.map(|c| c / MM_PER_INCH)
 }
+
+/// The 1-σ position uncertainty (inch) the service's model gives for `joints` (inch), as the
+/// service sends it (an `f32` of mm).
+fn service_uncertainty(sim: &SimConfig, joints: &[f64]) -> f64 {
+    let legs_mm: [f64; 6] = std::array::from_fn(|j| joints[j] * MM_PER_INCH);
+    let answer = compensate_legs(&sim.geometry, Some(&FusedModel::new(&sim.model)), &legs_mm);
+    assert_eq!(answer.status, PointStatus::Ok, "legs {legs_mm:?} mm");
+    let sigma_mm = answer.uncertainty_mm.expect("the model has an uncertainty") as f32;
+    f64::from(sigma_mm) / MM_PER_INCH
+}
+
+/// Largest relative difference between the uncertainty pin and the service's: the legs the
+/// component sent and those LinuxCNC reports agree to rounding, the `f32` on the wire to 6e-8.
+const UNCERTAINTY_TOLERANCE: f64 = 1e-6;
 
 /// The correction the component added in `sample` (inch).
 fn applied_correction(sample: &Sample) -> [f64; 6] {
@@ -281,8 +296,16 @@ fn linuxcnc_joints_equal_hexacomp_inverse_kinematics_for_mdi_poses() {
     let recorded = results["mdi"].as_array().expect("mdi results");
     assert_eq!(recorded.len(), poses.len());
     let mut worst = 0.0f64;
+    let mut uncertainties = Vec::new();
     for (pose, record) in poses.iter().zip(recorded) {
         let joints: Vec<f64> = serde_json::from_value(record["joints"].clone()).expect("joints");
+        let pin = record["uncertainty"].as_f64().expect("the uncertainty pin");
+        let expected = service_uncertainty(&sim, &joints);
+        assert!(
+            (pin - expected).abs() <= UNCERTAINTY_TOLERANCE * expected,
+            "pose {pose:?}: uncertainty pin {pin} in, the service's {expected} in"
+        );
+        uncertainties.push(pin);
         let nominal = inverse_kinematics(&sim.geometry, &Pose::from_mm_deg(to_mm_deg(pose)));
         for (leg, &joint) in joints.iter().enumerate() {
             let length = nominal.lengths[leg];
@@ -299,8 +322,19 @@ fn linuxcnc_joints_equal_hexacomp_inverse_kinematics_for_mdi_poses() {
         results["errors"].as_array().is_some_and(|e| e.is_empty()),
         "{results}"
     );
+    // The pin follows the legs: a pin stuck at one value (or at 0) would not tell where the
+    // model extrapolates.
+    let (least, most) = uncertainties
+        .iter()
+        .fold((f64::INFINITY, 0.0f64), |(l, m), &u| (l.min(u), m.max(u)));
+    assert!(
+        least > 0.0 && most > 1.1 * least,
+        "uncertainty pin from {least} to {most} in over {} poses",
+        poses.len()
+    );
     eprintln!(
-        "{} MDI poses: largest |LinuxCNC − hexacomp| / leg length {worst:.2e}",
+        "{} MDI poses: largest |LinuxCNC − hexacomp| / leg length {worst:.2e}; uncertainty pin \
+         {least:.2e} to {most:.2e} in, the service's for the legs",
         poses.len()
     );
 }

@@ -7,7 +7,8 @@ E-stop, switches the machine on, homes, enables world (teleop) mode, then, as th
                                            records every sample of the HAL sampler's FIFO N
                                            (full precision, one line of Python reprs each);
   "mdi": [[x, y, z, a, b, c], ...]         moves to each pose by MDI G0 and records the joints
-                                           and the motor commands;
+                                           and the motor commands and the component's
+                                           uncertainty pin;
   "program": FILE                          runs the G-code program to its end;
   "started": FILE                          is created once the program runs;
   "unhomed": {"ready": FILE, "go": FILE}    before homing: creates "ready" with the machine on
@@ -128,6 +129,7 @@ def move_to_poses(poses):
             "position": list(stat.position[:6]),
             "joints": joints,
             "motors": [hal.get_value(f"joint.{j}.motor-pos-cmd") for j in range(6)],
+            "uncertainty": hal.get_value("hexacomp.0.uncertainty"),
         })
 
 
