@@ -24,9 +24,12 @@ corrections change far slower and are followed exactly; a jump (a fault clearing
 moved, a new model after a deploy or a service restart, the end of a clamped stretch) reaches the
 drives as a ramp, never as a step.
 
-\\fBuncertainty\\fR is the model's 1-sigma position uncertainty at the legs of the held corrections
-(from the service's answer; 0 when the model file has none): wire it to a comparator or a display
-to see where the model extrapolates, beyond the configurations it was trained on.
+\\fBuncertainty\\fR is the model's 1-sigma position uncertainty (the translation of the platform's
+reference point, machine units) at the legs of the held corrections, from the service's answer: it
+grows where the poses lie away from the measured configurations, within the trained leg range
+(beyond it the service answers outside-trained-range, a fault). It is held with the corrections
+while \\fBfault\\fR is set, and is 0 when the model file has none or nothing is held (after a
+ramp out): a comparator on it should be gated by \\fBfault\\fR and \\fBblend\\fR.
 
 The feedback pins remove the applied correction from the drive feedback again, so that motion sees
 the nominal joint positions and computes no following error from the correction.
@@ -59,7 +62,7 @@ pin out u32 model_generation "Generation of the service's model that computed th
 pin out u32 point_status "Status of the last answered point (HEXACOMP_STATUS_*: 0 ok, 1 out of stroke, 2 outside trained range, 3 clamped, 4 invalid input, 5 no model)";
 pin out s32 last_error "Result of the last call to the service (HexacompError: 0 ok, 3 service absent, 4 timeout, ...)";
 pin out float blend "Share of the held correction applied, 0 to 1";
-pin out float uncertainty "The model's 1-sigma position uncertainty at the point of the held corrections, machine units (the position error lies within twice it for 95 % of points; it grows where the model extrapolates); 0 when the model has none or nothing is held";
+pin out float uncertainty "The model's 1-sigma position uncertainty (translation of the platform's reference point, machine units) at the legs of the held corrections: the error lies within twice it for 95.45 % of points when calibrated; held with the corrections while fault is set; 0 when the model has none or nothing is held";
 
 param rw bit enable = 1 "Use compensation (changes ramp over ramp-time); 0 asks nothing and is no fault";
 param rw float ramp_time = 1.0 "Seconds for blend to go from 0 to 1 and back (the correction itself may take longer: max-rate bounds it too)";
@@ -235,6 +238,7 @@ static int take_connection(struct __comp_state *__comp_inst) {
    held[] only for an ok answer. */
 static int ask_service(struct __comp_state *__comp_inst) {
     double legs_mm[6];
+    double sigma;
     HexacompPoint answer;
     HexacompError result;
     int i;
@@ -247,13 +251,16 @@ static int ask_service(struct __comp_state *__comp_inst) {
     if (result != HEXACOMP_OK) return 0;
     point_status = answer.status;
     if (answer.status != HEXACOMP_STATUS_OK) return 0;
-    /* A correction that is not a finite number of machine units (mm-per-unit 0 or not a
-       number) is never held: it would make the applied correction NaN for good. */
+    /* An answer with a correction or an uncertainty that is not a finite number of machine
+       units (a bad mm-per-unit) is never held, in part or in whole: a NaN correction would make
+       the applied correction NaN for good. */
+    sigma = answer.uncertainty_mm / mm_per_unit;
+    if (!isfinite(sigma) || sigma < 0) return 0;
     for (i = 0; i < 6; i++)
         if (!isfinite(answer.corrections[i] / mm_per_unit)) return 0;
     for (i = 0; i < 6; i++) held[i] = answer.corrections[i] / mm_per_unit;
     /* 0 from the service where the model has no uncertainty: the pin then reads 0 too. */
-    uncertainty = answer.uncertainty_mm / mm_per_unit;
+    uncertainty = sigma;
     model_generation = answer.generation;
     return 1;
 }

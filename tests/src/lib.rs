@@ -148,7 +148,7 @@ pub fn smooth_model_for(
 /// A position uncertainty with the identity moment matrix, centred on the prototype's mid
 /// stroke: `σ² = 2e-5 + 3e-5 · h` mm², `h` the squared norm of the legs' features over 13.
 pub fn test_uncertainty() -> hexacomp_core::uncertainty::PositionUncertainty {
-    test_uncertainty_over([280.0, 430.0])
+    test_uncertainty_over(hexacomp_core::Geometry::prototype().leg_range)
 }
 
 /// [`test_uncertainty`] for legs whose stroke is `leg_range` (mm): centred on its middle, with

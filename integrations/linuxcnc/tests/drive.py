@@ -61,7 +61,8 @@ def wait_until(condition, seconds, what, interval=0.01):
 
 def component_state():
     """The hexacomp component's status pins, for failure messages."""
-    pins = ["fault", "fault-count", "last-error", "point-status", "model-generation", "blend"]
+    pins = ["fault", "fault-count", "last-error", "point-status", "model-generation", "blend",
+            "uncertainty"]
     return ", ".join(f"{pin} {hal.get_value('hexacomp.0.' + pin)}" for pin in pins)
 
 
