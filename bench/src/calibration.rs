@@ -11,7 +11,9 @@ use hexacomp_trainer::distill::DistillOptions;
 use hexacomp_trainer::identify::{PHYSICAL, identify};
 use hexacomp_trainer::physical_candidate::carried_into_networks;
 use hexacomp_trainer::pipeline::Pipeline;
-use hexacomp_trainer::pitch_resolution::{chosen_if_cross_validated, identifications};
+use hexacomp_trainer::pitch_resolution::{
+    ResolutionChoice, chosen_if_cross_validated, identifications,
+};
 use hexacomp_trainer::plan::PlanOptions;
 use hexacomp_trainer::train::{Architecture, CROSS_VALIDATION_FOLDS, training_work};
 use hexacomp_virtual::{ErrorModel, ErrorVariant, VirtualPlatform};
@@ -107,10 +109,13 @@ pub fn calibrate(
     for (basis, why) in resolution.iter().flat_map(|r| &r.failed) {
         eprintln!("{basis} lead-screw coefficients per leg left out: {why}");
     }
-    let identification = resolution.map_or(PHYSICAL, |r| r.options);
+    let identification = resolution.as_ref().map_or(PHYSICAL, |r| r.options);
     let physical = identify(&geometry, &kept, &identification)
         .context("identifying the virtual platform's physical model")?
         .model;
+    let alternative_bases = resolution
+        .as_ref()
+        .map_or_else(Vec::new, ResolutionChoice::indistinguishable);
     let bar = work_bar(
         training_work(
             options.samples + kept.len(),
@@ -122,6 +127,7 @@ pub fn calibrate(
     let carried = carried_into_networks(
         &geometry,
         &physical,
+        &alternative_bases,
         &kept,
         &options,
         error_model().repeatability_sigma_mm,

@@ -358,9 +358,13 @@ pub fn evaluate(
                 }
             })
             .collect();
+        let alternative_bases = resolution
+            .as_ref()
+            .map_or_else(Vec::new, ResolutionChoice::indistinguishable);
         let distilled = carried_into_networks(
             geometry,
             &physical,
+            &alternative_bases,
             &solved,
             &options.distill,
             options.error_model.repeatability_sigma_mm,

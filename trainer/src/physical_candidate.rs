@@ -18,7 +18,7 @@ use crate::distill::{DistillOptions, Fidelity, distill, fidelity};
 use crate::error::{Error, Result};
 use crate::identify::{IdentifyOptions, identify};
 use crate::physical::PhysicalModel;
-use crate::pitch_resolution::ResolutionChoice;
+use crate::pitch_resolution::{ResolutionChoice, alternatives};
 use crate::train::Trained;
 use crate::uncertainty::UncertaintySource;
 
@@ -76,6 +76,7 @@ pub fn physical_candidate(
     let carried = carried_into_networks(
         nominal,
         &physical,
+        &resolution.indistinguishable(),
         measurements,
         &options.distill,
         options.repeatability_mm,
@@ -122,10 +123,15 @@ pub struct CarriedModel {
 /// lead-screw resolution (the precondition: its uncertainty is propagated with those options'
 /// cutoff and compliance terms), into networks ([`distill`]) that carry its position uncertainty
 /// for legs repeating within `repeatability_mm` (1 σ per move, mm), the networks' own departure
-/// from the model added.
+/// from the model and its spread about the models of the lead-screw resolutions
+/// `alternative_bases` added (those the cross-validation could not tell from the model's,
+/// [`crate::pitch_resolution::ResolutionChoice::indistinguishable`]; the model's own is
+/// skipped), each identified on `measurements`. An alternative that cannot be identified
+/// leaves the networks without an uncertainty, as too few configurations do.
 pub fn carried_into_networks(
     nominal: &Geometry,
     physical: &PhysicalModel,
+    alternative_bases: &[usize],
     measurements: &[MeasuredConfiguration],
     options: &DistillOptions,
     repeatability_mm: f64,
@@ -146,17 +152,27 @@ pub fn carried_into_networks(
         FIDELITY_POSES,
     )?;
     let leg_variance_mm2 = repeatability_mm.powi(2) + fidelity.rms_mm.powi(2);
-    let uncertainty = UncertaintySource::new(
-        nominal,
-        physical,
-        &identification,
-        measurements,
-        options.seed,
-    )
-    .and_then(|source| {
-        distilled.model.uncertainty = Some(source.fitted(leg_variance_mm2)?);
-        Ok(source)
-    });
+    let own = physical.pitch.basis();
+    let bases: Vec<usize> = alternative_bases
+        .iter()
+        .copied()
+        .filter(|&basis| basis != own)
+        .collect();
+    let uncertainty = alternatives(nominal, measurements, &bases)
+        .and_then(|alternatives| {
+            UncertaintySource::new(
+                nominal,
+                physical,
+                &identification,
+                &alternatives,
+                measurements,
+                options.seed,
+            )
+        })
+        .and_then(|source| {
+            distilled.model.uncertainty = Some(source.fitted(leg_variance_mm2)?);
+            Ok(source)
+        });
     Ok(CarriedModel {
         distilled,
         fidelity,

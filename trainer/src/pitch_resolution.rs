@@ -75,6 +75,40 @@ impl ResolutionChoice {
             .find(|s| s.pitch_basis == self.options.pitch_basis)
             .expect("the chosen resolution was scored")
     }
+
+    /// The resolutions besides the chosen one that the cross-validation could not tell from
+    /// the best (within one standard error of the lowest error), coarsest first: the
+    /// uncertainty's alternatives ([`alternatives`]).
+    pub fn indistinguishable(&self) -> Vec<usize> {
+        within_one_standard_error(&self.scores)
+            .map(|s| s.pitch_basis)
+            .filter(|&basis| basis != self.options.pitch_basis)
+            .collect()
+    }
+}
+
+/// The physical models of lead-screw resolutions `bases` (B-spline coefficients per leg; the
+/// chosen one's [`ResolutionChoice::indistinguishable`]), each identified with
+/// [`IdentifyOptions::physical`] on every configuration of `measurements`, in the order of
+/// `bases`; an error naming the first resolution that could not be. The identifications run
+/// on the machine's cores.
+pub fn alternatives(
+    nominal: &Geometry,
+    measurements: &[MeasuredConfiguration],
+    bases: &[usize],
+) -> Result<Vec<PhysicalModel>> {
+    in_parallel(bases, |&basis| {
+        identify(nominal, measurements, &IdentifyOptions::physical(basis))
+            .map(|identified| identified.model)
+            .map_err(|e| {
+                Error::InsufficientData(format!(
+                    "the alternative of {basis} lead-screw coefficients per leg, identified on \
+                     every configuration: {e}"
+                ))
+            })
+    })
+    .into_iter()
+    .collect()
 }
 
 /// Chooses the lead-screw resolution of the physical model of the kept `measurements` and their
@@ -222,6 +256,14 @@ pub fn chosen_if_cross_validated(
 /// The score with the fewest coefficients whose error is within one standard error of the
 /// lowest error's.
 fn coarsest_within_one_standard_error(scores: &[ResolutionScore]) -> &ResolutionScore {
+    within_one_standard_error(scores)
+        .min_by_key(|s| s.pitch_basis)
+        .expect("the best is within its own standard error")
+}
+
+/// The scores whose error is within one standard error of the lowest error's (that one
+/// included), in the order of `scores`.
+fn within_one_standard_error(scores: &[ResolutionScore]) -> impl Iterator<Item = &ResolutionScore> {
     let best = scores
         .iter()
         .min_by(|a, b| {
@@ -232,9 +274,7 @@ fn coarsest_within_one_standard_error(scores: &[ResolutionScore]) -> &Resolution
     let within = best.cross_validated_rmse_mm + best.standard_error_mm;
     scores
         .iter()
-        .filter(|s| s.cross_validated_rmse_mm <= within)
-        .min_by_key(|s| s.pitch_basis)
-        .expect("the best is within its own standard error")
+        .filter(move |s| s.cross_validated_rmse_mm <= within)
 }
 
 /// The score of `basis` from each configuration's squared miss (summed over the legs, mm²).
@@ -261,20 +301,20 @@ fn fold_miss(
     nominal: &Geometry,
     measurements: &[MeasuredConfiguration],
     corrections: &[JointCorrection],
-    fold: &[usize],
+    fold: &[Option<usize>],
     f: usize,
     options: &IdentifyOptions,
 ) -> Result<Vec<(usize, f64)>> {
     let fitted: Vec<MeasuredConfiguration> = measurements
         .iter()
         .zip(fold)
-        .filter(|(_, of)| **of != f)
+        .filter(|(_, of)| **of != Some(f))
         .map(|(m, _)| m.clone())
         .collect();
     let model = identify(nominal, &fitted, options)?.model;
     fold.iter()
         .enumerate()
-        .filter(|(_, of)| **of == f)
+        .filter(|(_, of)| **of == Some(f))
         .map(|(k, _)| {
             Ok((
                 k,
@@ -341,6 +381,40 @@ mod tests {
             score(16, 0.0377, 0.0010),
         ];
         assert_eq!(coarsest_within_one_standard_error(&finest).pitch_basis, 16);
+    }
+
+    #[test]
+    fn the_alternatives_are_the_other_resolutions_within_one_standard_error_of_the_best() {
+        let choice = |scores: Vec<ResolutionScore>| ResolutionChoice {
+            options: IdentifyOptions::physical(
+                coarsest_within_one_standard_error(&scores).pitch_basis,
+            ),
+            scores,
+            failed: Vec::new(),
+        };
+        // The strong lead-screw robot at 100 configurations: twelve lowest, eight chosen, both
+        // others within the noise.
+        let level = choice(vec![
+            score(8, 0.0378, 0.0012),
+            score(12, 0.0370, 0.0012),
+            score(16, 0.0374, 0.0012),
+        ]);
+        assert_eq!(level.options.pitch_basis, 8);
+        assert_eq!(level.indistinguishable(), [12, 16]);
+        // Twelve chosen, sixteen within its noise, eight far off.
+        let short = choice(vec![
+            score(8, 0.0475, 0.0012),
+            score(12, 0.0367, 0.0009),
+            score(16, 0.0370, 0.0010),
+        ]);
+        assert_eq!(short.indistinguishable(), [16]);
+        // The best alone within its standard error: no alternative.
+        let clear = choice(vec![
+            score(8, 0.0475, 0.0012),
+            score(12, 0.0367, 0.0009),
+            score(16, 0.0477, 0.0010),
+        ]);
+        assert_eq!(clear.indistinguishable(), [0usize; 0]);
     }
 
     #[test]

@@ -283,23 +283,20 @@ fn fit_work(samples: usize, outputs: usize, hidden: usize, options: &TrainOption
 /// candidates) and chooses the physical model's lead-screw resolution.
 pub const CROSS_VALIDATION_FOLDS: usize = 5;
 
-/// The fold of a row that [`folds`] never holds out: it is fitted in every fold.
-pub const ALWAYS_FITTED: usize = usize::MAX;
-
-/// The fold (`0..folds`) of each row for a `folds`-fold cross-validation, given each row's
-/// commanded legs (mm). A row that holds a leg's shortest or longest length among all the rows
-/// is never held out ([`ALWAYS_FITTED`]): held out, it would ask the models fitted without it
-/// for a leg beyond the ones they saw, which no pose within the measured legs asks (a plan
-/// starts with each leg's extremes; docs/accuracy.md). The other rows in a seeded random order,
-/// dealt out in turn, so fold sizes differ by one at most.
-pub fn folds(legs: &[[f64; LEGS]], folds: usize, seed: u64) -> Vec<usize> {
+/// The fold (`0..folds`) that holds out each row in a `folds`-fold cross-validation, given each
+/// row's commanded legs (mm); `None` for a row fitted in every fold. A row that holds a leg's
+/// shortest or longest length among all the rows is never held out: held out, it would ask the
+/// models fitted without it for a leg beyond the ones they saw, which no pose within the
+/// measured legs asks (a plan starts with each leg's extremes; docs/accuracy.md). The other rows
+/// in a seeded random order, dealt out in turn, so fold sizes differ by one at most.
+pub fn folds(legs: &[[f64; LEGS]], folds: usize, seed: u64) -> Vec<Option<usize>> {
     let extreme = rows_holding_leg_extremes(legs);
-    let mut fold = vec![ALWAYS_FITTED; legs.len()];
+    let mut fold = vec![None; legs.len()];
     let dealt = shuffled(legs.len(), seed)
         .into_iter()
         .filter(|&row| !extreme[row]);
     for (position, row) in dealt.enumerate() {
-        fold[row] = position % folds.max(1);
+        fold[row] = Some(position % folds.max(1));
     }
     fold
 }
@@ -350,10 +347,11 @@ pub fn cross_validated_rmse(
     // The split's normalised samples; its own holdout is not used here.
     let split = Split::new(&inputs, &targets, &normalisation, options);
     let fold = folds(&legs, fold_count, options.seed);
-    let held_out = fold.iter().filter(|&&f| f != ALWAYS_FITTED).count();
+    let held_out = fold.iter().flatten().count();
     let mut squared = 0.0;
     for f in 0..fold_count {
-        let (held, fitted): (Vec<usize>, Vec<usize>) = (0..rows.len()).partition(|&k| fold[k] == f);
+        let (held, fitted): (Vec<usize>, Vec<usize>) =
+            (0..rows.len()).partition(|&k| fold[k] == Some(f));
         for (net, legs) in networks.iter().enumerate() {
             let seed = seed_for(options.seed ^ (f as u64) << 48, net as u64, hidden[net]);
             let fitted = split.data(&fitted, legs);

@@ -11,6 +11,12 @@
 //! they carry): the pose-error twist has the covariance `T (G C Gᵀ + v I) Tᵀ`, and the position
 //! error its upper-left 3 × 3 block `Σ`.
 //!
+//! **The resolutions the data cannot tell apart.** The covariance holds the parameters' noise,
+//! not the model's form: where the cross-validation could not tell other lead-screw
+//! resolutions from the chosen one ([`crate::pitch_resolution::alternatives`]), each is taken
+//! equally likely, and the spread of the legs' errors a machine of its form would make under the
+//! chosen model's commands is added ([`Propagation::position_covariances`]).
+//!
 //! **One σ.** `Σ` is anisotropic; the uncertainty reported is the one-dimensional equivalent
 //! `σ` with `P(‖δ‖ ≤ 2σ) = 95.45 %` (what `2σ` covers in one dimension): `‖δ‖²` is a weighted
 //! sum of χ²₁ variables, approximated by a scaled χ² with the same mean and variance (Patnaik),
@@ -95,17 +101,36 @@ impl Propagation {
     }
 
     /// The covariance of the position error (mm², base-frame axes) at `pose` commanded with
-    /// the model's legs, in two parts: what the parameters' uncertainty gives, and what one
-    /// mm² of independent leg variance at every move gives (mm² per mm²); `Σ` is the first
-    /// plus the leg variance times the second. `None` at a singular pose.
-    pub fn position_covariances(&self, pose: &Pose) -> Option<(Matrix3<f64>, Matrix3<f64>)> {
+    /// the model's legs, in two parts: what the parameters' uncertainty and the choice among
+    /// `alternatives` give, and what one mm² of independent leg variance at every move gives
+    /// (mm² per mm²); `Σ` is the first plus the leg variance times the second. `None` at a
+    /// singular pose.
+    ///
+    /// `alternatives` are models the data could not tell from this one (other lead-screw
+    /// resolutions within the cross-validation's noise): had the machine been alternative
+    /// `k`'s, the legs commanded by this model would stand loaded at `L_k(q)` where the pose
+    /// needs `l_k` (its geometry's inverse kinematics), off by `d_k = L_k(q) − l_k`; the
+    /// spread about this model, `Σ_k d_k d_kᵀ / (K + 1)` over the `K` alternatives and this
+    /// model (equally likely), is added to the legs' covariance.
+    pub fn position_covariances(
+        &self,
+        pose: &Pose,
+        alternatives: &[PhysicalModel],
+    ) -> Option<(Matrix3<f64>, Matrix3<f64>)> {
         let geometry = &self.model.geometry;
         let commanded = self.model.command(pose);
         let screws = ActuationScrews::at(geometry, pose);
         let t = screws.motion_jacobian()?;
         let g = leg_sensitivities(&self.model, &self.options, &commanded, pose, &screws);
         let legs = &g * &self.covariance * g.transpose();
-        let legs = SMatrix::<f64, LEGS, LEGS>::from_iterator(legs.iter().copied());
+        let mut legs = SMatrix::<f64, LEGS, LEGS>::from_iterator(legs.iter().copied());
+        let choices = (alternatives.len() + 1) as f64;
+        for alternative in alternatives {
+            let loaded = alternative.loaded_lengths(&commanded, pose);
+            let needed = hexacomp_core::inverse_kinematics(&alternative.geometry, pose).lengths;
+            let d = SMatrix::<f64, LEGS, 1>::from_fn(|i, _| loaded[i] - needed[i]);
+            legs += d * d.transpose() / choices;
+        }
         let position = |m: SMatrix<f64, LEGS, LEGS>| {
             (t * m * t.transpose())
                 .fixed_view::<3, 3>(0, 0)
@@ -152,12 +177,14 @@ pub struct UncertaintySource {
 }
 
 impl UncertaintySource {
-    /// The source of `model`, identified from `rows` with `options` on `nominal`; the poses
-    /// over the measured range are drawn with `seed`.
+    /// The source of `model`, identified from `rows` with `options` on `nominal`, beside
+    /// `alternatives` the rows could not tell from it ([`Propagation::position_covariances`]);
+    /// the poses over the measured range are drawn with `seed`.
     pub fn new(
         nominal: &Geometry,
         model: &PhysicalModel,
         options: &IdentifyOptions,
+        alternatives: &[PhysicalModel],
         rows: &[MeasuredConfiguration],
         seed: u64,
     ) -> Result<Self> {
@@ -172,7 +199,7 @@ impl UncertaintySource {
         let samples = poses
             .iter()
             .filter_map(|pose| {
-                let (parameters, legs) = propagation.position_covariances(pose)?;
+                let (parameters, legs) = propagation.position_covariances(pose, alternatives)?;
                 Some((leverage.leverage(&nominal_legs(pose)), parameters, legs))
             })
             .collect();
@@ -382,6 +409,98 @@ mod tests {
         }
         assert_eq!(one_sigma_mm(&Matrix3::zeros()), 0.0);
         assert!(one_sigma_mm(&Matrix3::from_element(f64::INFINITY)).is_nan());
+    }
+
+    /// Where a machine that `alternative` describes exactly reaches when commanded with the legs
+    /// `model` gives for `pose`, minus `pose`'s position (mm): Newton steps on the
+    /// alternative's commands, differentiated by central differences.
+    fn reached_off(
+        model: &PhysicalModel,
+        alternative: &PhysicalModel,
+        pose: &Pose,
+    ) -> nalgebra::Vector3<f64> {
+        let target = model.command(pose);
+        let start = pose.to_mm_deg();
+        let mut at = start;
+        for _ in 0..3 {
+            let commanded = alternative.command(&Pose::from_mm_deg(at));
+            let mut jacobian = SMatrix::<f64, LEGS, LEGS>::zeros();
+            for k in 0..LEGS {
+                let step = if k < 3 { 1e-3 } else { 1e-4 };
+                let (mut up, mut down) = (at, at);
+                up[k] += step;
+                down[k] -= step;
+                let (up, down) = (
+                    alternative.command(&Pose::from_mm_deg(up)),
+                    alternative.command(&Pose::from_mm_deg(down)),
+                );
+                for i in 0..LEGS {
+                    jacobian[(i, k)] = (up[i] - down[i]) / (2.0 * step);
+                }
+            }
+            let miss = SMatrix::<f64, LEGS, 1>::from_fn(|i, _| target[i] - commanded[i]);
+            let step = jacobian.lu().solve(&miss).expect("a regular pose");
+            for k in 0..LEGS {
+                at[k] += step[k];
+            }
+        }
+        nalgebra::Vector3::from_fn(|k, _| at[k] - start[k])
+    }
+
+    #[test]
+    fn an_alternative_adds_its_share_of_where_its_machine_would_reach() {
+        // The physical model of the default robot's 40 configurations with eight and with
+        // twelve lead-screw coefficients: the second is the alternative.
+        let g = Geometry::prototype();
+        let poses = crate::plan::plan(
+            &g,
+            &crate::plan::PlanOptions {
+                count: 40,
+                seed: 3,
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        let mut platform = hexacomp_virtual::VirtualPlatform::new(
+            &g,
+            &hexacomp_virtual::ErrorModel::default(),
+            1,
+            1,
+        )
+        .unwrap();
+        let rows = crate::acquire::measure_plan(&mut platform, &crate::plan::numbered_rows(&poses))
+            .unwrap();
+        let identified = |basis| {
+            crate::identify::identify(&g, &rows, &IdentifyOptions::physical(basis))
+                .unwrap()
+                .model
+        };
+        let (model, alternative) = (identified(8), identified(12));
+        let propagation = Propagation::of(&model, &IdentifyOptions::physical(8), &rows).unwrap();
+        let mut largest = 0.0f64;
+        for pose in &poses[20..26] {
+            let (alone, legs_alone) = propagation.position_covariances(pose, &[]).unwrap();
+            let (beside, legs_beside) = propagation
+                .position_covariances(pose, std::slice::from_ref(&alternative))
+                .unwrap();
+            assert_eq!(
+                legs_alone, legs_beside,
+                "the leg variance's part is unchanged"
+            );
+            // Two models the data cannot tell apart: half the outer product of the miss, to
+            // within what the propagation's linear map leaves out (it holds the sag under the
+            // weight fixed while the pose moves: 0.5 % here).
+            let off = reached_off(&model, &alternative, pose);
+            let expected = off * off.transpose() / 2.0;
+            let added = beside - alone;
+            largest = largest.max(off.norm());
+            assert!(
+                (added - expected).norm() <= 1e-2 * expected.norm(),
+                "pose {pose:?}: added {added} against {expected}"
+            );
+        }
+        // The models differ by micrometres: the check is about something.
+        assert!(largest > 5e-4, "the models differ by {largest} mm at most");
     }
 
     #[test]

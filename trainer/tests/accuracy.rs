@@ -18,7 +18,7 @@ use hexacomp_trainer::pipeline::Pipeline;
 use hexacomp_trainer::pitch_resolution::chosen_resolution;
 use hexacomp_trainer::plan::PlanOptions;
 use hexacomp_trainer::train::{
-    ALWAYS_FITTED, Architecture, TrainOptions, can_cross_validate, cross_validated_rmse, folds,
+    Architecture, TrainOptions, can_cross_validate, cross_validated_rmse, folds,
 };
 use hexacomp_virtual::{DEFAULT_MACHINE_SEED, ErrorModel, ErrorVariant, VirtualPlatform};
 use rand::{RngExt, SeedableRng};
@@ -51,12 +51,12 @@ fn folds_deal_every_row_but_the_legs_extremes_to_one_fold_evenly_and_the_same_fo
     for (r, of) in fold.iter().enumerate() {
         assert_eq!(
             extremes.contains(&r),
-            *of == ALWAYS_FITTED,
-            "row {r} in fold {of}"
+            of.is_none(),
+            "row {r} in fold {of:?}"
         );
     }
     let sizes: Vec<usize> = (0..5)
-        .map(|f| fold.iter().filter(|&&of| of == f).count())
+        .map(|f| fold.iter().filter(|&&of| of == Some(f)).count())
         .collect();
     assert_eq!(sizes.iter().sum::<usize>(), 35 - extremes.len());
     assert!(
@@ -363,9 +363,11 @@ fn the_physical_model_as_networks_beats_the_papers_decoupled_networks_at_50_and_
             );
             // And it stays above what no compensation can beat.
             assert!(ours.mean > floor.mean, "{variant:?} at {n}");
-            // Its uncertainty per point: on the default robot, 2σ holds 90–98 % of the errors
-            // reached (95.45 % if calibrated); the strong-pitch robot's lead-screw errors have a
-            // form the model lacks, which the uncertainty does not know (docs/accuracy.md).
+            // Its uncertainty per point: 2σ holds 90–98 % of the errors reached (95.45 % if
+            // calibrated), on the strong-pitch robot too, whose periodic lead-screw error the
+            // eight coefficients kept at 50 configurations follow less well than twelve would,
+            // which the spread between the resolutions the cross-validation cannot tell apart
+            // says (docs/accuracy.md).
             let u = size.uncertainty.expect("the networks carry an uncertainty");
             eprintln!(
                 "{variant:?} at {n}: {:.1} % within 2σ, mean σ {:.4} mm, floor mean {:.4} mm",
@@ -373,12 +375,10 @@ fn the_physical_model_as_networks_beats_the_papers_decoupled_networks_at_50_and_
                 u.mean_sigma_mm,
                 floor.mean
             );
-            if variant == ErrorVariant::Paper {
-                assert!(
-                    (0.90..=0.98).contains(&u.within_two_sigma),
-                    "{variant:?} at {n}: {u:?}"
-                );
-            }
+            assert!(
+                (0.90..=0.98).contains(&u.within_two_sigma),
+                "{variant:?} at {n}: {u:?}"
+            );
             // It is of the size of the errors: above the floor, below the paper's networks.
             assert!(
                 u.mean_sigma_mm > floor.mean && u.mean_sigma_mm < paper.mean,

@@ -5,7 +5,9 @@ mod common;
 use hexacomp_core::{Geometry, inverse_kinematics};
 use hexacomp_trainer::Error;
 use hexacomp_trainer::identify::{IdentifyOptions, PARAMETERS, PHYSICAL, identify};
-use hexacomp_trainer::physical_candidate::{CandidateOptions, physical_candidate};
+use hexacomp_trainer::physical_candidate::{
+    CandidateOptions, carried_into_networks, physical_candidate,
+};
 use hexacomp_trainer::pitch_resolution::{PITCH_RESOLUTIONS, chosen_resolution, identifications};
 use hexacomp_virtual::{DEFAULT_MACHINE_SEED, ErrorModel, ErrorVariant};
 
@@ -214,6 +216,44 @@ fn the_lead_screw_resolution_is_chosen_by_held_out_error_and_follows_a_short_per
         chosen.cross_validated_rmse_mm
     );
     assert!(candidate.networks_uncertainty.is_ok());
+    // An alternative resolution that cannot be identified (two coefficients: at least four are
+    // needed) leaves the model without an uncertainty, naming it, and the model is still
+    // carried; another resolution widens the uncertainty, and the model's own among the
+    // alternatives is skipped (it would add nothing and count as one more choice).
+    let physical = identify(&g, &kept, &choice.options).unwrap().model;
+    let carried = |bases: &[usize]| {
+        carried_into_networks(
+            &g,
+            &physical,
+            bases,
+            &kept,
+            &common::cheap_distill(),
+            0.004,
+            &|_| {},
+        )
+        .unwrap()
+    };
+    let failed = carried(&[2]);
+    let why = failed.uncertainty.unwrap_err().to_string();
+    assert!(why.contains("2 lead-screw coefficients"), "{why}");
+    assert!(failed.distilled.model.uncertainty.is_none());
+    let uncertainty = |bases: &[usize]| {
+        carried(bases)
+            .distilled
+            .model
+            .uncertainty
+            .expect("an uncertainty")
+    };
+    let own = chosen.pitch_basis;
+    let other = if own == 12 { 16 } else { 12 };
+    let alone = uncertainty(&[]);
+    let beside = uncertainty(&[other]);
+    assert!(
+        beside.constant_variance_mm2 + beside.leverage_variance_mm2
+            > alone.constant_variance_mm2 + alone.leverage_variance_mm2,
+        "{beside:?} against {alone:?}"
+    );
+    assert_eq!(uncertainty(&[own, other]), beside);
     // Rows out of step with their corrections, or too few folds, are refused.
     let mut shuffled = solved.corrections.clone();
     shuffled.swap(0, 1);

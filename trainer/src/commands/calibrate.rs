@@ -532,6 +532,13 @@ fn physical(
     for (basis, why) in &resolution.failed {
         println!("physical model: {basis} lead-screw coefficients per leg left out: {why}");
     }
+    let alternatives = resolution.indistinguishable();
+    if !alternatives.is_empty() && candidate.networks_uncertainty.is_ok() {
+        println!(
+            "physical model: its uncertainty holds the spread to the models of {alternatives:?} \
+             coefficients per leg, which the cross-validation could not tell from it"
+        );
+    }
 
     let f = candidate.fidelity;
     // The departure's RMS enters the score; its largest value is where the networks follow the
