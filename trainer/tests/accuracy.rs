@@ -352,7 +352,7 @@ fn the_physical_model_as_networks_beats_the_papers_decoupled_networks_at_50_and_
                 ours.mean / paper.mean,
                 ours.max / paper.max
             );
-            // Measured here: 0.13–0.52 of the decoupled networks' mean, 0.12–0.38 of their max.
+            // Measured here: 0.13–0.49 of the decoupled networks' mean, 0.12–0.41 of their max.
             assert!(
                 ours.mean < 0.6 * paper.mean && ours.max < 0.8 * paper.max,
                 "{variant:?} at {n}: mean {} against {}, max {} against {}",
