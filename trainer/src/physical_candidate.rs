@@ -137,7 +137,8 @@ pub fn carried_into_networks(
     repeatability_mm: f64,
     progress: &(dyn Fn(u64) + Sync),
 ) -> Result<CarriedModel> {
-    let identification = IdentifyOptions::physical(physical.pitch.basis());
+    let own = physical.pitch.basis();
+    let identification = IdentifyOptions::physical(own);
     let measured: Vec<Pose> = measurements
         .iter()
         .map(MeasuredConfiguration::pose)
@@ -152,7 +153,6 @@ pub fn carried_into_networks(
         FIDELITY_POSES,
     )?;
     let leg_variance_mm2 = repeatability_mm.powi(2) + fidelity.rms_mm.powi(2);
-    let own = physical.pitch.basis();
     let bases: Vec<usize> = alternative_bases
         .iter()
         .copied()
