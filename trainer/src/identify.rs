@@ -30,6 +30,11 @@ use crate::physical::{COMPLIANCE_TERMS, PhysicalModel, PitchCurves};
 /// Number of geometric parameters: 6 × (3 + 3 + 1).
 pub const PARAMETERS: usize = 42;
 
+/// The first of the legs' zero offsets among [`linearise`]'s columns (six, leg by leg, after
+/// the base and the platform joints). An offset lengthens its leg one millimetre per
+/// millimetre, so its column is how the targets move with that leg's length.
+pub(crate) const LEG_OFFSET_COLUMNS: usize = 36;
+
 /// Settings of the identification.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct IdentifyOptions {
@@ -380,7 +385,7 @@ pub(crate) fn leg_sensitivities(
             g[(i, 3 * i + axis)] = s[axis];
             g[(i, 18 + 3 * i + axis)] = -s_platform[axis];
         }
-        g[(i, 36 + i)] = 1.0;
+        g[(i, LEG_OFFSET_COLUMNS + i)] = 1.0;
         // A pitch coefficient and a compliance coefficient lengthen the leg as its offset.
         // The middle basis function's coefficient stays 0: the functions sum to one, so
         // with it the curve and the offset could trade a constant.
@@ -411,7 +416,7 @@ fn apply(model: &mut PhysicalModel, options: &IdentifyOptions, step: &DVector<f6
             geometry.base_joints[i][axis] += step[3 * i + axis];
             geometry.platform_joints[i][axis] += step[18 + 3 * i + axis];
         }
-        geometry.leg_offsets[i] += step[36 + i];
+        geometry.leg_offsets[i] += step[LEG_OFFSET_COLUMNS + i];
         for (k, c) in model.pitch.coefficients[i].iter_mut().enumerate() {
             if let Some(column) = options.pitch_column(i, k) {
                 *c += step[column];
@@ -461,7 +466,7 @@ mod tests {
                 delta[18 + 3 * i + axis] =
                     identified.platform_joints[i][axis] - nominal.platform_joints[i][axis];
             }
-            delta[36 + i] = identified.leg_offsets[i] - nominal.leg_offsets[i];
+            delta[LEG_OFFSET_COLUMNS + i] = identified.leg_offsets[i] - nominal.leg_offsets[i];
         }
         delta
     }

@@ -162,10 +162,10 @@ pub fn carried_into_networks(
         .and_then(|alternatives| {
             UncertaintySource::new(
                 nominal,
-                physical,
-                &identification,
+                (physical, &identification),
                 &alternatives,
                 measurements,
+                repeatability_mm,
                 options.seed,
             )
         })
