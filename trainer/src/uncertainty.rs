@@ -76,8 +76,9 @@ impl Propagation {
     /// and so every target measured there, together (`K_c ε`, `K_c` how the targets move per mm
     /// of each leg: the leg offsets' columns, `LEG_OFFSET_COLUMNS`). Their covariance is
     /// `Ω = σ² I + v Σ_c K_c K_cᵀ` (`v` the repeatability's variance, `σ²` the rest per
-    /// coordinate: the instrument's noise, and what the model's form misses), and the estimate's change `δθ = B r` (`B = F U_rᵀ`, `F = D⁻¹ V_r S_r⁻¹`) has
-    /// the covariance `B Ω Bᵀ`. `σ²` is what the residuals hold beyond the repeatability's
+    /// coordinate: the instrument's noise, and what the model's form misses), and the
+    /// estimate's change `δθ = B r` (`B = F U_rᵀ`, `F = D⁻¹ V_r S_r⁻¹`) has the covariance
+    /// `B Ω Bᵀ`. `σ²` is what the residuals hold beyond the repeatability's
     /// expected share: `E‖r‖² = σ² (m − r) + v tr((I − U_r U_rᵀ) K Kᵀ)`.
     pub fn of(
         model: &PhysicalModel,
@@ -181,9 +182,12 @@ impl Propagation {
         let legs = &g * &self.covariance * g.transpose();
         let mut legs = SMatrix::<f64, LEGS, LEGS>::from_iterator(legs.iter().copied());
         let choices = (alternatives.len() + 1) as f64;
-        for alternative in alternatives {
-            let (d, fits) = self.miss_of(alternative, pose, &commanded, &g);
-            legs += positive_part(d * d.transpose() - fits) / choices;
+        if !alternatives.is_empty() {
+            let own = &g * &self.estimator;
+            for alternative in alternatives {
+                let (d, fits) = self.miss_of(alternative, pose, &commanded, &own);
+                legs += positive_part(d * d.transpose() - fits) / choices;
+            }
         }
         let position = |m: SMatrix<f64, LEGS, LEGS>| {
             (t * m * t.transpose())
@@ -194,13 +198,14 @@ impl Propagation {
     }
 
     /// `d_k` and `N_k` of `alternative` at `pose` (mm, mm²; [`Self::position_covariances`]):
-    /// legs `commanded` by this model, whose `G` there is `g`.
+    /// legs `commanded` by this model, whose estimate moves them there by `own = G B` per mm
+    /// of each residual.
     fn miss_of(
         &self,
         alternative: &Propagation,
         pose: &Pose,
         commanded: &[f64; LEGS],
-        g: &DMatrix<f64>,
+        own: &DMatrix<f64>,
     ) -> (SMatrix<f64, LEGS, 1>, SMatrix<f64, LEGS, LEGS>) {
         let model = &alternative.model;
         let loaded = model.loaded_lengths(commanded, pose);
@@ -208,9 +213,7 @@ impl Propagation {
         let d = SMatrix::<f64, LEGS, 1>::from_fn(|i, _| loaded[i] - needed[i]);
         let screws = ActuationScrews::at(&model.geometry, pose);
         let g_k = leg_sensitivities(model, &alternative.options, commanded, pose, &screws);
-        let fits = self
-            .noise
-            .sandwich(&(g_k * &alternative.estimator - g * &self.estimator));
+        let fits = self.noise.sandwich(&(g_k * &alternative.estimator - own));
         (d, SMatrix::from_iterator(fits.iter().copied()))
     }
 
@@ -223,7 +226,8 @@ impl Propagation {
 /// The covariance `Ω = σ² I + v Σ_c K_c K_cᵀ` of an identification's residuals, mm².
 #[derive(Debug, Clone)]
 struct ResidualNoise {
-    /// `σ²`, the instrument's variance per coordinate, mm².
+    /// `σ²`, the variance per coordinate beyond the repeatability (the instrument's noise, and
+    /// what the model's form misses), mm².
     instrument_variance_mm2: f64,
     /// `v`, the variance of each leg's length at every move (the repeatability), mm².
     repeatability_variance_mm2: f64,
@@ -617,18 +621,27 @@ mod tests {
     }
 
     /// `poses` measured on the virtual machine of `errors` (machine seed 1) with the noise of
-    /// `noise_seed`, and the physical models of eight and twelve lead-screw coefficients
-    /// identified from them, with their propagations for `errors`' repeatability.
+    /// `noise_seed`.
+    fn measured(
+        g: &Geometry,
+        poses: &[Pose],
+        errors: &hexacomp_virtual::ErrorModel,
+        noise_seed: u64,
+    ) -> Vec<MeasuredConfiguration> {
+        let mut platform =
+            hexacomp_virtual::VirtualPlatform::new(g, errors, 1, noise_seed).unwrap();
+        crate::acquire::measure_plan(&mut platform, &crate::plan::numbered_rows(poses)).unwrap()
+    }
+
+    /// `poses` measured as [`measured`], and the physical models of eight and twelve lead-screw
+    /// coefficients identified from them, with their propagations for `errors`' repeatability.
     fn eight_and_twelve(
         g: &Geometry,
         poses: &[Pose],
         errors: &hexacomp_virtual::ErrorModel,
         noise_seed: u64,
     ) -> [Propagation; 2] {
-        let mut platform =
-            hexacomp_virtual::VirtualPlatform::new(g, errors, 1, noise_seed).unwrap();
-        let rows = crate::acquire::measure_plan(&mut platform, &crate::plan::numbered_rows(poses))
-            .unwrap();
+        let rows = measured(g, poses, errors, noise_seed);
         [8, 12].map(|basis| {
             let options = IdentifyOptions::physical(basis);
             let model = crate::identify::identify(g, &rows, &options).unwrap().model;
@@ -709,25 +722,20 @@ mod tests {
                 })
                 .collect();
             model_scattered += scatter(&off);
-            // Twelve's miss under eight's commands, in each draw: its scatter is N's.
-            let misses: Vec<SMatrix<f64, LEGS, 1>> = draws
-                .iter()
-                .map(|[eight, twelve]| {
-                    let commanded = eight.model.command(pose);
-                    let screws = ActuationScrews::at(&eight.model.geometry, pose);
-                    let g =
-                        leg_sensitivities(&eight.model, &eight.options, &commanded, pose, &screws);
-                    eight.miss_of(twelve, pose, &commanded, &g).0
-                })
-                .collect();
-            miss_scattered += scatter(&misses);
+            // Twelve's miss under eight's commands, in each draw: its scatter is N's. The
+            // predictions are averaged over the draws.
+            let mut misses = Vec::with_capacity(draws.len());
             for [eight, twelve] in &draws {
                 let commanded = eight.model.command(pose);
                 let screws = ActuationScrews::at(&eight.model.geometry, pose);
                 let g = leg_sensitivities(&eight.model, &eight.options, &commanded, pose, &screws);
+                let own = &g * &eight.estimator;
+                let (miss, fits) = eight.miss_of(twelve, pose, &commanded, &own);
+                misses.push(miss);
                 model_predicted += (&g * &eight.covariance * g.transpose()).trace() / 40.0;
-                miss_predicted += eight.miss_of(twelve, pose, &commanded, &g).1.trace() / 40.0;
+                miss_predicted += fits.trace() / 40.0;
             }
+            miss_scattered += scatter(&misses);
         }
         // Forty draws (39 degrees of freedom) estimate one direction's variance within 23 % (1 σ,
         // √(2/39)), a sum over several directions within less: 0.96 was measured for both.
@@ -763,19 +771,18 @@ mod tests {
     #[test]
     fn the_propagation_refuses_a_repeatability_that_is_not_a_finite_sigma() {
         let g = Geometry::prototype();
-        let poses = forty_poses(&g);
-        let [eight, _] = eight_and_twelve(&g, &poses, &hexacomp_virtual::ErrorModel::default(), 1);
-        let mut platform = hexacomp_virtual::VirtualPlatform::new(
+        let rows = measured(
             &g,
+            &forty_poses(&g),
             &hexacomp_virtual::ErrorModel::default(),
             1,
-            1,
-        )
-        .unwrap();
-        let rows = crate::acquire::measure_plan(&mut platform, &crate::plan::numbered_rows(&poses))
-            .unwrap();
+        );
+        let options = IdentifyOptions::physical(8);
+        let model = crate::identify::identify(&g, &rows, &options)
+            .unwrap()
+            .model;
         for bad in [-0.004, f64::NAN, f64::INFINITY] {
-            let e = Propagation::of(&eight.model, &eight.options, &rows, bad).unwrap_err();
+            let e = Propagation::of(&model, &options, &rows, bad).unwrap_err();
             assert!(e.to_string().contains("repeatability"), "{e}");
         }
     }
