@@ -17,8 +17,9 @@
 //! not the model's form: where the cross-validation could not tell other lead-screw
 //! resolutions from the chosen one ([`crate::pitch_resolution::alternatives`]), each is taken
 //! equally likely, and the spread of the legs' errors a machine of its form would make under the
-//! chosen model's commands, beyond what the two fits' own noise explains, is added
-//! ([`Propagation::position_covariances`]).
+//! chosen model's commands, shrunk by what the two fits' own noise explains, is added
+//! ([`Propagation::position_covariances`]): `d dᵀ` of each miss `d`, scaled by `(1 − p/s)₊`, `s`
+//! its squared Mahalanobis length over the `p` directions of that noise.
 //!
 //! **One σ.** `Σ` is anisotropic; the uncertainty reported is the one-dimensional equivalent
 //! `σ` with `P(‖δ‖ ≤ 2σ) = 95.45 %` (what `2σ` covers in one dimension): `‖δ‖²` is a weighted
@@ -45,6 +46,12 @@ use crate::identify::{
     IdentifyOptions, LEG_OFFSET_COLUMNS, ScaledSvd, leg_sensitivities, linearise, scaled_svd,
 };
 use crate::physical::PhysicalModel;
+
+/// A repeatability is refused when its expected share of the residuals' variance is more than
+/// this many times what they hold: far beyond their own scatter (of 40 draws of a machine
+/// repeating within 0.02 mm, 40 configurations each, one held 0.98² of it:
+/// `tests::the_propagated_covariances_…`, which fails if the share is refused at once).
+const REPEATABILITY_EXCESS_REFUSED: f64 = 2.0;
 
 /// Poses drawn over the measured range that the uncertainty is fitted at (the configurations'
 /// own are added).
@@ -79,7 +86,10 @@ impl Propagation {
     /// coordinate: the instrument's noise, and what the model's form misses), and the
     /// estimate's change `δθ = B r` (`B = F U_rᵀ`, `F = D⁻¹ V_r S_r⁻¹`) has the covariance
     /// `B Ω Bᵀ`. `σ²` is what the residuals hold beyond the repeatability's
-    /// expected share: `E‖r‖² = σ² (m − r) + v tr((I − U_r U_rᵀ) K Kᵀ)`.
+    /// expected share: `E‖r‖² = σ² (m − r) + v tr((I − U_r U_rᵀ) K Kᵀ)`, and 0 where the
+    /// residuals hold less than that share, as their noise lets them when the instrument's is
+    /// small. A repeatability whose share is more than twice what they hold is refused (it is
+    /// not the machine's), naming the one that would be all of it.
     pub fn of(
         model: &PhysicalModel,
         options: &IdentifyOptions,
@@ -136,9 +146,18 @@ impl Propagation {
                 (u.rows(start, height).transpose() * moves.rows(start, height)).norm_squared()
             })
             .sum();
-        let repeated = repeatability * (moves.norm_squared() - taken);
+        let share = moves.norm_squared() - taken;
+        if repeatability * share > REPEATABILITY_EXCESS_REFUSED * residual.norm_squared() {
+            return Err(Error::InvalidSetting(format!(
+                "the machine's repeatability of {repeatability_mm} mm would give the \
+                 identification's residuals more than twice the variance they hold (all of it \
+                 is a repeatability of {:.3} µm with a noiseless instrument)",
+                1e3 * (residual.norm_squared() / share).sqrt()
+            )));
+        }
         let noise = ResidualNoise {
-            instrument_variance_mm2: ((residual.norm_squared() - repeated) / freedom as f64)
+            instrument_variance_mm2: ((residual.norm_squared() - repeatability * share)
+                / freedom as f64)
                 .max(0.0),
             repeatability_variance_mm2: repeatability,
             moves,
@@ -166,7 +185,9 @@ impl Propagation {
     /// stand loaded at `L_k(q)` where the pose needs `l_k` (its geometry's inverse
     /// kinematics), off by `d_k = L_k(q) − l_k`. Part of `d_k` is the two fits' own noise, not
     /// the choice: the difference of their estimates' moves, `A_k = G_k B_k − G B`, has the
-    /// covariance `N_k = A_k Ω A_kᵀ`. What is left of `d_k d_kᵀ − N_k` (its positive part),
+    /// covariance `N_k = A_k Ω A_kᵀ`. `d_k d_kᵀ` shrunk by that noise (by `(1 − p/s)₊`,
+    /// `s = d_kᵀ N_k⁻¹ d_k`, `p` the directions `N_k` holds: `s − p` estimates `s`'s share
+    /// beyond the noise),
     /// over the `K` alternatives and this model taken as equally likely (`/ (K + 1)`), is
     /// added to the legs' covariance.
     pub fn position_covariances(
@@ -186,7 +207,7 @@ impl Propagation {
             let own = &g * &self.estimator;
             for alternative in alternatives {
                 let (d, fits) = self.miss_of(alternative, pose, &commanded, &own);
-                legs += positive_part(d * d.transpose() - fits) / choices;
+                legs += beyond_noise(&d, &fits) / choices;
             }
         }
         let position = |m: SMatrix<f64, LEGS, LEGS>| {
@@ -250,11 +271,42 @@ impl ResidualNoise {
     }
 }
 
-/// The symmetric `m` with its negative eigenvalues set to zero.
-fn positive_part(m: SMatrix<f64, LEGS, LEGS>) -> SMatrix<f64, LEGS, LEGS> {
-    let eigen = m.symmetric_eigen();
-    let values = eigen.eigenvalues.map(|l| l.max(0.0));
-    eigen.eigenvectors * SMatrix::from_diagonal(&values) * eigen.eigenvectors.transpose()
+/// Eigenvalues of a noise covariance below this share of its largest are directions it does
+/// not hold: they are counted at this share, so a miss along them is not noise.
+const NOISE_RANK_TOLERANCE: f64 = 1e-12;
+
+/// What of a miss `d` (mm, one per leg) is beyond `noise`, the covariance of the part of it
+/// that is noise (mm²): `d dᵀ (1 − p/s)₊`, `s = dᵀ N⁻¹ d` the miss's squared Mahalanobis length
+/// and `p` the directions the noise holds. Were `d = δ + e`, `e ~ N(0, N)`, `s` would average
+/// `p + δᵀN⁻¹δ`: the estimate keeps `s − p` of it (the signal's share in the noise's metric),
+/// along `d`, and nothing where the noise explains the whole miss. A miss along directions the
+/// noise does not hold is kept, and without noise (`p = 0`) all of `d dᵀ`. NaN where the
+/// noise is not finite. (Taking `N` away from `d dᵀ` and keeping the positive part instead
+/// keeps about five of the six a pure noise miss holds in that metric: `d dᵀ` is of rank
+/// one, `N` spreads over six directions.)
+fn beyond_noise(
+    d: &SMatrix<f64, LEGS, 1>,
+    noise: &SMatrix<f64, LEGS, LEGS>,
+) -> SMatrix<f64, LEGS, LEGS> {
+    if !noise.iter().all(|v| v.is_finite()) {
+        // nalgebra's eigendecomposition does not return on a NaN.
+        return SMatrix::from_element(f64::NAN);
+    }
+    let eigen = noise.symmetric_eigen();
+    let floor = NOISE_RANK_TOLERANCE * eigen.eigenvalues.max();
+    let directions = eigen.eigenvalues.iter().filter(|&&v| v > floor).count();
+    let kept = if directions == 0 {
+        1.0
+    } else {
+        let squared: f64 = eigen
+            .eigenvalues
+            .iter()
+            .enumerate()
+            .map(|(k, &variance)| eigen.eigenvectors.column(k).dot(d).powi(2) / variance.max(floor))
+            .sum();
+        (1.0 - directions as f64 / squared).max(0.0)
+    };
+    d * d.transpose() * kept
 }
 
 /// The one-dimensional-equivalent σ of a zero-mean normal position error with covariance
@@ -313,7 +365,25 @@ impl UncertaintySource {
             .iter()
             .map(|alternative| {
                 let options = IdentifyOptions::physical(alternative.pitch.basis());
-                let of = Propagation::of(alternative, &options, rows, repeatability_mm)?;
+                let of = Propagation::of(alternative, &options, rows, repeatability_mm).map_err(
+                    |e| {
+                        let of_alternative = |why| {
+                            format!(
+                                "the alternative of {} lead-screw coefficients per leg: {why}",
+                                options.pitch_basis
+                            )
+                        };
+                        match e {
+                            Error::InvalidSetting(why) => {
+                                Error::InvalidSetting(of_alternative(why))
+                            }
+                            Error::InsufficientData(why) => {
+                                Error::InsufficientData(of_alternative(why))
+                            }
+                            other => other,
+                        }
+                    },
+                )?;
                 // The same rows, each with as many targets whatever the geometry.
                 debug_assert_eq!(of.residuals(), propagation.residuals());
                 Ok(of)
@@ -752,24 +822,92 @@ mod tests {
         }
     }
 
-    #[test]
-    fn the_positive_part_keeps_what_the_noise_does_not_explain() {
-        let d = SMatrix::<f64, LEGS, 1>::from_fn(|i, _| 1e-3 * (i as f64 + 1.0));
-        let outer = d * d.transpose();
-        // The fits' noise along the miss, a third of it: two thirds are left.
-        let along = outer / 3.0;
-        assert!((positive_part(outer - along) - outer * 2.0 / 3.0).norm() < 1e-15);
-        // Noise across the miss only takes nothing from it.
-        let across = SMatrix::<f64, LEGS, LEGS>::from_diagonal_element(1e-6)
-            - outer / d.norm_squared() * 1e-6;
-        assert!((positive_part(outer - across) - outer).norm() < 1e-15);
-        // Noise larger than the miss in every direction: nothing is added.
-        let larger = SMatrix::<f64, LEGS, LEGS>::identity() * 1.0;
-        assert!(positive_part(outer - larger).norm() < 1e-15);
+    /// An anisotropic noise covariance of the legs' miss (mm²): variances 1–16 µm² along
+    /// randomly rotated directions.
+    fn anisotropic_noise() -> SMatrix<f64, LEGS, LEGS> {
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        let rotation = SMatrix::<f64, LEGS, LEGS>::from_fn(|_, _| StandardNormal.sample(&mut rng))
+            .qr()
+            .q();
+        let spread = SMatrix::<f64, LEGS, 1>::from_fn(|i, _| 1e-6 * (1.0 + 3.0 * i as f64));
+        rotation * SMatrix::from_diagonal(&spread) * rotation.transpose()
+    }
+
+    /// The means of `tr(N⁻¹ R)` and of `tr R / tr N`, `R = beyond_noise(d, N)`, over `draws`
+    /// misses `d = δ + e`, `e ~ N(0, N)`.
+    fn kept_over_draws(
+        signal: &SMatrix<f64, LEGS, 1>,
+        noise: &SMatrix<f64, LEGS, LEGS>,
+        draws: usize,
+    ) -> (f64, f64) {
+        let root = noise.cholesky().unwrap();
+        let mut rng = ChaCha8Rng::seed_from_u64(7);
+        let (mut mahalanobis, mut euclidean) = (0.0, 0.0);
+        for _ in 0..draws {
+            let z = SMatrix::<f64, LEGS, 1>::from_fn(|_, _| StandardNormal.sample(&mut rng));
+            let kept = beyond_noise(&(signal + root.l() * z), noise);
+            mahalanobis += root.solve(&kept).trace();
+            euclidean += kept.trace() / noise.trace();
+        }
+        (mahalanobis / draws as f64, euclidean / draws as f64)
     }
 
     #[test]
-    fn the_propagation_refuses_a_repeatability_that_is_not_a_finite_sigma() {
+    fn the_miss_is_shrunk_by_what_the_noise_explains() {
+        let noise = anisotropic_noise();
+        // A miss of noise alone: tr(N⁻¹R) = (s − 6)₊, s ~ χ²₆, whose mean is
+        // 6·P(χ²₈ > 6) − 6·P(χ²₆ > 6) = 6·e⁻³·(13 − 8.5) = 1.344: against 6 for the whole
+        // miss, and about 5 for the positive part of `d dᵀ − N`. In mm², as the position's
+        // covariance takes it: d's direction is uniform in N's metric and independent of s, so
+        // tr R averages tr N · 1.344 / 6 = 0.224 tr N (the positive part about 0.8). 20 000
+        // draws estimate the first within 0.02 (1 σ), the second within 0.004.
+        let (mahalanobis, euclidean) = kept_over_draws(&SMatrix::zeros(), &noise, 20_000);
+        let expected = 6.0 * (-3.0f64).exp() * (13.0 - 8.5);
+        assert!(
+            (mahalanobis - expected).abs() < 0.1,
+            "{mahalanobis} against {expected}"
+        );
+        assert!(
+            (euclidean - expected / 6.0).abs() < 0.02,
+            "{euclidean} against {expected}/6"
+        );
+        // A signal of Mahalanobis length² 100 beside the noise: `s − 6` is kept, which
+        // averages it in the noise's metric (s < 6 on a vanishing share of draws; 1 σ of the
+        // mean √(2·206/20 000) = 0.14).
+        let unit = SMatrix::<f64, LEGS, 1>::from_fn(|i, _| i as f64 - 2.5).normalize();
+        let signal = noise.cholesky().unwrap().l() * unit * 10.0;
+        let (mahalanobis, _) = kept_over_draws(&signal, &noise, 20_000);
+        assert!(
+            (mahalanobis - 100.0).abs() < 0.7,
+            "{mahalanobis} against 100"
+        );
+    }
+
+    #[test]
+    fn a_miss_the_noise_cannot_make_is_kept_whole() {
+        let d = SMatrix::<f64, LEGS, 1>::from_fn(|i, _| 1e-3 * (i as f64 + 1.0));
+        assert_eq!(beyond_noise(&d, &SMatrix::zeros()), d * d.transpose());
+        assert_eq!(
+            beyond_noise(&SMatrix::zeros(), &anisotropic_noise()),
+            SMatrix::<f64, LEGS, LEGS>::zeros()
+        );
+        // Noise in five directions, the miss along the sixth.
+        let mut spread = SMatrix::<f64, LEGS, 1>::from_element(1e-6);
+        spread[5] = 0.0;
+        let along = SMatrix::<f64, LEGS, 1>::from_fn(|i, _| if i == 5 { 1e-3 } else { 0.0 });
+        let kept = beyond_noise(&along, &SMatrix::from_diagonal(&spread));
+        // (Counted at 1e-12 of the largest variance: 1 − 5·10⁻¹² of it kept.)
+        assert!(
+            (kept - along * along.transpose()).norm() < 1e-10 * kept.norm(),
+            "{kept}"
+        );
+        // Noise that is not a number gives no number, and returns.
+        let broken = SMatrix::<f64, LEGS, LEGS>::from_element(f64::NAN);
+        assert!(beyond_noise(&d, &broken).iter().all(|v| v.is_nan()));
+    }
+
+    #[test]
+    fn the_propagation_refuses_a_repeatability_not_a_finite_sigma_or_beyond_the_residuals() {
         let g = Geometry::prototype();
         let rows = measured(
             &g,
@@ -785,6 +923,19 @@ mod tests {
             let e = Propagation::of(&model, &options, &rows, bad).unwrap_err();
             assert!(e.to_string().contains("repeatability"), "{e}");
         }
+        // A repeatability the residuals cannot hold: refused, naming the one that is all of
+        // them (to 1 nm). Up to √2 times that, within the residuals' own scatter, accepted.
+        let e = Propagation::of(&model, &options, &rows, 0.1).unwrap_err();
+        let largest: f64 = e
+            .to_string()
+            .split("repeatability of ")
+            .nth(2)
+            .and_then(|rest| rest.split(' ').next()?.parse::<f64>().ok())
+            .map(|micrometres| micrometres * 1e-3)
+            .unwrap_or_else(|| panic!("no largest repeatability in {e}"));
+        assert!((0.004..0.1).contains(&largest), "{e}");
+        assert!(Propagation::of(&model, &options, &rows, largest * 1.35).is_ok());
+        assert!(Propagation::of(&model, &options, &rows, largest * 1.5).is_err());
     }
 
     /// The trace of the sample covariance of `values`, mm².
