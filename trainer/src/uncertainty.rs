@@ -49,8 +49,9 @@ use crate::physical::PhysicalModel;
 
 /// A repeatability is refused when its expected share of the residuals' variance is more than
 /// this many times what they hold: far beyond their own scatter (of 40 draws of a machine
-/// repeating within 0.02 mm, 40 configurations each, one held 0.98² of it:
-/// `tests::the_propagated_covariances_…`, which fails if the share is refused at once).
+/// repeating within 0.02 mm, 40 configurations each, one held 0.98 of it, a repeatability of
+/// 0.0198 mm: `tests::the_propagated_covariances_…`, which fails if the share is refused at
+/// once).
 const REPEATABILITY_EXCESS_REFUSED: f64 = 2.0;
 
 /// Poses drawn over the measured range that the uncertainty is fitted at (the configurations'
