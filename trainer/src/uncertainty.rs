@@ -148,18 +148,17 @@ impl Propagation {
             })
             .sum();
         let share = moves.norm_squared() - taken;
-        if repeatability * share > REPEATABILITY_EXCESS_REFUSED * residual.norm_squared() {
+        let held = residual.norm_squared();
+        if repeatability * share > REPEATABILITY_EXCESS_REFUSED * held {
             return Err(Error::InvalidSetting(format!(
                 "the machine's repeatability of {repeatability_mm} mm would give the \
                  identification's residuals more than twice the variance they hold (all of it \
                  is a repeatability of {:.3} µm with a noiseless instrument)",
-                1e3 * (residual.norm_squared() / share).sqrt()
+                1e3 * (held / share).sqrt()
             )));
         }
         let noise = ResidualNoise {
-            instrument_variance_mm2: ((residual.norm_squared() - repeatability * share)
-                / freedom as f64)
-                .max(0.0),
+            instrument_variance_mm2: ((held - repeatability * share) / freedom as f64).max(0.0),
             repeatability_variance_mm2: repeatability,
             moves,
             blocks,

@@ -77,7 +77,8 @@ pub struct CalibrateArgs {
     /// The machine's repeatability, mm: σ (one standard deviation) of one leg's length error at
     /// every move. It enters each point's position uncertainty, and decides how much of the
     /// measurements' scatter is the instrument's (the rest the legs', shared by the targets of
-    /// a configuration). Not ISO 9283's RP, which is a
+    /// a configuration); one that would give the scatter more than twice the variance it has is
+    /// refused, and the models are written without an uncertainty. Not ISO 9283's RP, which is a
     /// position figure of the mean plus three standard deviations: a leg's σ is of the order of
     /// RP / 3 divided by the leg-to-tool gain of the pose. Default: the virtual machine's
     /// (0.004 mm for the built-in variants with noise), also for --measurements, which says so.
