@@ -59,6 +59,7 @@ pub mod pipeline;
 pub mod pitch_resolution;
 pub mod plan;
 pub mod registration;
+pub mod residual_noise;
 pub mod screening;
 pub mod table;
 pub mod train;

@@ -122,7 +122,8 @@ pub struct CarriedModel {
 /// Carries `physical`, identified on `measurements` with [`IdentifyOptions::physical`] at its own
 /// lead-screw resolution (the precondition: its uncertainty is propagated with those options'
 /// cutoff and compliance terms), into networks ([`distill`]) that carry its position uncertainty
-/// for legs repeating within `repeatability_mm` (1 σ per move, mm), the networks' own departure
+/// for legs repeating within `repeatability_mm` (1 σ per move, mm; more where the residuals'
+/// shape shows more, [`crate::uncertainty::Propagation`]), the networks' own departure
 /// from the model and its spread about the models of the lead-screw resolutions
 /// `alternative_bases` added (those the cross-validation could not tell from the model's,
 /// [`crate::pitch_resolution::ResolutionChoice::indistinguishable`]; the model's own is
@@ -152,7 +153,6 @@ pub fn carried_into_networks(
         options,
         FIDELITY_POSES,
     )?;
-    let leg_variance_mm2 = repeatability_mm.powi(2) + fidelity.rms_mm.powi(2);
     let bases: Vec<usize> = alternative_bases
         .iter()
         .copied()
@@ -170,7 +170,7 @@ pub fn carried_into_networks(
             )
         })
         .and_then(|source| {
-            distilled.model.uncertainty = Some(source.fitted(leg_variance_mm2)?);
+            distilled.model.uncertainty = Some(source.fitted(fidelity.rms_mm.powi(2))?);
             Ok(source)
         });
     Ok(CarriedModel {
@@ -193,14 +193,13 @@ pub struct NetworksUncertainty {
 
 impl NetworksUncertainty {
     /// The uncertainty of networks whose cross-validated error is `score_mm` (Eq. 21's units,
-    /// mm) on a machine whose legs repeat within `repeatability_mm` (1 σ per move, mm).
+    /// mm), beside the legs' variance the model's propagation holds.
     pub fn of_networks(
         &self,
         score_mm: f64,
-        repeatability_mm: f64,
     ) -> Result<hexacomp_core::uncertainty::PositionUncertainty> {
         let excess =
             (score_mm.powi(2) - self.physical_cross_validated_mm.powi(2)).max(0.0) / LEGS as f64;
-        self.source.fitted(repeatability_mm.powi(2) + excess)
+        self.source.fitted(excess)
     }
 }

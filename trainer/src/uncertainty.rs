@@ -9,8 +9,9 @@
 //! A parameter error `δθ` moves each loaded leg by `G(x)·δθ` at a
 //! pose `x` commanded with the model's legs ([`crate::identify`]'s `G`), and the platform by the
 //! twist `T·G·δθ` (`T` the motion Jacobian, Eq. 3). Every move adds the leg errors `ε`
-//! (variance `v` each: the machine's repeatability, the networks' departure from the model
-//! they carry): the pose-error twist has the covariance `T (G C Gᵀ + v I) Tᵀ`, and the position
+//! (variance `w` each: the machine's repeatability, what the model's form misses where the
+//! residuals' shape shows it, [`crate::residual_noise`], the networks' departure from the model
+//! they carry): the pose-error twist has the covariance `T (G C Gᵀ + w I) Tᵀ`, and the position
 //! error its upper-left 3 × 3 block `Σ`.
 //!
 //! **The resolutions the data cannot tell apart.** The covariance holds the parameters' noise,
@@ -34,6 +35,7 @@
 //!
 //! Units: mm.
 
+use hexacomp_core::observation::Observation;
 use hexacomp_core::records::MeasuredConfiguration;
 use hexacomp_core::screw::ActuationScrews;
 use hexacomp_core::uncertainty::{FEATURES, PositionUncertainty, WHITENING_ENTRIES};
@@ -46,6 +48,7 @@ use crate::identify::{
     IdentifyOptions, LEG_OFFSET_COLUMNS, ScaledSvd, leg_sensitivities, linearise, scaled_svd,
 };
 use crate::physical::PhysicalModel;
+use crate::residual_noise::{ResidualNoise, ShapeSplit, split_by_shape};
 
 /// A repeatability is refused when its expected share of the residuals' variance is more than
 /// this many times what they hold: far beyond their own scatter (of 40 draws of a machine
@@ -71,6 +74,12 @@ pub struct Propagation {
     estimator: DMatrix<f64>,
     /// The residuals' covariance `Ω`.
     noise: ResidualNoise,
+    /// `w`, the variance of each leg's length at a fresh move: the repeatability, and what the
+    /// model's form misses, where the residuals' shape shows more than the repeatability
+    /// ([`crate::residual_noise`]), mm².
+    leg_variance_mm2: f64,
+    /// The residuals' variance told apart by shape, where it can be.
+    split: Option<ShapeSplit>,
     /// `C = B Ω Bᵀ`, mm² per unit² of the parameters.
     covariance: DMatrix<f64>,
 }
@@ -91,6 +100,14 @@ impl Propagation {
     /// residuals hold less than that share, as their noise lets them when the instrument's is
     /// small. A repeatability whose share is more than twice what they hold is refused (it is
     /// not the machine's), naming the one that would be all of it.
+    ///
+    /// Where the residuals' shape shows the platform moved by more than the repeatability
+    /// ([`crate::residual_noise::split_by_shape`]: a variance `w > v` per leg and
+    /// configuration, beside the instrument's `σ²` per coordinate), the rest is what the
+    /// model's form misses at the configurations: `σ²` is then the instrument's alone, and
+    /// `w` the legs' variance at a fresh move. The form's misfit stays out of `Ω`: it is what
+    /// the model's columns cannot fit, which moves its parameters little, not noise that
+    /// moves them.
     pub fn of(
         model: &PhysicalModel,
         options: &IdentifyOptions,
@@ -157,14 +174,33 @@ impl Propagation {
                 1e3 * (held / share).sqrt()
             )));
         }
+        // What the residuals hold beyond the repeatability's share, all taken as the
+        // instrument's where their shape cannot tell more.
+        let unsplit = ((held - repeatability * share) / freedom as f64).max(0.0);
+        // A pose measured places its targets with its noise in the platform's directions.
+        let targets_measured = rows
+            .iter()
+            .all(|row| matches!(row.observed, Observation::Targets(_)));
+        let split = targets_measured
+            .then(|| split_by_shape(&residual, &u, &moves, &blocks))
+            .flatten();
+        let (instrument, leg_variance_mm2) = match split {
+            Some(split) if split.platform_variance_mm2 > repeatability => (
+                split.instrument_variance_mm2.max(0.0),
+                split.platform_variance_mm2,
+            ),
+            _ => (unsplit, repeatability),
+        };
         let noise = ResidualNoise {
-            instrument_variance_mm2: ((held - repeatability * share) / freedom as f64).max(0.0),
+            instrument_variance_mm2: instrument,
             repeatability_variance_mm2: repeatability,
             moves,
             blocks,
         };
         let estimator = factor * u.transpose();
         Ok(Self {
+            leg_variance_mm2,
+            split,
             model: model.clone(),
             options: *options,
             covariance: noise.sandwich(&estimator),
@@ -244,33 +280,6 @@ impl Propagation {
     }
 }
 
-/// The covariance `Ω = σ² I + v Σ_c K_c K_cᵀ` of an identification's residuals, mm².
-#[derive(Debug, Clone)]
-struct ResidualNoise {
-    /// `σ²`, the variance per coordinate beyond the repeatability (the instrument's noise, and
-    /// what the model's form misses), mm².
-    instrument_variance_mm2: f64,
-    /// `v`, the variance of each leg's length at every move (the repeatability), mm².
-    repeatability_variance_mm2: f64,
-    /// `K`: how each residual moves per mm of each leg (residuals × legs), configuration after
-    /// configuration.
-    moves: DMatrix<f64>,
-    /// Each configuration's first residual and number of residuals.
-    blocks: Vec<(usize, usize)>,
-}
-
-impl ResidualNoise {
-    /// `A Ω Aᵀ` for a linear map `A` of the residuals (any rows × the residuals).
-    fn sandwich(&self, a: &DMatrix<f64>) -> DMatrix<f64> {
-        let mut result = a * a.transpose() * self.instrument_variance_mm2;
-        for &(start, height) in &self.blocks {
-            let moved = a.columns(start, height) * self.moves.rows(start, height);
-            result += &moved * moved.transpose() * self.repeatability_variance_mm2;
-        }
-        result
-    }
-}
-
 /// Eigenvalues of a noise covariance below this share of its largest are directions it does
 /// not hold: they are counted at this share, so a miss along them is not noise.
 const NOISE_RANK_TOLERANCE: f64 = 1e-12;
@@ -336,6 +345,11 @@ pub fn one_sigma_mm(sigma: &Matrix3<f64>) -> f64 {
 /// among the configurations' nominal legs.
 #[derive(Debug, Clone)]
 pub struct UncertaintySource {
+    /// `w` of the model's [`Propagation`] and its alternatives', averaged (each form taken as
+    /// equally likely), mm².
+    leg_variance_mm2: f64,
+    /// The model's residuals' variance told apart by shape, where it can be.
+    split: Option<ShapeSplit>,
     /// The leverage's normalisation and whitening (variances zero).
     leverage: PositionUncertainty,
     /// At each pose the propagation is defined at: its leverage, and the position covariance's
@@ -403,18 +417,43 @@ impl UncertaintySource {
                 Some((leverage.leverage(&nominal_legs(pose)), parameters, legs))
             })
             .collect();
+        // Each form taken as equally likely, as in the spread between them: had the machine
+        // been alternative k's, what the form misses would be k's.
+        let leg_variance_mm2 = (propagation.leg_variance_mm2
+            + alternatives
+                .iter()
+                .map(|alternative| alternative.leg_variance_mm2)
+                .sum::<f64>())
+            / (alternatives.len() + 1) as f64;
         Ok(Self {
+            leg_variance_mm2,
+            split: propagation.split,
             leverage,
             samples,
             poses: poses.len(),
         })
     }
 
-    /// The model file's uncertainty with independent leg errors of variance
-    /// `leg_variance_mm2` (mm²) at every move: the leverage among the configurations' nominal
-    /// legs, its two variances fitted, relative to the fit (`relative_fit`), to the propagated
-    /// `σ²` at the poses.
-    pub fn fitted(&self, leg_variance_mm2: f64) -> Result<PositionUncertainty> {
+    /// The variance of each leg's length at a fresh move the uncertainty is fitted with: `w`
+    /// of the model's [`Propagation`] and of its alternatives', averaged, mm².
+    pub fn leg_variance_mm2(&self) -> f64 {
+        self.leg_variance_mm2
+    }
+
+    /// The model's residuals' variance told apart by shape: the instrument's per coordinate,
+    /// the platform's per leg and configuration ([`crate::residual_noise::split_by_shape`]);
+    /// `None` where the measurements cannot tell them apart.
+    pub fn shape_split(&self) -> Option<ShapeSplit> {
+        self.split
+    }
+
+    /// The model file's uncertainty for networks that depart from the model by independent
+    /// leg errors of variance `departure_variance_mm2` (mm²) at every move, beside the model's
+    /// own `w` ([`Propagation`]): the leverage among the configurations' nominal legs, its two
+    /// variances fitted, relative to the fit (`relative_fit`), to the propagated `σ²` at the
+    /// poses.
+    pub fn fitted(&self, departure_variance_mm2: f64) -> Result<PositionUncertainty> {
+        let leg_variance_mm2 = self.leg_variance_mm2 + departure_variance_mm2;
         let samples: Vec<(f64, f64)> = self
             .samples
             .iter()
@@ -881,6 +920,29 @@ mod tests {
             (mahalanobis - 100.0).abs() < 0.7,
             "{mahalanobis} against 100"
         );
+    }
+
+    #[test]
+    fn poses_measured_are_not_split_by_shape() {
+        // The same measurements as a 6-DoF probe would report them: each configuration's
+        // targets placed by one pose, the instrument's noise in the platform's directions.
+        let g = Geometry::prototype();
+        let errors = hexacomp_virtual::ErrorModel::default();
+        let rows = measured(&g, &forty_poses(&g), &errors, 1);
+        let as_poses: Vec<MeasuredConfiguration> = rows
+            .iter()
+            .map(|row| MeasuredConfiguration {
+                observed: Observation::Pose(row.observed.fitted_pose(&g).unwrap().to_mm_deg()),
+                ..row.clone()
+            })
+            .collect();
+        let options = IdentifyOptions::physical(8);
+        let model = crate::identify::identify(&g, &as_poses, &options)
+            .unwrap()
+            .model;
+        let v = errors.repeatability_sigma_mm;
+        let propagation = Propagation::of(&model, &options, &as_poses, v).unwrap();
+        assert_eq!(propagation.leg_variance_mm2, v * v);
     }
 
     #[test]

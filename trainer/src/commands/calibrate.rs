@@ -218,7 +218,7 @@ pub fn run(geometry: &Geometry, args: &CalibrateArgs) -> anyhow::Result<()> {
         ) {
             Ok((candidate, Ok(uncertainty))) => {
                 for network in &mut candidates {
-                    match uncertainty.of_networks(network.score_mm, repeatability_mm) {
+                    match uncertainty.of_networks(network.score_mm) {
                         Ok(u) => network.trained.model.uncertainty = Some(u),
                         Err(e) => {
                             println!("the {} networks carry no uncertainty: {e}", network.name)
@@ -543,6 +543,31 @@ fn physical(
         );
     }
 
+    if let Some(split) = candidate
+        .networks_uncertainty
+        .as_ref()
+        .ok()
+        .and_then(|u| u.source.shape_split())
+    {
+        let micrometres = |variance: f64| 1e3 * variance.max(0.0).sqrt();
+        println!(
+            "physical model: its residuals hold {:.1} µm per coordinate of the instrument's \
+             noise, and move the platform by {:.1} µm per leg and configuration (a variance \
+             of {:.1} ± {:.1} µm²){}",
+            micrometres(split.instrument_variance_mm2),
+            micrometres(split.platform_variance_mm2),
+            1e6 * split.platform_variance_mm2,
+            1e6 * split.platform_error_mm2,
+            if split.platform_variance_mm2 > repeatability_mm.powi(2) {
+                format!(
+                    ": more than the repeatability of {repeatability_mm} mm, the rest taken as \
+                     what the model's form misses, in every point's uncertainty"
+                )
+            } else {
+                format!(": within the repeatability of {repeatability_mm} mm")
+            }
+        );
+    }
     let f = candidate.fidelity;
     // The departure's RMS enters the score; its largest value is where the networks follow the
     // model least, at the edge of the measured range.

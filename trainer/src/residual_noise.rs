@@ -1,0 +1,274 @@
+//! The covariance of an identification's residuals, and its two variances told apart by their
+//! shape.
+//!
+//! At each configuration `c` the residuals of its targets (`n_c` coordinates, mm) hold the
+//! instrument's noise, independent on every coordinate (variance `σ²`), and whatever moved the
+//! platform as a whole there: the machine's repeatability, and what the model's form misses at
+//! that configuration's legs. Both move the legs, which move the targets by `K_c·δ` (`K_c` how
+//! the targets move per mm of each leg, `n_c × 6`, of rank 6 with three targets or more). The
+//! instrument's noise fills all `n_c` directions of a configuration, the platform's only the six
+//! `K_c` spans: two sums of squares of the residuals, the whole and its part in those spans,
+//! tell the two variances apart ([`split_by_shape`]). The machine's repeatability and the
+//! form's misfit have the same shape and are not told apart.
+
+use nalgebra::{DMatrix, DVector};
+
+/// The covariance `Ω = σ² I + v Σ_c K_c K_cᵀ` of an identification's residuals, mm².
+#[derive(Debug, Clone)]
+pub(crate) struct ResidualNoise {
+    /// `σ²`, the variance per coordinate of the instrument's noise (and of what the model's
+    /// form misses where the residuals' shape does not tell it apart), mm².
+    pub(crate) instrument_variance_mm2: f64,
+    /// `v`, the variance of each leg's length at every move (the repeatability), mm².
+    pub(crate) repeatability_variance_mm2: f64,
+    /// `K`: how each residual moves per mm of each leg (residuals × legs), configuration after
+    /// configuration.
+    pub(crate) moves: DMatrix<f64>,
+    /// Each configuration's first residual and number of residuals.
+    pub(crate) blocks: Vec<(usize, usize)>,
+}
+
+impl ResidualNoise {
+    /// `A Ω Aᵀ` for a linear map `A` of the residuals (any rows × the residuals).
+    pub(crate) fn sandwich(&self, a: &DMatrix<f64>) -> DMatrix<f64> {
+        let mut result = a * a.transpose() * self.instrument_variance_mm2;
+        for &(start, height) in &self.blocks {
+            let moved = a.columns(start, height) * self.moves.rows(start, height);
+            result += &moved * moved.transpose() * self.repeatability_variance_mm2;
+        }
+        result
+    }
+}
+
+/// The residuals' variance told apart by shape ([`split_by_shape`]), mm².
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ShapeSplit {
+    /// Per coordinate, independent: the instrument's noise.
+    pub instrument_variance_mm2: f64,
+    /// Per leg and configuration, moving all its targets together: the repeatability and what
+    /// the model's form misses.
+    pub platform_variance_mm2: f64,
+    /// The standard error of `platform_variance_mm2`, by the delete-one-configuration
+    /// jackknife.
+    pub platform_error_mm2: f64,
+}
+
+/// Singular values of a configuration's `K_c` below this share of its largest are directions
+/// its legs do not move the targets in.
+const MOVE_RANK_TOLERANCE: f64 = 1e-9;
+
+/// `σ²` and `w` of residuals `r = (I − H) e`, `e` of covariance `σ² I + w Σ_c K_c K_cᵀ`, by the
+/// method of moments: `H = U Uᵀ` the identification's hat matrix (`kept`, its kept left singular
+/// vectors, residuals × directions), `K` = `moves` (residuals × legs) in `blocks` (each
+/// configuration's first residual and number of residuals). With `P` the projection onto the
+/// `K_c`'s spans, `E rᵀ A r = tr((I − H) A (I − H) Ω)` for `A = I` and `A = P` are two linear
+/// equations in `σ²` and `w`. Either may come out negative where the residuals' own scatter
+/// takes it there. `None` where no configuration has a coordinate its legs cannot move (fewer
+/// than three targets everywhere): the two cannot be told apart. The residuals are taken as
+/// the targets' coordinates, each with the instrument's noise: not those of targets placed
+/// by a measured pose, whose noise the pose's six directions hold.
+pub fn split_by_shape(
+    residual: &DVector<f64>,
+    kept: &DMatrix<f64>,
+    moves: &DMatrix<f64>,
+    blocks: &[(usize, usize)],
+) -> Option<ShapeSplit> {
+    let directions = kept.ncols();
+    // Σ_c U_cᵀ P_c U_c, directions × directions.
+    let mut kept_in_spans = DMatrix::<f64>::zeros(directions, directions);
+    let mut terms: Vec<Moments> = Vec::with_capacity(blocks.len());
+    for &(start, height) in blocks {
+        if height == 0 {
+            // A configuration without a target seen adds nothing.
+            terms.push(Moments::default());
+            continue;
+        }
+        let svd = moves.rows(start, height).into_owned().svd(true, false);
+        let largest = svd.singular_values.max();
+        let spanned: Vec<usize> = (0..svd.singular_values.len())
+            .filter(|&i| svd.singular_values[i] > MOVE_RANK_TOLERANCE * largest)
+            .collect();
+        let basis = svd.u.expect("U was asked for").select_columns(&spanned);
+        let kept_here = basis.transpose() * kept.rows(start, height);
+        let here = residual.rows(start, height);
+        terms.push(Moments {
+            sums: [
+                here.norm_squared(),
+                (basis.transpose() * here).norm_squared(),
+            ],
+            instrument: [
+                height as f64 - kept.rows(start, height).norm_squared(),
+                spanned.len() as f64 - kept_here.norm_squared(),
+            ],
+            platform: [0.0; 2],
+        });
+        kept_in_spans += kept_here.transpose() * &kept_here;
+    }
+    // The platform's share of each sum: tr((I − H) A (I − H) E_c K_c K_cᵀ E_cᵀ) over the
+    // configurations, with M_c = U_cᵀ K_c: ‖K_c‖² − ‖M_c‖² for A = I, and
+    // ‖K_c‖² − 2‖M_c‖² + tr(M_cᵀ (Σ U_cᵀ P_c U_c) M_c) for A = P.
+    for (&(start, height), term) in blocks.iter().zip(&mut terms) {
+        let leg_moves = moves.rows(start, height);
+        let kept_moves = kept.rows(start, height).transpose() * leg_moves;
+        let whole = leg_moves.norm_squared();
+        let taken = kept_moves.norm_squared();
+        term.platform = [
+            whole - taken,
+            whole - 2.0 * taken + (kept_moves.transpose() * &kept_in_spans * &kept_moves).trace(),
+        ];
+    }
+    let total = terms
+        .iter()
+        .fold(Moments::default(), |sum, term| sum.plus(term, 1.0));
+    let (instrument, platform) = total.solved()?;
+    // The delete-one-configuration jackknife of w.
+    let count = terms.len() as f64;
+    let left_out: Vec<f64> = terms
+        .iter()
+        .filter_map(|term| Some(total.plus(term, -1.0).solved()?.1))
+        .collect();
+    let mean = left_out.iter().sum::<f64>() / left_out.len().max(1) as f64;
+    let spread: f64 = left_out.iter().map(|w| (w - mean).powi(2)).sum();
+    Some(ShapeSplit {
+        instrument_variance_mm2: instrument,
+        platform_variance_mm2: platform,
+        platform_error_mm2: ((count - 1.0) / count * spread).sqrt(),
+    })
+}
+
+/// The two sums of squares of [`split_by_shape`] (`A = I`, `A = P`) and the coefficients of
+/// `σ²` and `w` in their expectations, summed over configurations.
+#[derive(Debug, Clone, Copy, Default)]
+struct Moments {
+    sums: [f64; 2],
+    instrument: [f64; 2],
+    platform: [f64; 2],
+}
+
+impl Moments {
+    /// These moments plus `scale` times `other`'s.
+    fn plus(self, other: &Moments, scale: f64) -> Moments {
+        let add = |a: [f64; 2], b: [f64; 2]| [a[0] + scale * b[0], a[1] + scale * b[1]];
+        Moments {
+            sums: add(self.sums, other.sums),
+            instrument: add(self.instrument, other.instrument),
+            platform: add(self.platform, other.platform),
+        }
+    }
+
+    /// `(σ², w)` solving the two equations; `None` where they are dependent (to rounding), as
+    /// where no coordinate lies outside the spans.
+    fn solved(&self) -> Option<(f64, f64)> {
+        let [all, in_spans] = self.sums;
+        let determinant =
+            self.instrument[0] * self.platform[1] - self.instrument[1] * self.platform[0];
+        // A NaN determinant fails the comparison as a dependent pair does.
+        let independent = determinant.abs() > 1e-9 * self.instrument[0] * self.platform[1];
+        if !independent {
+            return None;
+        }
+        Some((
+            (all * self.platform[1] - in_spans * self.platform[0]) / determinant,
+            (self.instrument[0] * in_spans - self.instrument[1] * all) / determinant,
+        ))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::SeedableRng;
+    use rand_chacha::ChaCha8Rng;
+    use rand_distr::{Distribution, StandardNormal};
+
+    /// Configurations of this many residuals (three targets).
+    const HEIGHT: usize = 9;
+
+    /// Forty configurations' `K` (random moves, mm per mm), their blocks, and the kept
+    /// directions of an identification whose columns hold the legs' offsets (`K` itself, as
+    /// the identification's do) and twenty more.
+    fn identification(rng: &mut ChaCha8Rng) -> (DMatrix<f64>, Vec<(usize, usize)>, DMatrix<f64>) {
+        let configurations = 40;
+        let rows = configurations * HEIGHT;
+        let moves = DMatrix::<f64>::from_fn(rows, 6, |_, _| StandardNormal.sample(&mut *rng));
+        let blocks = (0..configurations).map(|c| (c * HEIGHT, HEIGHT)).collect();
+        let mut columns =
+            DMatrix::<f64>::from_fn(rows, 26, |_, _| StandardNormal.sample(&mut *rng));
+        columns.columns_mut(0, 6).copy_from(&moves);
+        let kept = columns.svd(true, false).u.unwrap();
+        (moves, blocks, kept)
+    }
+
+    /// The mean split over `draws` residuals of `instrument` and `platform` variances (mm²),
+    /// its standard errors, and the root mean square of the jackknife's standard error of
+    /// the platform's variance.
+    fn mean_split(instrument: f64, platform: f64, draws: usize) -> ([f64; 2], [f64; 2], f64) {
+        let mut rng = ChaCha8Rng::seed_from_u64(11);
+        let (moves, blocks, kept) = identification(&mut rng);
+        let mut sums = [[0.0; 2]; 2];
+        let mut jackknifed = 0.0;
+        for _ in 0..draws {
+            let mut noise =
+                DVector::<f64>::from_fn(moves.nrows(), |_, _| StandardNormal.sample(&mut rng))
+                    * instrument.sqrt();
+            for &(start, height) in &blocks {
+                let legs = DVector::<f64>::from_fn(6, |_, _| StandardNormal.sample(&mut rng));
+                let moved = moves.rows(start, height) * legs * platform.sqrt();
+                let mut here = noise.rows_mut(start, height);
+                here += moved;
+            }
+            let residual = &noise - &kept * (kept.transpose() * &noise);
+            let split = split_by_shape(&residual, &kept, &moves, &blocks).unwrap();
+            jackknifed += split.platform_error_mm2.powi(2);
+            for (k, value) in [split.instrument_variance_mm2, split.platform_variance_mm2]
+                .into_iter()
+                .enumerate()
+            {
+                sums[k][0] += value;
+                sums[k][1] += value * value;
+            }
+        }
+        let n = draws as f64;
+        let mean = sums.map(|[s, _]| s / n);
+        let error = [0, 1].map(|k| ((sums[k][1] / n - mean[k].powi(2)) / n).sqrt());
+        (mean, error, (jackknifed / n).sqrt())
+    }
+
+    #[test]
+    fn the_split_recovers_the_instruments_and_the_platforms_variance() {
+        // The virtual platform's instrument (0.02 mm a reading, three averaged) beside a
+        // platform variance of twice its repeatability's, and beside none.
+        for (instrument, platform) in [(1.33e-4, 3.2e-5), (1.33e-4, 0.0), (0.0, 1.6e-5)] {
+            let (mean, error, jackknifed) = mean_split(instrument, platform, 400);
+            for (what, truth, k) in [("instrument", instrument, 0), ("platform", platform, 1)] {
+                assert!(
+                    (mean[k] - truth).abs() < 4.0 * error[k] + 1e-12,
+                    "{what}: {} ± {} against {truth} mm² (instrument {instrument}, platform \
+                     {platform})",
+                    mean[k],
+                    error[k]
+                );
+            }
+            // The check can tell: the standard error is well below what is estimated.
+            assert!(error[0] < 0.02 * instrument.max(1e-4), "{error:?}");
+            assert!(error[1] < 0.1 * platform.max(1e-5), "{error:?}");
+            // The jackknife's standard error is the scatter of w over the draws (400 draws
+            // estimate that scatter within 3.5 %, 1 σ).
+            let scattered = error[1] * 400f64.sqrt();
+            assert!(
+                (0.85..1.15).contains(&(jackknifed / scattered)),
+                "the jackknife gives {jackknifed} where w scatters by {scattered} mm²"
+            );
+        }
+    }
+
+    #[test]
+    fn residuals_the_legs_can_make_everywhere_are_not_split() {
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        let (moves, _, kept) = identification(&mut rng);
+        let residual = DVector::<f64>::from_fn(moves.nrows(), |_, _| 1e-3);
+        // Blocks of six residuals: each K_c spans them all.
+        let blocks: Vec<(usize, usize)> = (0..moves.nrows() / 6).map(|c| (c * 6, 6)).collect();
+        assert_eq!(split_by_shape(&residual, &kept, &moves, &blocks), None);
+    }
+}
