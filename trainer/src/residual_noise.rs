@@ -49,7 +49,7 @@ pub struct ShapeSplit {
     /// the model's form misses.
     pub platform_variance_mm2: f64,
     /// The standard error of `platform_variance_mm2`, by the delete-one-configuration
-    /// jackknife.
+    /// jackknife; infinite where a configuration left out leaves the two inseparable.
     pub platform_error_mm2: f64,
 }
 
@@ -74,65 +74,65 @@ pub fn split_by_shape(
     blocks: &[(usize, usize)],
 ) -> Option<ShapeSplit> {
     let directions = kept.ncols();
-    // Σ_c U_cᵀ P_c U_c, directions × directions.
-    let mut kept_in_spans = DMatrix::<f64>::zeros(directions, directions);
-    let mut terms: Vec<Moments> = Vec::with_capacity(blocks.len());
+    // Each configuration's residuals' expectations, with S = Σ_c M_c M_cᵀ (M_c = U_cᵀ K_c):
+    // the platform's moves of every configuration reach these residuals through I − H, as
+    // Σ_c' ‖E_cᵀ (I − H) E_c' K_c'‖² = ‖K_c‖² − 2‖M_c‖² + tr(U_c S U_cᵀ), and in the spans
+    // with P_c U_c for U_c. Summed, they are the expectations of the whole residuals.
+    let mut spread = DMatrix::<f64>::zeros(directions, directions);
     for &(start, height) in blocks {
-        if height == 0 {
-            // A configuration without a target seen adds nothing.
-            terms.push(Moments::default());
-            continue;
-        }
-        let svd = moves.rows(start, height).into_owned().svd(true, false);
+        let kept_moves = kept.rows(start, height).transpose() * moves.rows(start, height);
+        spread += &kept_moves * kept_moves.transpose();
+    }
+    let mut terms: Vec<Moments> = Vec::with_capacity(blocks.len());
+    // A configuration without a target seen adds nothing.
+    for &(start, height) in blocks.iter().filter(|(_, height)| *height > 0) {
+        let leg_moves = moves.rows(start, height);
+        let svd = leg_moves.into_owned().svd(true, false);
         let largest = svd.singular_values.max();
         let spanned: Vec<usize> = (0..svd.singular_values.len())
             .filter(|&i| svd.singular_values[i] > MOVE_RANK_TOLERANCE * largest)
             .collect();
         let basis = svd.u.expect("U was asked for").select_columns(&spanned);
-        let kept_here = basis.transpose() * kept.rows(start, height);
+        let kept_here = kept.rows(start, height);
+        let kept_in_span = basis.transpose() * kept_here;
         let here = residual.rows(start, height);
+        let own =
+            leg_moves.norm_squared() - 2.0 * (kept_here.transpose() * leg_moves).norm_squared();
         terms.push(Moments {
             sums: [
                 here.norm_squared(),
                 (basis.transpose() * here).norm_squared(),
             ],
             instrument: [
-                height as f64 - kept.rows(start, height).norm_squared(),
-                spanned.len() as f64 - kept_here.norm_squared(),
+                height as f64 - kept_here.norm_squared(),
+                spanned.len() as f64 - kept_in_span.norm_squared(),
             ],
-            platform: [0.0; 2],
+            platform: [
+                own + (kept_here * &spread * kept_here.transpose()).trace(),
+                own + (&kept_in_span * &spread * kept_in_span.transpose()).trace(),
+            ],
         });
-        kept_in_spans += kept_here.transpose() * &kept_here;
-    }
-    // The platform's share of each sum: tr((I − H) A (I − H) E_c K_c K_cᵀ E_cᵀ) over the
-    // configurations, with M_c = U_cᵀ K_c: ‖K_c‖² − ‖M_c‖² for A = I, and
-    // ‖K_c‖² − 2‖M_c‖² + tr(M_cᵀ (Σ U_cᵀ P_c U_c) M_c) for A = P.
-    for (&(start, height), term) in blocks.iter().zip(&mut terms) {
-        let leg_moves = moves.rows(start, height);
-        let kept_moves = kept.rows(start, height).transpose() * leg_moves;
-        let whole = leg_moves.norm_squared();
-        let taken = kept_moves.norm_squared();
-        term.platform = [
-            whole - taken,
-            whole - 2.0 * taken + (kept_moves.transpose() * &kept_in_spans * &kept_moves).trace(),
-        ];
     }
     let total = terms
         .iter()
         .fold(Moments::default(), |sum, term| sum.plus(term, 1.0));
     let (instrument, platform) = total.solved()?;
-    // The delete-one-configuration jackknife of w.
-    let count = terms.len() as f64;
-    let left_out: Vec<f64> = terms
+    // The delete-one-configuration jackknife of w; none where leaving one out leaves the two
+    // variances inseparable (that configuration alone told them apart).
+    let left_out: Option<Vec<f64>> = terms
         .iter()
-        .filter_map(|term| Some(total.plus(term, -1.0).solved()?.1))
+        .map(|term| Some(total.plus(term, -1.0).solved()?.1))
         .collect();
-    let mean = left_out.iter().sum::<f64>() / left_out.len().max(1) as f64;
-    let spread: f64 = left_out.iter().map(|w| (w - mean).powi(2)).sum();
+    let platform_error_mm2 = left_out.map_or(f64::INFINITY, |left_out| {
+        let count = left_out.len() as f64;
+        let mean = left_out.iter().sum::<f64>() / count;
+        let scatter: f64 = left_out.iter().map(|w| (w - mean).powi(2)).sum();
+        ((count - 1.0) / count * scatter).sqrt()
+    });
     Some(ShapeSplit {
         instrument_variance_mm2: instrument,
         platform_variance_mm2: platform,
-        platform_error_mm2: ((count - 1.0) / count * spread).sqrt(),
+        platform_error_mm2,
     })
 }
 
@@ -184,16 +184,16 @@ mod tests {
     /// Configurations of this many residuals (three targets).
     const HEIGHT: usize = 9;
 
-    /// Forty configurations' `K` (random moves, mm per mm), their blocks, and the kept
+    /// Fifty configurations' `K` (random moves, mm per mm), their blocks, and the kept
     /// directions of an identification whose columns hold the legs' offsets (`K` itself, as
-    /// the identification's do) and twenty more.
+    /// the identification's do) and a hundred more: the physical model's size (108 columns).
     fn identification(rng: &mut ChaCha8Rng) -> (DMatrix<f64>, Vec<(usize, usize)>, DMatrix<f64>) {
-        let configurations = 40;
+        let configurations = 50;
         let rows = configurations * HEIGHT;
         let moves = DMatrix::<f64>::from_fn(rows, 6, |_, _| StandardNormal.sample(&mut *rng));
         let blocks = (0..configurations).map(|c| (c * HEIGHT, HEIGHT)).collect();
         let mut columns =
-            DMatrix::<f64>::from_fn(rows, 26, |_, _| StandardNormal.sample(&mut *rng));
+            DMatrix::<f64>::from_fn(rows, 106, |_, _| StandardNormal.sample(&mut *rng));
         columns.columns_mut(0, 6).copy_from(&moves);
         let kept = columns.svd(true, false).u.unwrap();
         (moves, blocks, kept)

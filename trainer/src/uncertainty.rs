@@ -93,7 +93,8 @@ impl Propagation {
     /// and so every target measured there, together (`K_c ε`, `K_c` how the targets move per mm
     /// of each leg: the leg offsets' columns, `LEG_OFFSET_COLUMNS`). Their covariance is
     /// `Ω = σ² I + v Σ_c K_c K_cᵀ` (`v` the repeatability's variance, `σ²` the rest per
-    /// coordinate: the instrument's noise, and what the model's form misses), and the
+    /// coordinate: the instrument's noise, and what the model's form misses unless split
+    /// below), and the
     /// estimate's change `δθ = B r` (`B = F U_rᵀ`, `F = D⁻¹ V_r S_r⁻¹`) has the covariance
     /// `B Ω Bᵀ`. `σ²` is what the residuals hold beyond the repeatability's
     /// expected share: `E‖r‖² = σ² (m − r) + v tr((I − U_r U_rᵀ) K Kᵀ)`, and 0 where the
@@ -185,10 +186,11 @@ impl Propagation {
             .then(|| split_by_shape(&residual, &u, &moves, &blocks))
             .flatten();
         let (instrument, leg_variance_mm2) = match split {
-            Some(split) if split.platform_variance_mm2 > repeatability => (
-                split.instrument_variance_mm2.max(0.0),
-                split.platform_variance_mm2,
-            ),
+            // A negative instrument's variance: all of the residuals are the platform's.
+            Some(split) if split.instrument_variance_mm2 < 0.0 => (0.0, held / share),
+            Some(split) if split.platform_variance_mm2 > repeatability => {
+                (split.instrument_variance_mm2, split.platform_variance_mm2)
+            }
             _ => (unsplit, repeatability),
         };
         let noise = ResidualNoise {
@@ -920,6 +922,40 @@ mod tests {
             (mahalanobis - 100.0).abs() < 0.7,
             "{mahalanobis} against 100"
         );
+    }
+
+    #[test]
+    fn a_platform_moving_beyond_the_given_repeatability_is_told_from_the_instrument() {
+        // A machine repeating within 0.02 mm, measured by an instrument of 0.002 mm a reading
+        // (three averaged: 1.33e-6 mm² per coordinate), its repeatability given as 0.004 mm:
+        // the residuals' shape shows the platform's 4e-4 mm², and the instrument's variance is
+        // the split's, not what the residuals hold beyond 0.004 mm's share (about 7e-5 mm²).
+        let g = Geometry::prototype();
+        let paper = hexacomp_virtual::ErrorModel::default();
+        let errors = hexacomp_virtual::ErrorModel {
+            repeatability_sigma_mm: 0.02,
+            device: hexacomp_virtual::MeasuringDevice {
+                sigma_mm: 0.002,
+                ..paper.device
+            },
+            ..paper
+        };
+        let rows = measured(&g, &forty_poses(&g), &errors, 1);
+        let options = IdentifyOptions::physical(8);
+        let model = crate::identify::identify(&g, &rows, &options)
+            .unwrap()
+            .model;
+        let propagation = Propagation::of(&model, &options, &rows, 0.004).unwrap();
+        let split = propagation.split.expect("three targets a configuration");
+        // Forty configurations estimate w within about 15 % (1 σ).
+        let w = propagation.leg_variance_mm2;
+        assert!((2.6e-4..6e-4).contains(&w), "{w} mm² against 4e-4");
+        assert_eq!(w, split.platform_variance_mm2);
+        let instrument = propagation.noise.instrument_variance_mm2;
+        assert_eq!(instrument, split.instrument_variance_mm2);
+        assert!((0.6e-6..2.2e-6).contains(&instrument), "{instrument} mm²");
+        // Ω keeps the given repeatability: the misfit is not noise that moves the parameters.
+        assert_eq!(propagation.noise.repeatability_variance_mm2, 0.004 * 0.004);
     }
 
     #[test]

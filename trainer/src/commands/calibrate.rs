@@ -543,28 +543,28 @@ fn physical(
         );
     }
 
-    if let Some(split) = candidate
-        .networks_uncertainty
-        .as_ref()
-        .ok()
-        .and_then(|u| u.source.shape_split())
+    if let Ok(uncertainty) = &candidate.networks_uncertainty
+        && let Some(split) = uncertainty.source.shape_split()
     {
         let micrometres = |variance: f64| 1e3 * variance.max(0.0).sqrt();
+        let legs = uncertainty.source.leg_variance_mm2();
         println!(
             "physical model: its residuals hold {:.1} µm per coordinate of the instrument's \
              noise, and move the platform by {:.1} µm per leg and configuration (a variance \
-             of {:.1} ± {:.1} µm²){}",
+             of {:.1} ± {:.1} µm²); every point's uncertainty takes {:.1} µm per leg at a \
+             fresh move ({})",
             micrometres(split.instrument_variance_mm2),
             micrometres(split.platform_variance_mm2),
             1e6 * split.platform_variance_mm2,
             1e6 * split.platform_error_mm2,
-            if split.platform_variance_mm2 > repeatability_mm.powi(2) {
+            micrometres(legs),
+            if legs > repeatability_mm.powi(2) {
                 format!(
-                    ": more than the repeatability of {repeatability_mm} mm, the rest taken as \
-                     what the model's form misses, in every point's uncertainty"
+                    "the repeatability of {repeatability_mm} mm and what the model's form misses, \
+                     over the resolutions kept"
                 )
             } else {
-                format!(": within the repeatability of {repeatability_mm} mm")
+                format!("the repeatability of {repeatability_mm} mm")
             }
         );
     }
