@@ -797,6 +797,20 @@ mod tests {
         assert!(largest > 5e-4, "the models differ by {largest} mm at most");
     }
 
+    /// The default virtual machine with legs repeating within 0.02 mm, measured by an
+    /// instrument of 0.002 mm a reading (three averaged).
+    fn repeating_machine() -> hexacomp_virtual::ErrorModel {
+        let paper = hexacomp_virtual::ErrorModel::default();
+        hexacomp_virtual::ErrorModel {
+            repeatability_sigma_mm: 0.02,
+            device: hexacomp_virtual::MeasuringDevice {
+                sigma_mm: 0.002,
+                ..paper.device
+            },
+            ..paper
+        }
+    }
+
     #[test]
     fn the_propagated_covariances_hold_what_fits_of_other_draws_scatter_by() {
         // A machine whose legs repeat within 0.02 mm, measured by an instrument of 0.002 mm a
@@ -805,15 +819,7 @@ mod tests {
         // targets. Forty draws of the noise, each identified with eight and twelve coefficients.
         let g = Geometry::prototype();
         let poses = forty_poses(&g);
-        let paper = hexacomp_virtual::ErrorModel::default();
-        let errors = hexacomp_virtual::ErrorModel {
-            repeatability_sigma_mm: 0.02,
-            device: hexacomp_virtual::MeasuringDevice {
-                sigma_mm: 0.002,
-                ..paper.device
-            },
-            ..paper
-        };
+        let errors = repeating_machine();
         let draws: Vec<[Propagation; 2]> = (1..=40)
             .map(|seed| eight_and_twelve(&g, &poses, &errors, seed))
             .collect();
@@ -931,15 +937,7 @@ mod tests {
         // the residuals' shape shows the platform's 4e-4 mm², and the instrument's variance is
         // the split's, not what the residuals hold beyond 0.004 mm's share (about 7e-5 mm²).
         let g = Geometry::prototype();
-        let paper = hexacomp_virtual::ErrorModel::default();
-        let errors = hexacomp_virtual::ErrorModel {
-            repeatability_sigma_mm: 0.02,
-            device: hexacomp_virtual::MeasuringDevice {
-                sigma_mm: 0.002,
-                ..paper.device
-            },
-            ..paper
-        };
+        let errors = repeating_machine();
         let rows = measured(&g, &forty_poses(&g), &errors, 1);
         let options = IdentifyOptions::physical(8);
         let model = crate::identify::identify(&g, &rows, &options)
