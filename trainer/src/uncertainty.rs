@@ -186,8 +186,11 @@ impl Propagation {
             .then(|| split_by_shape(&residual, &u, &moves, &blocks))
             .flatten();
         let (instrument, leg_variance_mm2) = match split {
-            // A negative instrument's variance: all of the residuals are the platform's.
-            Some(split) if split.instrument_variance_mm2 < 0.0 => (0.0, held / share),
+            // A negative instrument's variance: all of the residuals are the platform's, as
+            // far as they hold more than the repeatability's share.
+            Some(split) if split.instrument_variance_mm2 < 0.0 => {
+                (0.0, (held / share).max(repeatability))
+            }
             Some(split) if split.platform_variance_mm2 > repeatability => {
                 (split.instrument_variance_mm2, split.platform_variance_mm2)
             }
