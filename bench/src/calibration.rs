@@ -16,6 +16,7 @@ use hexacomp_trainer::pitch_resolution::{
 };
 use hexacomp_trainer::plan::PlanOptions;
 use hexacomp_trainer::train::{Architecture, CROSS_VALIDATION_FOLDS, training_work};
+use hexacomp_trainer::uncertainty::Repeatability;
 use hexacomp_virtual::{ErrorModel, ErrorVariant, VirtualPlatform};
 use indicatif::{ProgressBar, ProgressStyle};
 
@@ -130,7 +131,7 @@ pub fn calibrate(
         &alternative_bases,
         &kept,
         &options,
-        error_model().repeatability_sigma_mm,
+        Repeatability::Known(error_model().repeatability_sigma_mm),
         &|n| bar.inc(n),
     );
     bar.finish_and_clear();

@@ -27,7 +27,7 @@ use crate::pitch_resolution::{ResolutionChoice, chosen_if_cross_validated};
 use crate::plan::PlanOptions;
 use crate::screening::ScreeningOptions;
 use crate::train::{Architecture, CROSS_VALIDATION_FOLDS, TrainOptions, Trained};
-use crate::uncertainty::Coverage;
+use crate::uncertainty::{Coverage, Repeatability};
 
 /// A compensation method of the comparison.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -367,7 +367,7 @@ pub fn evaluate(
             &alternative_bases,
             &solved,
             &options.distill,
-            options.error_model.repeatability_sigma_mm,
+            Repeatability::Known(options.error_model.repeatability_sigma_mm),
             &|_| {},
         )?
         .distilled;

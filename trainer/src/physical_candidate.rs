@@ -20,7 +20,7 @@ use crate::identify::{IdentifyOptions, identify};
 use crate::physical::PhysicalModel;
 use crate::pitch_resolution::{ResolutionChoice, alternatives};
 use crate::train::Trained;
-use crate::uncertainty::UncertaintySource;
+use crate::uncertainty::{Repeatability, UncertaintySource};
 
 /// Poses the distilled networks are checked on.
 const FIDELITY_POSES: usize = 500;
@@ -54,8 +54,9 @@ pub struct PhysicalCandidate {
 pub struct CandidateOptions {
     /// How the model is carried into networks.
     pub distill: DistillOptions,
-    /// The machine's repeatability: σ of one leg's length error at every move, mm.
-    pub repeatability_mm: f64,
+    /// The machine's repeatability: σ of one leg's length error at every move, mm, and whether
+    /// it is the machine's or assumed.
+    pub repeatability: Repeatability,
 }
 
 /// Identifies, scores and distills the physical model of the kept `measurements` with the
@@ -79,7 +80,7 @@ pub fn physical_candidate(
         &resolution.indistinguishable(),
         measurements,
         &options.distill,
-        options.repeatability_mm,
+        options.repeatability,
         progress,
     )?;
     let (mut distilled, fidelity) = (carried.distilled, carried.fidelity);
@@ -122,7 +123,7 @@ pub struct CarriedModel {
 /// Carries `physical`, identified on `measurements` with [`IdentifyOptions::physical`] at its own
 /// lead-screw resolution (the precondition: its uncertainty is propagated with those options'
 /// cutoff and compliance terms), into networks ([`distill`]) that carry its position uncertainty
-/// for legs repeating within `repeatability_mm` (1 σ per move, mm; more where the residuals'
+/// for legs repeating within `repeatability` (1 σ per move, mm; more where the residuals'
 /// shape shows more, [`crate::uncertainty::Propagation`]), the networks' own departure
 /// from the model and its spread about the models of the lead-screw resolutions
 /// `alternative_bases` added (those the cross-validation could not tell from the model's,
@@ -135,7 +136,7 @@ pub fn carried_into_networks(
     alternative_bases: &[usize],
     measurements: &[MeasuredConfiguration],
     options: &DistillOptions,
-    repeatability_mm: f64,
+    repeatability: Repeatability,
     progress: &(dyn Fn(u64) + Sync),
 ) -> Result<CarriedModel> {
     let own = physical.pitch.basis();
@@ -165,7 +166,7 @@ pub fn carried_into_networks(
                 (physical, &identification),
                 &alternatives,
                 measurements,
-                repeatability_mm,
+                repeatability,
                 options.seed,
             )
         })

@@ -57,6 +57,32 @@ use crate::residual_noise::{ResidualNoise, ShapeSplit, split_by_shape};
 /// once).
 const REPEATABILITY_EXCESS_REFUSED: f64 = 2.0;
 
+/// The machine's repeatability the uncertainty is propagated with: σ of one leg's length error
+/// at every move, mm, and whether it is the machine's.
+///
+/// Where the residuals' shape shows the platform moving by more than it
+/// ([`crate::residual_noise`]), the excess is either what the model's form misses or a
+/// repeatability the machine does not reach, and no data tells the two apart. A misfit moves the
+/// identified parameters little (the model's columns cannot fit it), a repeatability as much as
+/// any noise does: a known repeatability makes the excess the misfit, an assumed one is not
+/// trusted over the residuals, and the excess moves the parameters too.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Repeatability {
+    /// The machine's, given by its user (or the virtual machine's own), mm.
+    Known(f64),
+    /// Assumed for want of the machine's (a default), mm.
+    Assumed(f64),
+}
+
+impl Repeatability {
+    /// σ of one leg's length error at every move, mm.
+    pub fn sigma_mm(self) -> f64 {
+        match self {
+            Self::Known(mm) | Self::Assumed(mm) => mm,
+        }
+    }
+}
+
 /// Poses drawn over the measured range that the uncertainty is fitted at (the configurations'
 /// own are added).
 pub const FIT_POSES: usize = 300;
@@ -84,6 +110,56 @@ pub struct Propagation {
     covariance: DMatrix<f64>,
 }
 
+/// The residuals' variances a [`Propagation`] takes, mm².
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Variances {
+    /// `σ²` of `Ω`, per coordinate.
+    instrument: f64,
+    /// `v` of `Ω`, per leg and configuration: what moved the platform and the parameters with it.
+    moving_parameters: f64,
+    /// `w`, per leg at a fresh move.
+    fresh_move: f64,
+}
+
+/// The variances of residuals whose shape split them as `split` (where it could), on a machine
+/// of `repeatability`: `all_platform_mm2` is the platform's variance per leg that all of the
+/// residuals would be (`‖r‖² / tr((I − H) K Kᵀ)`), `unsplit_mm2` the instrument's that all they
+/// hold beyond the repeatability's share would be ([`Propagation::of`]).
+fn variances(
+    split: Option<ShapeSplit>,
+    repeatability: Repeatability,
+    all_platform_mm2: f64,
+    unsplit_mm2: f64,
+) -> Variances {
+    let given = repeatability.sigma_mm().powi(2);
+    match split {
+        // A negative instrument's variance: all of the residuals are the platform's, as far as
+        // they hold more than the repeatability's share; they are all the noise that moved
+        // the parameters too.
+        Some(split) if split.instrument_variance_mm2 < 0.0 => {
+            let all = all_platform_mm2.max(given);
+            Variances {
+                instrument: 0.0,
+                moving_parameters: all,
+                fresh_move: all,
+            }
+        }
+        Some(split) if split.platform_variance_mm2 > given => Variances {
+            instrument: split.instrument_variance_mm2,
+            moving_parameters: match repeatability {
+                Repeatability::Known(_) => given,
+                Repeatability::Assumed(_) => split.platform_variance_mm2,
+            },
+            fresh_move: split.platform_variance_mm2,
+        },
+        _ => Variances {
+            instrument: unsplit_mm2,
+            moving_parameters: given,
+            fresh_move: given,
+        },
+    }
+}
+
 impl Propagation {
     /// The covariance of `model`, identified from `rows` with `options`, at its parameters, on
     /// a machine whose legs repeat within `repeatability_mm` (1 σ of each leg's length at every
@@ -103,18 +179,21 @@ impl Propagation {
     /// not the machine's), naming the one that would be all of it.
     ///
     /// Where the residuals' shape shows the platform moved by more than the repeatability
-    /// ([`crate::residual_noise::split_by_shape`]: a variance `w > v` per leg and
-    /// configuration, beside the instrument's `σ²` per coordinate), the rest is what the
-    /// model's form misses at the configurations: `σ²` is then the instrument's alone, and
-    /// `w` the legs' variance at a fresh move. The form's misfit stays out of `Ω`: it is what
-    /// the model's columns cannot fit, which moves its parameters little, not noise that
-    /// moves them.
+    /// ([`crate::residual_noise`]: a variance `w > v` per leg and configuration, beside the
+    /// instrument's `σ²` per coordinate), `σ²` is the instrument's alone and `w` the legs'
+    /// variance at a fresh move. Beyond a [`Repeatability::Known`] the rest is what the
+    /// model's form misses at the configurations, and stays out of `Ω`: it is what the
+    /// model's columns cannot fit, which moves its parameters little, not noise that moves
+    /// them. Beyond a [`Repeatability::Assumed`] it may be the machine's own repeatability,
+    /// and `Ω` holds `w` in `v`'s place. Where the split leaves the instrument nothing (a
+    /// negative `σ²`), all of the residuals are the platform's, in `Ω` too.
     pub fn of(
         model: &PhysicalModel,
         options: &IdentifyOptions,
         rows: &[MeasuredConfiguration],
-        repeatability_mm: f64,
+        repeatability: Repeatability,
     ) -> Result<Self> {
+        let repeatability_mm = repeatability.sigma_mm();
         if !(repeatability_mm.is_finite() && repeatability_mm >= 0.0) {
             return Err(Error::InvalidSetting(format!(
                 "the machine's repeatability is {repeatability_mm} mm: a finite σ ≥ 0 is needed"
@@ -157,6 +236,7 @@ impl Propagation {
             blocks.push((at, height));
             at += height;
         }
+        let machine = repeatability;
         let repeatability = repeatability_mm * repeatability_mm;
         // tr(U_r U_rᵀ K Kᵀ): the share of the repeatability the kept directions take up.
         let taken: f64 = blocks
@@ -185,20 +265,14 @@ impl Propagation {
         let split = targets_measured
             .then(|| split_by_shape(&residual, &u, &moves, &blocks))
             .flatten();
-        let (instrument, leg_variance_mm2) = match split {
-            // A negative instrument's variance: all of the residuals are the platform's, as
-            // far as they hold more than the repeatability's share.
-            Some(split) if split.instrument_variance_mm2 < 0.0 => {
-                (0.0, (held / share).max(repeatability))
-            }
-            Some(split) if split.platform_variance_mm2 > repeatability => {
-                (split.instrument_variance_mm2, split.platform_variance_mm2)
-            }
-            _ => (unsplit, repeatability),
-        };
+        let Variances {
+            instrument,
+            moving_parameters,
+            fresh_move: leg_variance_mm2,
+        } = variances(split, machine, held / share, unsplit);
         let noise = ResidualNoise {
             instrument_variance_mm2: instrument,
-            repeatability_variance_mm2: repeatability,
+            repeatability_variance_mm2: moving_parameters,
             moves,
             blocks,
         };
@@ -366,7 +440,7 @@ pub struct UncertaintySource {
 
 impl UncertaintySource {
     /// The source of `model`, identified from `rows` with `options` on `nominal` whose legs
-    /// repeat within `repeatability_mm` ([`Propagation::of`]), beside `alternatives` identified
+    /// repeat within `repeatability` ([`Propagation::of`]), beside `alternatives` identified
     /// from the same rows, which they could not tell from it (each with
     /// [`IdentifyOptions::physical`] at its own resolution,
     /// [`Propagation::position_covariances`]); the poses over the measured range are drawn with
@@ -376,16 +450,16 @@ impl UncertaintySource {
         (model, options): (&PhysicalModel, &IdentifyOptions),
         alternatives: &[PhysicalModel],
         rows: &[MeasuredConfiguration],
-        repeatability_mm: f64,
+        repeatability: Repeatability,
         seed: u64,
     ) -> Result<Self> {
-        let propagation = Propagation::of(model, options, rows, repeatability_mm)?;
+        let propagation = Propagation::of(model, options, rows, repeatability)?;
         let alternatives = alternatives
             .iter()
             .map(|alternative| {
                 let options = IdentifyOptions::physical(alternative.pitch.basis());
-                let of = Propagation::of(alternative, &options, rows, repeatability_mm).map_err(
-                    |e| {
+                let of =
+                    Propagation::of(alternative, &options, rows, repeatability).map_err(|e| {
                         let of_alternative = |why| {
                             format!(
                                 "the alternative of {} lead-screw coefficients per leg: {why}",
@@ -401,8 +475,7 @@ impl UncertaintySource {
                             }
                             other => other,
                         }
-                    },
-                )?;
+                    })?;
                 // The same rows, each with as many targets whatever the geometry.
                 debug_assert_eq!(of.residuals(), propagation.residuals());
                 Ok(of)
@@ -446,7 +519,7 @@ impl UncertaintySource {
     }
 
     /// The model's residuals' variance told apart by shape: the instrument's per coordinate,
-    /// the platform's per leg and configuration ([`crate::residual_noise::split_by_shape`]);
+    /// the platform's per leg and configuration ([`crate::residual_noise`]);
     /// `None` where the measurements cannot tell them apart.
     pub fn shape_split(&self) -> Option<ShapeSplit> {
         self.split
@@ -759,7 +832,13 @@ mod tests {
         [8, 12].map(|basis| {
             let options = IdentifyOptions::physical(basis);
             let model = crate::identify::identify(g, &rows, &options).unwrap().model;
-            Propagation::of(&model, &options, &rows, errors.repeatability_sigma_mm).unwrap()
+            Propagation::of(
+                &model,
+                &options,
+                &rows,
+                Repeatability::Known(errors.repeatability_sigma_mm),
+            )
+            .unwrap()
         })
     }
 
@@ -946,7 +1025,8 @@ mod tests {
         let model = crate::identify::identify(&g, &rows, &options)
             .unwrap()
             .model;
-        let propagation = Propagation::of(&model, &options, &rows, 0.004).unwrap();
+        let propagation =
+            Propagation::of(&model, &options, &rows, Repeatability::Known(0.004)).unwrap();
         let split = propagation.split.expect("three targets a configuration");
         // Forty configurations estimate w within about 15 % (1 σ).
         let w = propagation.leg_variance_mm2;
@@ -957,6 +1037,94 @@ mod tests {
         assert!((0.6e-6..2.2e-6).contains(&instrument), "{instrument} mm²");
         // Ω keeps the given repeatability: the misfit is not noise that moves the parameters.
         assert_eq!(propagation.noise.repeatability_variance_mm2, 0.004 * 0.004);
+    }
+
+    /// The trace of the parameters' covariance `propagation`'s estimator gives residuals whose
+    /// platform moves by `platform_mm2` per leg and configuration, the instrument's noise as
+    /// its own.
+    fn covariance_trace_with(propagation: &Propagation, platform_mm2: f64) -> f64 {
+        let mut noise = propagation.noise.clone();
+        noise.repeatability_variance_mm2 = platform_mm2;
+        noise.sandwich(&propagation.estimator).trace()
+    }
+
+    #[test]
+    fn an_assumed_repeatability_lets_what_the_platform_shows_move_the_parameters() {
+        // The machine above, repeating within 0.02 mm, its repeatability assumed as 0.004 mm
+        // for want of its own: the platform's variance the residuals' shape shows may be the
+        // machine's repeatability, and moves the parameters as that would.
+        let g = Geometry::prototype();
+        let rows = measured(&g, &forty_poses(&g), &repeating_machine(), 1);
+        let options = IdentifyOptions::physical(8);
+        let model = crate::identify::identify(&g, &rows, &options)
+            .unwrap()
+            .model;
+        let assumed =
+            Propagation::of(&model, &options, &rows, Repeatability::Assumed(0.004)).unwrap();
+        let w = assumed
+            .split
+            .expect("three targets a configuration")
+            .platform_variance_mm2;
+        assert_eq!(assumed.noise.repeatability_variance_mm2, w);
+        assert_eq!(assumed.leg_variance_mm2, w);
+        // The covariance the machine's own repeatability gives, within the split's estimate of
+        // it (about 15 %, 1 σ); the assumed one's would be a twenty-fifth of it.
+        let ratio = assumed.covariance.trace() / covariance_trace_with(&assumed, 0.02 * 0.02);
+        assert!((0.65..1.5).contains(&ratio), "{ratio}");
+    }
+
+    #[test]
+    fn residuals_the_split_leaves_to_the_platform_alone_move_the_parameters() {
+        // A split that leaves the instrument a negative variance (its own scatter can, with a
+        // precise instrument on a machine that moves more; the virtual platform's noiseless
+        // instrument gives 5e-13 to 1e-12 mm² on ten draws, not below): all of the residuals
+        // are the platform's, at a fresh move and in `Ω` alike — not the nothing a
+        // repeatability given as 0 and no instrument's noise would leave there.
+        let split = ShapeSplit {
+            instrument_variance_mm2: -1e-8,
+            platform_variance_mm2: 3e-4,
+            platform_error_mm2: 4e-5,
+        };
+        for machine in [Repeatability::Known(0.0), Repeatability::Assumed(0.0)] {
+            assert_eq!(
+                variances(Some(split), machine, 4e-4, 1e-6),
+                Variances {
+                    instrument: 0.0,
+                    moving_parameters: 4e-4,
+                    fresh_move: 4e-4,
+                }
+            );
+        }
+        // Less than the repeatability's share: the repeatability.
+        assert_eq!(
+            variances(Some(split), Repeatability::Known(0.03), 4e-4, 0.0).fresh_move,
+            9e-4
+        );
+        // Beyond a repeatability known, the misfit moves the legs at a fresh move alone;
+        // beyond one assumed, the parameters too; within it, the residuals' rest is the
+        // instrument's.
+        let split = ShapeSplit {
+            instrument_variance_mm2: 1e-6,
+            ..split
+        };
+        let beyond = |machine| variances(Some(split), machine, 4e-4, 2e-6);
+        assert_eq!(
+            beyond(Repeatability::Known(0.01)),
+            Variances {
+                instrument: 1e-6,
+                moving_parameters: 1e-4,
+                fresh_move: 3e-4,
+            }
+        );
+        assert_eq!(beyond(Repeatability::Assumed(0.01)).moving_parameters, 3e-4);
+        assert_eq!(
+            variances(Some(split), Repeatability::Known(0.02), 4e-4, 2e-6),
+            Variances {
+                instrument: 2e-6,
+                moving_parameters: 4e-4,
+                fresh_move: 4e-4,
+            }
+        );
     }
 
     #[test]
@@ -978,7 +1146,9 @@ mod tests {
             .unwrap()
             .model;
         let v = errors.repeatability_sigma_mm;
-        let propagation = Propagation::of(&model, &options, &as_poses, v).unwrap();
+        let propagation =
+            Propagation::of(&model, &options, &as_poses, Repeatability::Known(v)).unwrap();
+        assert!(propagation.split.is_none());
         assert_eq!(propagation.leg_variance_mm2, v * v);
     }
 
@@ -1019,12 +1189,13 @@ mod tests {
             .unwrap()
             .model;
         for bad in [-0.004, f64::NAN, f64::INFINITY] {
-            let e = Propagation::of(&model, &options, &rows, bad).unwrap_err();
+            let e =
+                Propagation::of(&model, &options, &rows, Repeatability::Known(bad)).unwrap_err();
             assert!(e.to_string().contains("repeatability"), "{e}");
         }
         // A repeatability the residuals cannot hold: refused, naming the one that is all of
         // them (to 1 nm). Up to √2 times that, within the residuals' own scatter, accepted.
-        let e = Propagation::of(&model, &options, &rows, 0.1).unwrap_err();
+        let e = Propagation::of(&model, &options, &rows, Repeatability::Known(0.1)).unwrap_err();
         let largest: f64 = e
             .to_string()
             .split("repeatability of ")
@@ -1033,8 +1204,18 @@ mod tests {
             .map(|micrometres| micrometres * 1e-3)
             .unwrap_or_else(|| panic!("no largest repeatability in {e}"));
         assert!((0.004..0.1).contains(&largest), "{e}");
-        assert!(Propagation::of(&model, &options, &rows, largest * 1.35).is_ok());
-        assert!(Propagation::of(&model, &options, &rows, largest * 1.5).is_err());
+        assert!(
+            Propagation::of(
+                &model,
+                &options,
+                &rows,
+                Repeatability::Known(largest * 1.35)
+            )
+            .is_ok()
+        );
+        assert!(
+            Propagation::of(&model, &options, &rows, Repeatability::Known(largest * 1.5)).is_err()
+        );
     }
 
     /// The trace of the sample covariance of `values`, mm².

@@ -20,6 +20,7 @@ use hexacomp_trainer::plan::PlanOptions;
 use hexacomp_trainer::train::{
     Architecture, TrainOptions, can_cross_validate, cross_validated_rmse, folds,
 };
+use hexacomp_trainer::uncertainty::Repeatability;
 use hexacomp_virtual::{DEFAULT_MACHINE_SEED, ErrorModel, ErrorVariant, VirtualPlatform};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -280,7 +281,7 @@ fn the_physical_models_cross_validation_predicts_each_fold_without_it() {
     };
     let options = CandidateOptions {
         distill: common::cheap_distill(),
-        repeatability_mm: 0.004,
+        repeatability: Repeatability::Known(0.004),
     };
     let candidate = physical_candidate(&g, &kept, choose(5).unwrap(), &options, &|_| {}).unwrap();
     // In sample, by hand: the model identified on all thirty, compared where each robust

@@ -9,6 +9,7 @@ use hexacomp_trainer::physical_candidate::{
     CandidateOptions, carried_into_networks, physical_candidate,
 };
 use hexacomp_trainer::pitch_resolution::{PITCH_RESOLUTIONS, chosen_resolution, identifications};
+use hexacomp_trainer::uncertainty::Repeatability;
 use hexacomp_virtual::{DEFAULT_MACHINE_SEED, ErrorModel, ErrorVariant};
 
 #[test]
@@ -205,7 +206,7 @@ fn the_lead_screw_resolution_is_chosen_by_held_out_error_and_follows_a_short_per
         choice.clone(),
         &CandidateOptions {
             distill: common::cheap_distill(),
-            repeatability_mm: 0.004,
+            repeatability: Repeatability::Known(0.004),
         },
         &|_| {},
     )
@@ -228,7 +229,7 @@ fn the_lead_screw_resolution_is_chosen_by_held_out_error_and_follows_a_short_per
             bases,
             &kept,
             &common::cheap_distill(),
-            0.004,
+            Repeatability::Known(0.004),
             &|_| {},
         )
         .unwrap()

@@ -25,6 +25,7 @@ use hexacomp_trainer::train::{
     Architecture, CROSS_VALIDATION_FOLDS, TrainOptions, Trained, can_cross_validate,
     commanded_legs, cross_validated_rmse, training_work,
 };
+use hexacomp_trainer::uncertainty::Repeatability;
 use hexacomp_virtual::{DEFAULT_MACHINE_SEED, ErrorModel, ErrorVariant, VirtualPlatform};
 
 use super::solve::{MeasuredScreeningArgs, solve_screened, write_outcomes};
@@ -81,7 +82,10 @@ pub struct CalibrateArgs {
     /// refused, and the models are written without an uncertainty. Not ISO 9283's RP, which is a
     /// position figure of the mean plus three standard deviations: a leg's σ is of the order of
     /// RP / 3 divided by the leg-to-tool gain of the pose. Default: the virtual machine's
-    /// (0.004 mm for the built-in variants with noise), also for --measurements, which says so.
+    /// (0.004 mm for the built-in variants with noise); with --measurements 0.004 mm is
+    /// assumed, which calibrate says, and where the measurements show the legs moving by more,
+    /// that is taken as the machine's instead (given, the excess is taken as what the model's
+    /// form misses).
     #[arg(long, value_name = "MM", value_parser = repeatability)]
     repeatability_mm: Option<f64>,
     /// Output folder, replaced as a whole when the calibration succeeds (a failed one leaves it
@@ -151,16 +155,17 @@ pub fn run(geometry: &Geometry, args: &CalibrateArgs) -> anyhow::Result<()> {
     let folder = ResultsFolder::create(&args.out_dir, "calibrate", &CALIBRATION_FILES)?;
     let dir = folder.path();
     let error_model = ErrorModel::variant(args.error_variant);
-    let repeatability_mm = match (args.repeatability_mm, &args.measurements) {
-        (Some(given), _) => given,
-        (None, None) => error_model.repeatability_sigma_mm,
+    let repeatability = match (args.repeatability_mm, &args.measurements) {
+        (Some(given), _) => Repeatability::Known(given),
+        (None, None) => Repeatability::Known(error_model.repeatability_sigma_mm),
         (None, Some(_)) => {
             let assumed = ErrorModel::default().repeatability_sigma_mm;
             println!(
                 "uncertainty: the machine's repeatability is taken as {assumed} mm per leg and \
-                 move (the virtual platform's); give --repeatability-mm for this machine's"
+                 move (the virtual platform's), or as what the measurements show where they \
+                 show more; give --repeatability-mm for this machine's"
             );
-            assumed
+            Repeatability::Assumed(assumed)
         }
     };
     let mut platform = VirtualPlatform::new(geometry, &error_model, args.machine_seed, args.seed)?;
@@ -209,13 +214,7 @@ pub fn run(geometry: &Geometry, args: &CalibrateArgs) -> anyhow::Result<()> {
         let start = Instant::now();
         // A physical model that cannot be identified or carried into networks leaves the
         // choice to the networks, and says why.
-        match physical(
-            geometry,
-            &pipeline,
-            &solved,
-            &measurements,
-            repeatability_mm,
-        ) {
+        match physical(geometry, &pipeline, &solved, &measurements, repeatability) {
             Ok((candidate, Ok(uncertainty))) => {
                 for network in &mut candidates {
                     match uncertainty.of_networks(network.score_mm) {
@@ -295,10 +294,16 @@ pub fn run(geometry: &Geometry, args: &CalibrateArgs) -> anyhow::Result<()> {
         args.out_dir.display()
     );
     if let Some(u) = &best.trained.model.uncertainty {
+        let legs = match repeatability {
+            Repeatability::Known(mm) => format!("legs repeating within {mm} mm"),
+            Repeatability::Assumed(mm) => format!(
+                "legs repeating within {mm} mm assumed, or what the measurements show where \
+                 they show more"
+            ),
+        };
         println!(
             "its 1-σ position uncertainty: {:.4} mm RMS over the measured configurations, \
-             growing outside them (legs repeating within {repeatability_mm} mm; `predict` and \
-             the service give it per point)",
+             growing outside them ({legs}; `predict` and the service give it per point)",
             (u.constant_variance_mm2 + u.leverage_variance_mm2).sqrt()
         );
     }
@@ -471,14 +476,14 @@ fn physical(
     pipeline: &Pipeline,
     solved: &Solved,
     measurements: &[MeasuredConfiguration],
-    repeatability_mm: f64,
+    repeatability: Repeatability,
 ) -> anyhow::Result<(
     Candidate,
     hexacomp_trainer::error::Result<NetworksUncertainty>,
 )> {
     let options = CandidateOptions {
         distill: DistillOptions::default(),
-        repeatability_mm,
+        repeatability,
     };
     let kept = solved.kept_of(measurements);
     let choosing = Instant::now();
@@ -546,26 +551,46 @@ fn physical(
     if let Ok(uncertainty) = &candidate.networks_uncertainty
         && let Some(split) = uncertainty.source.shape_split()
     {
-        let micrometres = |variance: f64| 1e3 * variance.max(0.0).sqrt();
+        let repeatability_mm = repeatability.sigma_mm();
+        // A variance the split finds negative is printed as it is, not as its root.
+        let deviation = |variance: f64| {
+            if variance >= 0.0 {
+                format!("{:.1} µm", 1e3 * variance.sqrt())
+            } else {
+                "nothing".to_string()
+            }
+        };
         let legs = uncertainty.source.leg_variance_mm2();
-        println!(
-            "physical model: its residuals hold {:.1} µm per coordinate of the instrument's \
-             noise, and move the platform by {:.1} µm per leg and configuration (a variance \
-             of {:.1} ± {:.1} µm²); every point's uncertainty takes {:.1} µm per leg at a \
-             fresh move ({})",
-            micrometres(split.instrument_variance_mm2),
-            micrometres(split.platform_variance_mm2),
-            1e6 * split.platform_variance_mm2,
-            1e6 * split.platform_error_mm2,
-            micrometres(legs),
-            if legs > repeatability_mm.powi(2) {
-                format!(
+        let why = if legs <= repeatability_mm.powi(2) {
+            format!("the repeatability of {repeatability_mm} mm")
+        } else if split.instrument_variance_mm2 < 0.0 {
+            "all of the residuals, the instrument's share coming out negative; it moves the \
+             identified parameters too"
+                .to_string()
+        } else {
+            match repeatability {
+                Repeatability::Known(_) => format!(
                     "the repeatability of {repeatability_mm} mm and what the model's form misses, \
                      over the resolutions kept"
-                )
-            } else {
-                format!("the repeatability of {repeatability_mm} mm")
+                ),
+                Repeatability::Assumed(_) => format!(
+                    "more than the assumed repeatability of {repeatability_mm} mm: the machine's \
+                     repeatability or what the model's form misses, over the resolutions kept; \
+                     it moves the identified parameters too"
+                ),
             }
+        };
+        println!(
+            "physical model: its residuals hold {} per coordinate of the instrument's noise (a \
+             variance of {:.1} µm²), and move the platform by {} per leg and configuration (a \
+             variance of {:.1} ± {:.1} µm²); every point's uncertainty takes {:.1} µm per leg at \
+             a fresh move ({why})",
+            deviation(split.instrument_variance_mm2),
+            1e6 * split.instrument_variance_mm2,
+            deviation(split.platform_variance_mm2),
+            1e6 * split.platform_variance_mm2,
+            1e6 * split.platform_error_mm2,
+            1e3 * legs.sqrt(),
         );
     }
     let f = candidate.fidelity;
