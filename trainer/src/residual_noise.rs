@@ -19,7 +19,9 @@ pub(crate) struct ResidualNoise {
     /// `σ²`, the variance per coordinate of the instrument's noise (and of what the model's
     /// form misses where the residuals' shape does not tell it apart), mm².
     pub(crate) instrument_variance_mm2: f64,
-    /// `v`, the variance of each leg's length at every move (the repeatability), mm².
+    /// `v`, the variance of each leg's length at every move that moved the platform and the
+    /// parameters with it: the repeatability, or what the residuals' shape shows beyond an
+    /// assumed one (`uncertainty::Propagation::of`), mm².
     pub(crate) repeatability_variance_mm2: f64,
     /// `K`: how each residual moves per mm of each leg (residuals × legs), configuration after
     /// configuration.

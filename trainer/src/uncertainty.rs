@@ -104,6 +104,9 @@ pub struct Propagation {
     /// model's form misses, where the residuals' shape shows more than the repeatability
     /// ([`crate::residual_noise`]), mm².
     leg_variance_mm2: f64,
+    /// The repeatability's variance taken (an assumed one no more than all the residuals
+    /// hold), mm².
+    repeatability_variance_mm2: f64,
     /// The residuals' variance told apart by shape, where it can be.
     split: Option<ShapeSplit>,
     /// `C = B Ω Bᵀ`, mm² per unit² of the parameters.
@@ -132,37 +135,31 @@ fn variances(
     unsplit_mm2: f64,
 ) -> Variances {
     let given = repeatability.sigma_mm().powi(2);
-    match split {
+    let (instrument, platform) = match split {
         // A negative instrument's variance: all of the residuals are the platform's, as far as
-        // they hold more than the repeatability's share; they are all the noise that moved
-        // the parameters too.
-        Some(split) if split.instrument_variance_mm2 < 0.0 => {
-            let all = all_platform_mm2.max(given);
-            Variances {
-                instrument: 0.0,
-                moving_parameters: all,
-                fresh_move: all,
-            }
+        // they hold more than the repeatability's share (the limit of a split whose
+        // instrument's variance falls to zero).
+        Some(split) if split.instrument_variance_mm2 < 0.0 => (0.0, all_platform_mm2.max(given)),
+        Some(split) if split.platform_variance_mm2 > given => {
+            (split.instrument_variance_mm2, split.platform_variance_mm2)
         }
-        Some(split) if split.platform_variance_mm2 > given => Variances {
-            instrument: split.instrument_variance_mm2,
-            moving_parameters: match repeatability {
-                Repeatability::Known(_) => given,
-                Repeatability::Assumed(_) => split.platform_variance_mm2,
-            },
-            fresh_move: split.platform_variance_mm2,
+        _ => (unsplit_mm2, given),
+    };
+    Variances {
+        instrument,
+        // Beyond a known repeatability, the form's misfit; beyond an assumed one, maybe the
+        // machine's own repeatability, which moves the parameters.
+        moving_parameters: match repeatability {
+            Repeatability::Known(_) => given,
+            Repeatability::Assumed(_) => platform,
         },
-        _ => Variances {
-            instrument: unsplit_mm2,
-            moving_parameters: given,
-            fresh_move: given,
-        },
+        fresh_move: platform,
     }
 }
 
 impl Propagation {
     /// The covariance of `model`, identified from `rows` with `options`, at its parameters, on
-    /// a machine whose legs repeat within `repeatability_mm` (1 σ of each leg's length at every
+    /// a machine whose legs repeat within `repeatability` (1 σ of each leg's length at every
     /// move, mm).
     ///
     /// The residuals are not independent: a configuration's repeatability moves the platform,
@@ -175,8 +172,9 @@ impl Propagation {
     /// `B Ω Bᵀ`. `σ²` is what the residuals hold beyond the repeatability's
     /// expected share: `E‖r‖² = σ² (m − r) + v tr((I − U_r U_rᵀ) K Kᵀ)`, and 0 where the
     /// residuals hold less than that share, as their noise lets them when the instrument's is
-    /// small. A repeatability whose share is more than twice what they hold is refused (it is
-    /// not the machine's), naming the one that would be all of it.
+    /// small. A known repeatability whose share is more than twice what they hold is refused
+    /// (it is not the machine's), naming the one that would be all of it; an assumed one is
+    /// taken as no more than all of it.
     ///
     /// Where the residuals' shape shows the platform moved by more than the repeatability
     /// ([`crate::residual_noise`]: a variance `w > v` per leg and configuration, beside the
@@ -185,8 +183,8 @@ impl Propagation {
     /// model's form misses at the configurations, and stays out of `Ω`: it is what the
     /// model's columns cannot fit, which moves its parameters little, not noise that moves
     /// them. Beyond a [`Repeatability::Assumed`] it may be the machine's own repeatability,
-    /// and `Ω` holds `w` in `v`'s place. Where the split leaves the instrument nothing (a
-    /// negative `σ²`), all of the residuals are the platform's, in `Ω` too.
+    /// and `Ω` holds `w` in `v`'s place. A split whose instrument's variance comes out negative
+    /// is taken at its limit: no instrument's noise, all of the residuals the platform's.
     pub fn of(
         model: &PhysicalModel,
         options: &IdentifyOptions,
@@ -236,8 +234,6 @@ impl Propagation {
             blocks.push((at, height));
             at += height;
         }
-        let machine = repeatability;
-        let repeatability = repeatability_mm * repeatability_mm;
         // tr(U_r U_rᵀ K Kᵀ): the share of the repeatability the kept directions take up.
         let taken: f64 = blocks
             .iter()
@@ -247,6 +243,14 @@ impl Propagation {
             .sum();
         let share = moves.norm_squared() - taken;
         let held = residual.norm_squared();
+        // An assumed repeatability is not trusted over the residuals: at most all they hold.
+        let (machine, repeatability) = match repeatability {
+            Repeatability::Known(_) => (repeatability, repeatability_mm.powi(2)),
+            Repeatability::Assumed(_) => {
+                let taken = repeatability_mm.powi(2).min(held / share);
+                (Repeatability::Assumed(taken.sqrt()), taken)
+            }
+        };
         if repeatability * share > REPEATABILITY_EXCESS_REFUSED * held {
             return Err(Error::InvalidSetting(format!(
                 "the machine's repeatability of {repeatability_mm} mm would give the \
@@ -279,6 +283,7 @@ impl Propagation {
         let estimator = factor * u.transpose();
         Ok(Self {
             leg_variance_mm2,
+            repeatability_variance_mm2: repeatability,
             split,
             model: model.clone(),
             options: *options,
@@ -419,6 +424,18 @@ pub fn one_sigma_mm(sigma: &Matrix3<f64>) -> f64 {
     (scale * quantile).sqrt() / 2.0
 }
 
+/// Where the platform's variance the residuals' shape shows beyond the repeatability was taken
+/// ([`Propagation::of`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct BeyondRepeatability {
+    /// The model's or an alternative's residuals moved the platform by more than the
+    /// repeatability: every fresh move takes it.
+    pub at_fresh_moves: bool,
+    /// The model's excess moved its identified parameters too (`Ω`): the repeatability was
+    /// assumed, and the excess may be the machine's own.
+    pub moving_parameters: bool,
+}
+
 /// What a model file's uncertainty is fitted from: a physical model's [`Propagation`] at the
 /// configurations it was identified from and at poses over their legs' range, and the leverage
 /// among the configurations' nominal legs.
@@ -429,6 +446,8 @@ pub struct UncertaintySource {
     leg_variance_mm2: f64,
     /// The model's residuals' variance told apart by shape, where it can be.
     split: Option<ShapeSplit>,
+    /// What the leg variance holds beyond the repeatability, and where.
+    beyond: BeyondRepeatability,
     /// The leverage's normalisation and whitening (variances zero).
     leverage: PositionUncertainty,
     /// At each pose the propagation is defined at: its leverage, and the position covariance's
@@ -503,9 +522,17 @@ impl UncertaintySource {
                 .map(|alternative| alternative.leg_variance_mm2)
                 .sum::<f64>())
             / (alternatives.len() + 1) as f64;
+        let beyond = BeyondRepeatability {
+            at_fresh_moves: std::iter::once(&propagation)
+                .chain(&alternatives)
+                .any(|of| of.leg_variance_mm2 > of.repeatability_variance_mm2),
+            moving_parameters: propagation.noise.repeatability_variance_mm2
+                > propagation.repeatability_variance_mm2,
+        };
         Ok(Self {
             leg_variance_mm2,
             split: propagation.split,
+            beyond,
             leverage,
             samples,
             poses: poses.len(),
@@ -523,6 +550,11 @@ impl UncertaintySource {
     /// `None` where the measurements cannot tell them apart.
     pub fn shape_split(&self) -> Option<ShapeSplit> {
         self.split
+    }
+
+    /// What [`Self::leg_variance_mm2`] holds beyond the repeatability, and where.
+    pub fn beyond_repeatability(&self) -> BeyondRepeatability {
+        self.beyond
     }
 
     /// The model file's uncertainty for networks that depart from the model by independent
@@ -828,14 +860,23 @@ mod tests {
         errors: &hexacomp_virtual::ErrorModel,
         noise_seed: u64,
     ) -> [Propagation; 2] {
-        let rows = measured(g, poses, errors, noise_seed);
+        eight_and_twelve_of(g, &measured(g, poses, errors, noise_seed), errors)
+    }
+
+    /// The physical models of eight and twelve lead-screw coefficients identified from `rows`,
+    /// with their propagations for `errors`' repeatability.
+    fn eight_and_twelve_of(
+        g: &Geometry,
+        rows: &[MeasuredConfiguration],
+        errors: &hexacomp_virtual::ErrorModel,
+    ) -> [Propagation; 2] {
         [8, 12].map(|basis| {
             let options = IdentifyOptions::physical(basis);
-            let model = crate::identify::identify(g, &rows, &options).unwrap().model;
+            let model = crate::identify::identify(g, rows, &options).unwrap().model;
             Propagation::of(
                 &model,
                 &options,
-                &rows,
+                rows,
                 Repeatability::Known(errors.repeatability_sigma_mm),
             )
             .unwrap()
@@ -898,15 +939,30 @@ mod tests {
         // A machine whose legs repeat within 0.02 mm, measured by an instrument of 0.002 mm a
         // reading (three averaged):
         // the residuals' noise is mostly the configurations' own moves, shared by their
-        // targets. Forty draws of the noise, each identified with eight and twelve coefficients.
+        // targets. Forty draws of the noise, each identified with eight and twelve coefficients,
+        // and eight's propagation with the repeatability assumed as 0.004 mm, as `calibrate
+        // --measurements` does for want of the machine's: the platform's variance its
+        // residuals' shape shows then moves the parameters instead.
         let g = Geometry::prototype();
         let poses = forty_poses(&g);
         let errors = repeating_machine();
-        let draws: Vec<[Propagation; 2]> = (1..=40)
-            .map(|seed| eight_and_twelve(&g, &poses, &errors, seed))
+        let draws: Vec<([Propagation; 2], Propagation)> = (1..=40)
+            .map(|seed| {
+                let rows = measured(&g, &poses, &errors, seed);
+                let [eight, twelve] = eight_and_twelve_of(&g, &rows, &errors);
+                let assumed = Propagation::of(
+                    &eight.model,
+                    &eight.options,
+                    &rows,
+                    Repeatability::Assumed(0.004),
+                )
+                .unwrap();
+                ([eight, twelve], assumed)
+            })
             .collect();
-        let first = &draws[0][0];
+        let first = &draws[0].0[0];
         let (mut model_predicted, mut model_scattered) = (0.0, 0.0);
+        let mut assumed_predicted = 0.0;
         let (mut miss_predicted, mut miss_scattered) = (0.0, 0.0);
         for pose in &poses[20..24] {
             // Where the legs commanded by the first draw's model stand loaded against where
@@ -914,7 +970,7 @@ mod tests {
             let commanded = first.model.command(pose);
             let off: Vec<SMatrix<f64, LEGS, 1>> = draws
                 .iter()
-                .map(|[eight, _]| {
+                .map(|([eight, _], _)| {
                     let loaded = eight.model.loaded_lengths(&commanded, pose);
                     let needed = hexacomp_core::inverse_kinematics(&eight.model.geometry, pose);
                     SMatrix::from_fn(|i, _| loaded[i] - needed.lengths[i])
@@ -924,7 +980,7 @@ mod tests {
             // Twelve's miss under eight's commands, in each draw: its scatter is N's. The
             // predictions are averaged over the draws.
             let mut misses = Vec::with_capacity(draws.len());
-            for [eight, twelve] in &draws {
+            for ([eight, twelve], assumed) in &draws {
                 let commanded = eight.model.command(pose);
                 let screws = ActuationScrews::at(&eight.model.geometry, pose);
                 let g = leg_sensitivities(&eight.model, &eight.options, &commanded, pose, &screws);
@@ -932,15 +988,22 @@ mod tests {
                 let (miss, fits) = eight.miss_of(twelve, pose, &commanded, &own);
                 misses.push(miss);
                 model_predicted += (&g * &eight.covariance * g.transpose()).trace() / 40.0;
+                assumed_predicted += (&g * &assumed.covariance * g.transpose()).trace() / 40.0;
                 miss_predicted += fits.trace() / 40.0;
             }
             miss_scattered += scatter(&misses);
         }
         // Forty draws (39 degrees of freedom) estimate one direction's variance within 23 % (1 σ,
-        // √(2/39)), a sum over several directions within less: 0.96 was measured for both.
+        // √(2/39)), a sum over several directions within less: 1.01, 0.99 and 0.98 measured
+        // (the repeatability assumed: 0.004 mm's would be some 25 times short).
         for (what, predicted, scattered) in [
             ("the model's", model_predicted, model_scattered),
             ("the miss's", miss_predicted, miss_scattered),
+            (
+                "the model's, the repeatability assumed,",
+                assumed_predicted,
+                model_scattered,
+            ),
         ] {
             let ratio = scattered / predicted;
             assert!(
@@ -1018,15 +1081,7 @@ mod tests {
         // (three averaged: 1.33e-6 mm² per coordinate), its repeatability given as 0.004 mm:
         // the residuals' shape shows the platform's 4e-4 mm², and the instrument's variance is
         // the split's, not what the residuals hold beyond 0.004 mm's share (about 7e-5 mm²).
-        let g = Geometry::prototype();
-        let errors = repeating_machine();
-        let rows = measured(&g, &forty_poses(&g), &errors, 1);
-        let options = IdentifyOptions::physical(8);
-        let model = crate::identify::identify(&g, &rows, &options)
-            .unwrap()
-            .model;
-        let propagation =
-            Propagation::of(&model, &options, &rows, Repeatability::Known(0.004)).unwrap();
+        let propagation = of_the_repeating_machine(Repeatability::Known(0.004));
         let split = propagation.split.expect("three targets a configuration");
         // Forty configurations estimate w within about 15 % (1 σ).
         let w = propagation.leg_variance_mm2;
@@ -1037,6 +1092,18 @@ mod tests {
         assert!((0.6e-6..2.2e-6).contains(&instrument), "{instrument} mm²");
         // Ω keeps the given repeatability: the misfit is not noise that moves the parameters.
         assert_eq!(propagation.noise.repeatability_variance_mm2, 0.004 * 0.004);
+    }
+
+    /// The propagation of the physical model (eight coefficients) of the [`repeating_machine`]'s
+    /// forty configurations (noise seed 1), for `repeatability`.
+    fn of_the_repeating_machine(repeatability: Repeatability) -> Propagation {
+        let g = Geometry::prototype();
+        let rows = measured(&g, &forty_poses(&g), &repeating_machine(), 1);
+        let options = IdentifyOptions::physical(8);
+        let model = crate::identify::identify(&g, &rows, &options)
+            .unwrap()
+            .model;
+        Propagation::of(&model, &options, &rows, repeatability).unwrap()
     }
 
     /// The trace of the parameters' covariance `propagation`'s estimator gives residuals whose
@@ -1053,14 +1120,7 @@ mod tests {
         // The machine above, repeating within 0.02 mm, its repeatability assumed as 0.004 mm
         // for want of its own: the platform's variance the residuals' shape shows may be the
         // machine's repeatability, and moves the parameters as that would.
-        let g = Geometry::prototype();
-        let rows = measured(&g, &forty_poses(&g), &repeating_machine(), 1);
-        let options = IdentifyOptions::physical(8);
-        let model = crate::identify::identify(&g, &rows, &options)
-            .unwrap()
-            .model;
-        let assumed =
-            Propagation::of(&model, &options, &rows, Repeatability::Assumed(0.004)).unwrap();
+        let assumed = of_the_repeating_machine(Repeatability::Assumed(0.004));
         let w = assumed
             .split
             .expect("three targets a configuration")
@@ -1074,57 +1134,97 @@ mod tests {
     }
 
     #[test]
-    fn residuals_the_split_leaves_to_the_platform_alone_move_the_parameters() {
-        // A split that leaves the instrument a negative variance (its own scatter can, with a
-        // precise instrument on a machine that moves more; the virtual platform's noiseless
-        // instrument gives 5e-13 to 1e-12 mm² on ten draws, not below): all of the residuals
-        // are the platform's, at a fresh move and in `Ω` alike — not the nothing a
-        // repeatability given as 0 and no instrument's noise would leave there.
+    fn the_excess_moves_the_parameters_beyond_an_assumed_repeatability_alone() {
+        // Residuals whose shape shows the platform moving by 3e-4 mm² per leg, the instrument's
+        // noise 1e-6 mm² per coordinate.
         let split = ShapeSplit {
-            instrument_variance_mm2: -1e-8,
+            instrument_variance_mm2: 1e-6,
             platform_variance_mm2: 3e-4,
             platform_error_mm2: 4e-5,
         };
-        for machine in [Repeatability::Known(0.0), Repeatability::Assumed(0.0)] {
-            assert_eq!(
-                variances(Some(split), machine, 4e-4, 1e-6),
-                Variances {
-                    instrument: 0.0,
-                    moving_parameters: 4e-4,
-                    fresh_move: 4e-4,
-                }
-            );
-        }
-        // Less than the repeatability's share: the repeatability.
+        // (all of the residuals would be 4e-4 mm² of the platform's; beyond the repeatability's
+        // share they hold 2e-6 mm² per coordinate)
+        let of = |split, machine| variances(Some(split), machine, 4e-4, 2e-6);
+        // Beyond a known repeatability, the form's misfit: at a fresh move alone.
         assert_eq!(
-            variances(Some(split), Repeatability::Known(0.03), 4e-4, 0.0).fresh_move,
-            9e-4
-        );
-        // Beyond a repeatability known, the misfit moves the legs at a fresh move alone;
-        // beyond one assumed, the parameters too; within it, the residuals' rest is the
-        // instrument's.
-        let split = ShapeSplit {
-            instrument_variance_mm2: 1e-6,
-            ..split
-        };
-        let beyond = |machine| variances(Some(split), machine, 4e-4, 2e-6);
-        assert_eq!(
-            beyond(Repeatability::Known(0.01)),
+            of(split, Repeatability::Known(0.01)),
             Variances {
                 instrument: 1e-6,
                 moving_parameters: 1e-4,
                 fresh_move: 3e-4,
             }
         );
-        assert_eq!(beyond(Repeatability::Assumed(0.01)).moving_parameters, 3e-4);
+        // Beyond an assumed one, maybe the machine's own: the parameters too.
         assert_eq!(
-            variances(Some(split), Repeatability::Known(0.02), 4e-4, 2e-6),
+            of(split, Repeatability::Assumed(0.01)),
+            Variances {
+                instrument: 1e-6,
+                moving_parameters: 3e-4,
+                fresh_move: 3e-4,
+            }
+        );
+        // Within the repeatability, the residuals' rest is the instrument's.
+        assert_eq!(
+            of(split, Repeatability::Known(0.02)),
             Variances {
                 instrument: 2e-6,
                 moving_parameters: 4e-4,
                 fresh_move: 4e-4,
             }
         );
+        // A split whose instrument's variance falls to zero and below (a noiseless instrument,
+        // all of the residuals the platform's) is taken at its limit on either side, with the
+        // same rule: no jump where the sign turns.
+        for machine in [Repeatability::Known(0.0), Repeatability::Assumed(0.0)] {
+            let [above, below] = [1e-15, -1e-15].map(|instrument| {
+                of(
+                    ShapeSplit {
+                        instrument_variance_mm2: instrument,
+                        platform_variance_mm2: 4e-4,
+                        ..split
+                    },
+                    machine,
+                )
+            });
+            assert!((above.instrument - below.instrument).abs() <= 1e-15);
+            assert_eq!(above.moving_parameters, below.moving_parameters);
+            assert_eq!(above.fresh_move, below.fresh_move);
+            let moving = match machine {
+                Repeatability::Known(_) => 0.0,
+                Repeatability::Assumed(_) => 4e-4,
+            };
+            assert_eq!(below.moving_parameters, moving);
+            assert_eq!(below.fresh_move, 4e-4);
+        }
+    }
+
+    #[test]
+    fn the_source_says_where_the_platforms_excess_went() {
+        // The machine above, repeating within 0.02 mm (its residuals show 2.6e-4 to 6e-4 mm²):
+        // beyond 0.004 mm known, at fresh moves alone; beyond 0.004 mm assumed, in the
+        // parameters too; within 0.025 mm known, nowhere.
+        let g = Geometry::prototype();
+        let rows = measured(&g, &forty_poses(&g), &repeating_machine(), 1);
+        let options = IdentifyOptions::physical(8);
+        let model = crate::identify::identify(&g, &rows, &options)
+            .unwrap()
+            .model;
+        for (machine, at_fresh_moves, moving_parameters) in [
+            (Repeatability::Known(0.004), true, false),
+            (Repeatability::Assumed(0.004), true, true),
+            (Repeatability::Known(0.025), false, false),
+        ] {
+            let source =
+                UncertaintySource::new(&g, (&model, &options), &[], &rows, machine, 1).unwrap();
+            assert_eq!(
+                source.beyond_repeatability(),
+                BeyondRepeatability {
+                    at_fresh_moves,
+                    moving_parameters
+                },
+                "{machine:?}"
+            );
+        }
     }
 
     #[test]
@@ -1216,6 +1316,15 @@ mod tests {
         assert!(
             Propagation::of(&model, &options, &rows, Repeatability::Known(largest * 1.5)).is_err()
         );
+        // Assumed, it is not trusted over the residuals: no more than all they hold is taken.
+        let assumed =
+            Propagation::of(&model, &options, &rows, Repeatability::Assumed(0.1)).unwrap();
+        let taken = assumed.repeatability_variance_mm2.sqrt();
+        assert!(
+            (taken - largest).abs() < 1e-6,
+            "{taken} mm against {largest}"
+        );
+        assert_eq!(assumed.noise.instrument_variance_mm2, 0.0);
     }
 
     /// The trace of the sample covariance of `values`, mm².

@@ -83,9 +83,10 @@ pub struct CalibrateArgs {
     /// position figure of the mean plus three standard deviations: a leg's σ is of the order of
     /// RP / 3 divided by the leg-to-tool gain of the pose. Default: the virtual machine's
     /// (0.004 mm for the built-in variants with noise); with --measurements 0.004 mm is
-    /// assumed, which calibrate says, and where the measurements show the legs moving by more,
-    /// that is taken as the machine's instead (given, the excess is taken as what the model's
-    /// form misses).
+    /// assumed, which calibrate says: where the residuals' shape shows the legs moving by more
+    /// (three targets or more a configuration), that is taken as the machine's instead, and
+    /// where the residuals hold less than its share, no more than all they hold (a repeatability
+    /// given is refused there; beyond one given, the excess is what the model's form misses).
     #[arg(long, value_name = "MM", value_parser = repeatability)]
     repeatability_mm: Option<f64>,
     /// Output folder, replaced as a whole when the calibration succeeds (a failed one leaves it
@@ -162,8 +163,8 @@ pub fn run(geometry: &Geometry, args: &CalibrateArgs) -> anyhow::Result<()> {
             let assumed = ErrorModel::default().repeatability_sigma_mm;
             println!(
                 "uncertainty: the machine's repeatability is taken as {assumed} mm per leg and \
-                 move (the virtual platform's), or as what the measurements show where they \
-                 show more; give --repeatability-mm for this machine's"
+                 move (the virtual platform's), or as what the residuals' shape shows where it \
+                 shows more; give --repeatability-mm for this machine's"
             );
             Repeatability::Assumed(assumed)
         }
@@ -210,12 +211,15 @@ pub fn run(geometry: &Geometry, args: &CalibrateArgs) -> anyhow::Result<()> {
         dir,
         &mut stages,
     )?;
+    // σ of each leg's length at a fresh move the uncertainty takes, mm.
+    let mut fresh_move_mm = None;
     if cross_validated(&solved) {
         let start = Instant::now();
         // A physical model that cannot be identified or carried into networks leaves the
         // choice to the networks, and says why.
         match physical(geometry, &pipeline, &solved, &measurements, repeatability) {
             Ok((candidate, Ok(uncertainty))) => {
+                fresh_move_mm = Some(uncertainty.source.leg_variance_mm2().sqrt());
                 for network in &mut candidates {
                     match uncertainty.of_networks(network.score_mm) {
                         Ok(u) => network.trained.model.uncertainty = Some(u),
@@ -294,12 +298,17 @@ pub fn run(geometry: &Geometry, args: &CalibrateArgs) -> anyhow::Result<()> {
         args.out_dir.display()
     );
     if let Some(u) = &best.trained.model.uncertainty {
-        let legs = match repeatability {
-            Repeatability::Known(mm) => format!("legs repeating within {mm} mm"),
-            Repeatability::Assumed(mm) => format!(
-                "legs repeating within {mm} mm assumed, or what the measurements show where \
-                 they show more"
+        let (mm, how) = match repeatability {
+            Repeatability::Known(mm) => (mm, ""),
+            Repeatability::Assumed(mm) => (mm, " assumed"),
+        };
+        let legs = match fresh_move_mm {
+            Some(fresh) if fresh > mm => format!(
+                "legs moving by {:.1} µm at a fresh move: a repeatability of {mm} mm{how} and \
+                 what the residuals show beyond it",
+                1e3 * fresh
             ),
+            _ => format!("legs repeating within {mm} mm{how}"),
         };
         println!(
             "its 1-σ position uncertainty: {:.4} mm RMS over the measured configurations, \
@@ -561,24 +570,28 @@ fn physical(
             }
         };
         let legs = uncertainty.source.leg_variance_mm2();
-        let why = if legs <= repeatability_mm.powi(2) {
-            format!("the repeatability of {repeatability_mm} mm")
-        } else if split.instrument_variance_mm2 < 0.0 {
-            "all of the residuals, the instrument's share coming out negative; it moves the \
-             identified parameters too"
-                .to_string()
-        } else {
-            match repeatability {
-                Repeatability::Known(_) => format!(
-                    "the repeatability of {repeatability_mm} mm and what the model's form misses, \
-                     over the resolutions kept"
-                ),
-                Repeatability::Assumed(_) => format!(
-                    "more than the assumed repeatability of {repeatability_mm} mm: the machine's \
-                     repeatability or what the model's form misses, over the resolutions kept; \
-                     it moves the identified parameters too"
-                ),
+        let beyond = uncertainty.source.beyond_repeatability();
+        let why = match (beyond.at_fresh_moves, repeatability) {
+            (false, Repeatability::Known(_)) => {
+                format!("the repeatability of {repeatability_mm} mm")
             }
+            (false, Repeatability::Assumed(_)) => format!(
+                "the repeatability assumed, {repeatability_mm} mm, no more than all the \
+                 residuals hold"
+            ),
+            (true, Repeatability::Known(_)) => format!(
+                "the repeatability of {repeatability_mm} mm and what the model's form misses \
+                 beyond it, over the resolutions kept"
+            ),
+            (true, Repeatability::Assumed(_)) => format!(
+                "more than the repeatability assumed, {repeatability_mm} mm: the machine's own \
+                 repeatability or what the model's form misses, over the resolutions kept"
+            ),
+        };
+        let why = if beyond.moving_parameters {
+            format!("{why}; the model's excess moves its identified parameters too")
+        } else {
+            why
         };
         println!(
             "physical model: its residuals hold {} per coordinate of the instrument's noise (a \
