@@ -1094,15 +1094,26 @@ mod tests {
         assert_eq!(propagation.noise.repeatability_variance_mm2, 0.004 * 0.004);
     }
 
-    /// The propagation of the physical model (eight coefficients) of the [`repeating_machine`]'s
-    /// forty configurations (noise seed 1), for `repeatability`.
-    fn of_the_repeating_machine(repeatability: Repeatability) -> Propagation {
+    /// The [`repeating_machine`]'s forty configurations (noise seed 1) and the physical model
+    /// of eight coefficients identified from them.
+    fn the_repeating_machine_identified() -> (
+        Geometry,
+        Vec<MeasuredConfiguration>,
+        IdentifyOptions,
+        PhysicalModel,
+    ) {
         let g = Geometry::prototype();
         let rows = measured(&g, &forty_poses(&g), &repeating_machine(), 1);
         let options = IdentifyOptions::physical(8);
         let model = crate::identify::identify(&g, &rows, &options)
             .unwrap()
             .model;
+        (g, rows, options, model)
+    }
+
+    /// The propagation of [`the_repeating_machine_identified`]'s model for `repeatability`.
+    fn of_the_repeating_machine(repeatability: Repeatability) -> Propagation {
+        let (_, rows, options, model) = the_repeating_machine_identified();
         Propagation::of(&model, &options, &rows, repeatability).unwrap()
     }
 
@@ -1203,12 +1214,7 @@ mod tests {
         // The machine above, repeating within 0.02 mm (its residuals show 2.6e-4 to 6e-4 mm²):
         // beyond 0.004 mm known, at fresh moves alone; beyond 0.004 mm assumed, in the
         // parameters too; within 0.025 mm known, nowhere.
-        let g = Geometry::prototype();
-        let rows = measured(&g, &forty_poses(&g), &repeating_machine(), 1);
-        let options = IdentifyOptions::physical(8);
-        let model = crate::identify::identify(&g, &rows, &options)
-            .unwrap()
-            .model;
+        let (g, rows, options, model) = the_repeating_machine_identified();
         for (machine, at_fresh_moves, moving_parameters) in [
             (Repeatability::Known(0.004), true, false),
             (Repeatability::Assumed(0.004), true, true),
