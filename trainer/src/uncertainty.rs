@@ -116,6 +116,8 @@ pub struct Propagation {
 /// The residuals' variances a [`Propagation`] takes, mm².
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct Variances {
+    /// `v` of the repeatability, per leg and move: what the other two are taken against.
+    repeatability: f64,
     /// `σ²` of `Ω`, per coordinate.
     instrument: f64,
     /// `v` of `Ω`, per leg and configuration: what moved the platform and the parameters with it.
@@ -146,6 +148,7 @@ fn variances(
         _ => (unsplit_mm2, given),
     };
     Variances {
+        repeatability: given,
         instrument,
         // Beyond a known repeatability, the form's misfit; beyond an assumed one, maybe the
         // machine's own repeatability, which moves the parameters.
@@ -269,7 +272,11 @@ impl Propagation {
         let split = targets_measured
             .then(|| split_by_shape(&residual, &u, &moves, &blocks))
             .flatten();
+        // (The flags of `UncertaintySource` compare with the repeatability these were chosen
+        // against, not with `repeatability`: an assumed one's σ squared again may differ in
+        // the last bit.)
         let Variances {
+            repeatability: repeatability_variance_mm2,
             instrument,
             moving_parameters,
             fresh_move: leg_variance_mm2,
@@ -283,7 +290,7 @@ impl Propagation {
         let estimator = factor * u.transpose();
         Ok(Self {
             leg_variance_mm2,
-            repeatability_variance_mm2: repeatability,
+            repeatability_variance_mm2,
             split,
             model: model.clone(),
             options: *options,
@@ -1160,6 +1167,7 @@ mod tests {
         assert_eq!(
             of(split, Repeatability::Known(0.01)),
             Variances {
+                repeatability: 1e-4,
                 instrument: 1e-6,
                 moving_parameters: 1e-4,
                 fresh_move: 3e-4,
@@ -1169,6 +1177,7 @@ mod tests {
         assert_eq!(
             of(split, Repeatability::Assumed(0.01)),
             Variances {
+                repeatability: 1e-4,
                 instrument: 1e-6,
                 moving_parameters: 3e-4,
                 fresh_move: 3e-4,
@@ -1178,6 +1187,7 @@ mod tests {
         assert_eq!(
             of(split, Repeatability::Known(0.02)),
             Variances {
+                repeatability: 4e-4,
                 instrument: 2e-6,
                 moving_parameters: 4e-4,
                 fresh_move: 4e-4,
@@ -1219,6 +1229,8 @@ mod tests {
             (Repeatability::Known(0.004), true, false),
             (Repeatability::Assumed(0.004), true, true),
             (Repeatability::Known(0.025), false, false),
+            // More than all the residuals hold, assumed: all of them taken, nothing beyond.
+            (Repeatability::Assumed(0.1), false, false),
         ] {
             let source =
                 UncertaintySource::new(&g, (&model, &options), &[], &rows, machine, 1).unwrap();

@@ -211,15 +211,20 @@ pub fn run(geometry: &Geometry, args: &CalibrateArgs) -> anyhow::Result<()> {
         dir,
         &mut stages,
     )?;
-    // σ of each leg's length at a fresh move the uncertainty takes, mm.
-    let mut fresh_move_mm = None;
+    // σ of each leg's length at a fresh move the uncertainty takes (mm), and whether it holds
+    // more than the repeatability.
+    let mut fresh_move = None;
     if cross_validated(&solved) {
         let start = Instant::now();
         // A physical model that cannot be identified or carried into networks leaves the
         // choice to the networks, and says why.
         match physical(geometry, &pipeline, &solved, &measurements, repeatability) {
             Ok((candidate, Ok(uncertainty))) => {
-                fresh_move_mm = Some(uncertainty.source.leg_variance_mm2().sqrt());
+                let source = &uncertainty.source;
+                fresh_move = Some((
+                    source.leg_variance_mm2().sqrt(),
+                    source.beyond_repeatability().at_fresh_moves,
+                ));
                 for network in &mut candidates {
                     match uncertainty.of_networks(network.score_mm) {
                         Ok(u) => network.trained.model.uncertainty = Some(u),
@@ -298,17 +303,24 @@ pub fn run(geometry: &Geometry, args: &CalibrateArgs) -> anyhow::Result<()> {
         args.out_dir.display()
     );
     if let Some(u) = &best.trained.model.uncertainty {
-        let (mm, how) = match repeatability {
-            Repeatability::Known(mm) => (mm, ""),
-            Repeatability::Assumed(mm) => (mm, " assumed"),
-        };
-        let legs = match fresh_move_mm {
-            Some(fresh) if fresh > mm => format!(
-                "legs moving by {:.1} µm at a fresh move: a repeatability of {mm} mm{how} and \
-                 what the residuals show beyond it",
-                1e3 * fresh
+        let mm = repeatability.sigma_mm();
+        let assumed = matches!(repeatability, Repeatability::Assumed(_));
+        let legs = match fresh_move {
+            Some((fresh_mm, beyond)) => format!(
+                "legs moving by {:.1} µm at a fresh move: the repeatability {}{}",
+                1e3 * fresh_mm,
+                if assumed {
+                    format!("assumed, {mm} mm,")
+                } else {
+                    format!("of {mm} mm")
+                },
+                match (beyond, assumed) {
+                    (true, _) => " and what the residuals show beyond it",
+                    (false, true) => " no more than all the residuals hold",
+                    (false, false) => "",
+                }
             ),
-            _ => format!("legs repeating within {mm} mm{how}"),
+            None => format!("legs repeating within {mm} mm"),
         };
         println!(
             "its 1-σ position uncertainty: {:.4} mm RMS over the measured configurations, \
