@@ -127,7 +127,7 @@ pub fn calibrate(
     );
     let carried = carried_into_networks(
         &geometry,
-        &physical,
+        (&physical, &identification),
         &alternative_bases,
         &kept,
         &options,

@@ -363,7 +363,7 @@ pub fn evaluate(
             .map_or_else(Vec::new, ResolutionChoice::indistinguishable);
         let distilled = carried_into_networks(
             geometry,
-            &physical,
+            (&physical, &identification),
             &alternative_bases,
             &solved,
             &options.distill,

@@ -52,6 +52,11 @@ pub struct IdentifyOptions {
     pub pitch_basis: usize,
     /// Identify the legs' compliance under the platform's weight.
     pub compliance: bool,
+    /// Weight `λ` of the lead-screw curves' smoothness prior (dimensionless; 0: none): each
+    /// second difference of a curve's coefficients, `c_(k−1) − 2c_k + c_(k+1)` (mm), enters the
+    /// least squares beside the targets' residuals (mm) scaled by `√λ`, so a curve bends only
+    /// as far as the measurements pay for. [`crate::pitch_resolution`] chooses it per machine.
+    pub smoothness: f64,
 }
 
 impl IdentifyOptions {
@@ -94,6 +99,7 @@ impl Default for IdentifyOptions {
             relative_cutoff: 1e-9,
             pitch_basis: 0,
             compliance: false,
+            smoothness: 0.0,
         }
     }
 }
@@ -111,6 +117,7 @@ pub const PHYSICAL: IdentifyOptions = IdentifyOptions {
     relative_cutoff: 1e-6,
     pitch_basis: 8,
     compliance: true,
+    smoothness: 0.0,
 };
 
 impl IdentifyOptions {
@@ -121,6 +128,21 @@ impl IdentifyOptions {
             pitch_basis,
             ..PHYSICAL
         }
+    }
+
+    /// These options at another lead-screw resolution: `pitch_basis` B-spline coefficients
+    /// per curve.
+    pub const fn at_resolution(self, pitch_basis: usize) -> Self {
+        Self {
+            pitch_basis,
+            ..self
+        }
+    }
+
+    /// These options with the lead-screw curves' smoothness prior of weight `smoothness`
+    /// ([`Self::smoothness`]).
+    pub const fn smoothed(self, smoothness: f64) -> Self {
+        Self { smoothness, ..self }
     }
 }
 
@@ -162,12 +184,18 @@ pub fn identify(
             options.pitch_basis
         )));
     }
+    if !(options.smoothness.is_finite() && options.smoothness >= 0.0) {
+        return Err(Error::InvalidSetting(format!(
+            "a smoothness prior's weight of {}: a finite weight ≥ 0 is needed",
+            options.smoothness
+        )));
+    }
     let mut model = PhysicalModel::geometric(nominal.clone());
     model.pitch = PitchCurves::zero(nominal.leg_range, options.pitch_basis);
     let parameters = options.parameters();
     let mut poses: Vec<Pose> = rows.iter().map(MeasuredConfiguration::pose).collect();
     let mut rms_before = None;
-    let mut rms_previous = f64::INFINITY;
+    let mut cost_previous = f64::INFINITY;
     let mut rank = 0;
     let mut iterations = 0;
     for _ in 0..options.max_iterations {
@@ -175,21 +203,32 @@ pub fn identify(
             .map_err(|e| ill_conditioned(e, rank, parameters))?;
         let rms = (residual.norm_squared() / residual.len() as f64).sqrt();
         rms_before.get_or_insert(rms);
-        if rms_previous.is_finite() && rms_previous - rms <= options.stall_fraction * rms_previous {
+        // What the steps lower: the residuals' squares and the smoothness prior's.
+        let prior = SmoothnessPrior::at(&model, options);
+        let objective = residual.norm_squared() + prior.residual.norm_squared();
+        let cost = (objective / residual.len() as f64).sqrt();
+        if cost_previous.is_finite()
+            && cost_previous - cost <= options.stall_fraction * cost_previous
+        {
             break;
         }
-        rms_previous = rms;
+        cost_previous = cost;
         let ScaledSvd {
             svd,
             scales,
             cutoff,
-        } = scaled_svd(jacobian, options, true);
+            ..
+        } = scaled_svd(jacobian, &prior.rows, options, true);
         rank = svd.singular_values.iter().filter(|s| **s > cutoff).count();
+        let stacked = DVector::from_iterator(
+            residual.len() + prior.residual.len(),
+            residual.iter().chain(prior.residual.iter()).copied(),
+        );
         let step = svd
-            .solve(&residual, cutoff)
+            .solve(&stacked, cutoff)
             .map_err(|e| Error::InsufficientData(format!("identification step: {e}")))?
             .component_div(&scales);
-        // A step that raises the residual, or takes the legs where the geometry cannot reach
+        // A step that raises the objective, or takes the legs where the geometry cannot reach
         // them, is halved (up to ten times): a direction the data barely sees must not throw
         // the model away. None lowering it: the fit is done, unless no step could be taken at
         // all because every one left the reach of the geometry.
@@ -200,7 +239,11 @@ pub fn identify(
             apply(&mut trial, options, &step);
             let mut trial_poses = poses.clone();
             match linearise(&trial, options, rows, &mut trial_poses) {
-                Ok((_, r)) if r.norm_squared() < residual.norm_squared() => {
+                Ok((_, r))
+                    if r.norm_squared()
+                        + SmoothnessPrior::at(&trial, options).residual.norm_squared()
+                        < objective =>
+                {
                     Some((trial, trial_poses, step))
                 }
                 Ok(_) => None,
@@ -248,25 +291,34 @@ pub fn target_distance(geometry: &Geometry, row: &MeasuredConfiguration) -> Opti
 
 /// The truncated SVD the identification steps with.
 pub(crate) struct ScaledSvd {
-    /// The SVD of the Jacobian with its columns divided by `scales`.
+    /// The SVD of the Jacobian stacked on the smoothness prior's rows, with its columns
+    /// divided by `scales`.
     pub svd: SVD<f64, Dyn, Dyn>,
     /// The divisor of each column ([`column_scales`]).
     pub scales: DVector<f64>,
     /// Singular values at or below this are treated as zero (unidentifiable directions).
     pub cutoff: f64,
+    /// The Jacobian's rows, the first of `svd`'s (the residuals'; the prior's follow).
+    pub data_rows: usize,
 }
 
-/// The SVD of `jacobian` (`U` only when `compute_u`) after its pitch and compliance columns
-/// are scaled to the geometric columns' typical norm, so that `options`' relative cutoff judges
-/// what the data can see and not their units; the geometric columns (mm per mm) keep the
-/// baseline's minimum-norm answer.
+/// The SVD of `jacobian` stacked on the smoothness prior's `prior_rows` (parameters' columns;
+/// none without a prior, [`SmoothnessPrior`]), `U` only when `compute_u`, after the pitch and
+/// compliance columns are scaled to the geometric columns' typical norm in `jacobian`, so that
+/// `options`' relative cutoff judges what the data can see and not their units; the geometric
+/// columns (mm per mm) keep the baseline's minimum-norm answer.
 pub(crate) fn scaled_svd(
     jacobian: DMatrix<f64>,
+    prior_rows: &DMatrix<f64>,
     options: &IdentifyOptions,
     compute_u: bool,
 ) -> ScaledSvd {
     let scales = column_scales(&jacobian);
-    let mut scaled = jacobian;
+    let data_rows = jacobian.nrows();
+    let mut scaled = jacobian.resize_vertically(data_rows + prior_rows.nrows(), 0.0);
+    scaled
+        .rows_mut(data_rows, prior_rows.nrows())
+        .copy_from(prior_rows);
     for (j, scale) in scales.iter().enumerate() {
         scaled.column_mut(j).unscale_mut(*scale);
     }
@@ -276,6 +328,51 @@ pub(crate) fn scaled_svd(
         svd,
         scales,
         cutoff,
+        data_rows,
+    }
+}
+
+/// The lead-screw curves' smoothness prior at a model ([`IdentifyOptions::smoothness`]): rows
+/// appended to the identification's Jacobian, and their residuals appended to the targets'.
+pub(crate) struct SmoothnessPrior {
+    /// `√λ` times each second difference's change per unit of each parameter (rows × the
+    /// parameters of [`linearise`]'s columns); no row without a prior.
+    pub rows: DMatrix<f64>,
+    /// `−√λ` times each second difference of the model's coefficients, mm (as the targets'
+    /// residuals are measured minus modelled, with nothing measured).
+    pub residual: DVector<f64>,
+}
+
+impl SmoothnessPrior {
+    /// The prior of `options` at `model`'s lead-screw curves: `pitch_basis − 2` second
+    /// differences per leg, none when the weight is 0 or no curve is identified. The middle
+    /// coefficient, held at 0, enters its differences as the constant it is.
+    pub(crate) fn at(model: &PhysicalModel, options: &IdentifyOptions) -> Self {
+        let per_leg = options.pitch_basis.saturating_sub(2);
+        let count = if options.smoothness > 0.0 {
+            LEGS * per_leg
+        } else {
+            0
+        };
+        let mut rows = DMatrix::zeros(count, options.parameters());
+        let mut residual = DVector::zeros(count);
+        if count == 0 {
+            return Self { rows, residual };
+        }
+        let root = options.smoothness.sqrt();
+        for leg in 0..LEGS {
+            let curve = &model.pitch.coefficients[leg];
+            for k in 0..per_leg {
+                let row = leg * per_leg + k;
+                for (offset, weight) in [1.0, -2.0, 1.0].into_iter().enumerate() {
+                    residual[row] -= root * weight * curve[k + offset];
+                    if let Some(column) = options.pitch_column(leg, k + offset) {
+                        rows[(row, column)] = root * weight;
+                    }
+                }
+            }
+        }
+        Self { rows, residual }
     }
 }
 
@@ -523,5 +620,117 @@ mod tests {
         );
         // 8 readings of 9 coordinates, 6 fitted: what remains is the 12 µm device noise.
         assert!((0.003..0.02).contains(&result.rms_after_mm), "{result:?}");
+    }
+
+    #[test]
+    fn the_smoothness_prior_is_each_curves_second_differences_and_their_derivative() {
+        let options = IdentifyOptions::physical(8).smoothed(0.04);
+        let mut model = PhysicalModel::geometric(Geometry::prototype());
+        model.pitch = PitchCurves::zero(model.geometry.leg_range, 8);
+        // Leg 0 a straight line through the held middle coefficient (k = 4): no curvature.
+        // Leg 1 a parabola k² − 16 (0 at k = 4): each second difference 2 mm.
+        model.pitch.coefficients[0] = (0..8).map(|k| 0.01 * (k as f64 - 4.0)).collect();
+        model.pitch.coefficients[1] = (0..8).map(|k| (k * k) as f64 - 16.0).collect();
+        let prior = SmoothnessPrior::at(&model, &options);
+        assert_eq!(prior.rows.shape(), (LEGS * 6, options.parameters()));
+        let leg = |i: usize| prior.residual.rows(6 * i, 6).into_owned();
+        assert!(leg(0).amax() < 1e-15, "{}", leg(0));
+        // −√λ · 2 = −0.4 mm, as a residual measured minus modelled.
+        assert!(leg(1).iter().all(|r| (r + 0.4).abs() < 1e-12), "{}", leg(1));
+        // The rows are the residuals' derivative: a step moves them by −rows · step (the prior is
+        // linear in the coefficients), whatever the coefficients it starts from.
+        let step = DVector::from_fn(options.parameters(), |j, _| {
+            1e-3 * ((j * 7 % 13) as f64 - 6.0)
+        });
+        let mut stepped = model.clone();
+        apply(&mut stepped, &options, &step);
+        let moved = SmoothnessPrior::at(&stepped, &options).residual - &prior.residual;
+        assert!((moved + &prior.rows * &step).amax() < 1e-12);
+        // The geometry's and compliance's columns are not in it.
+        assert_eq!(prior.rows.columns(0, PARAMETERS).amax(), 0.0);
+        // No weight or no curves: no row.
+        assert_eq!(
+            SmoothnessPrior::at(&model, &IdentifyOptions::physical(8))
+                .rows
+                .nrows(),
+            0
+        );
+        assert_eq!(
+            SmoothnessPrior::at(&model, &PHYSICAL.at_resolution(0).smoothed(1.0))
+                .rows
+                .nrows(),
+            0
+        );
+    }
+
+    #[test]
+    fn a_heavy_smoothness_prior_straightens_the_curves_and_a_bad_weight_is_refused() {
+        let g = Geometry::prototype();
+        let mut platform =
+            VirtualPlatform::new(&g, &ErrorModel::variant(ErrorVariant::StrongPitch), 1, 3)
+                .unwrap();
+        let poses = crate::plan::plan(
+            &g,
+            &crate::plan::PlanOptions {
+                count: 40,
+                seed: 3,
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        let rows = crate::acquire::measure_plan(&mut platform, &crate::plan::numbered_rows(&poses))
+            .unwrap();
+        // The largest second difference of any leg's curve, mm.
+        let bend = |smoothness: f64| {
+            let options = IdentifyOptions::physical(12).smoothed(smoothness);
+            let identified = identify(&g, &rows, &options).unwrap();
+            identified
+                .model
+                .pitch
+                .coefficients
+                .iter()
+                .flat_map(|c| c.windows(3).map(|w| (w[0] - 2.0 * w[1] + w[2]).abs()))
+                .fold(0.0, f64::max)
+        };
+        let free = bend(0.0);
+        let held = bend(1e6);
+        // The strong robot's curves bend by tens of µm between knots; a prior a million times
+        // a residual's weight leaves them straight to well under a µm.
+        assert!(free > 0.01, "free curves bend by {free} mm");
+        assert!(
+            held < 1e-3 * free,
+            "held curves bend by {held} mm (free {free} mm)"
+        );
+        // At a weight where the data and the prior both count, the identification lowers
+        // what it is asked to: the targets' squares and the prior's, below where the curves
+        // fitted without the prior put them, at a cost in the targets' alone.
+        let options = IdentifyOptions::physical(12).smoothed(0.01);
+        let objective = |smoothness: f64| {
+            let model = identify(&g, &rows, &options.smoothed(smoothness))
+                .unwrap()
+                .model;
+            let mut at: Vec<Pose> = rows.iter().map(MeasuredConfiguration::pose).collect();
+            let (_, residual) = linearise(&model, &options, &rows, &mut at).unwrap();
+            let prior = SmoothnessPrior::at(&model, &options)
+                .residual
+                .norm_squared();
+            [residual.norm_squared(), prior]
+        };
+        let [fitted, fitted_bend] = objective(0.0);
+        let [held, held_bend] = objective(0.01);
+        assert!(
+            held + held_bend < 0.9 * (fitted + fitted_bend) && held > fitted,
+            "with the prior {held} + {held_bend} mm², without {fitted} + {fitted_bend} mm²"
+        );
+        for smoothness in [-1.0, f64::NAN, f64::INFINITY] {
+            let e = identify(
+                &g,
+                &rows,
+                &IdentifyOptions::physical(12).smoothed(smoothness),
+            )
+            .unwrap_err()
+            .to_string();
+            assert!(e.contains("smoothness prior"), "{e}");
+        }
     }
 }

@@ -76,7 +76,7 @@ pub fn physical_candidate(
     let physical = identify(nominal, measurements, &resolution.options)?.model;
     let carried = carried_into_networks(
         nominal,
-        &physical,
+        (&physical, &resolution.options),
         &resolution.indistinguishable(),
         measurements,
         &options.distill,
@@ -120,19 +120,18 @@ pub struct CarriedModel {
     pub uncertainty: Result<UncertaintySource>,
 }
 
-/// Carries `physical`, identified on `measurements` with [`IdentifyOptions::physical`] at its own
-/// lead-screw resolution (the precondition: its uncertainty is propagated with those options'
-/// cutoff and compliance terms), into networks ([`distill`]) that carry its position uncertainty
+/// Carries `physical`, identified on `measurements` with `identification` (its uncertainty is
+/// propagated with those options' cutoff, compliance terms and smoothness prior), into networks ([`distill`]) that carry its position uncertainty
 /// for legs repeating within `repeatability` (1 σ per move, mm; more where the residuals'
 /// shape shows more, [`crate::uncertainty::Propagation`]), the networks' own departure
 /// from the model and its spread about the models of the lead-screw resolutions
 /// `alternative_bases` added (those the cross-validation could not tell from the model's,
 /// [`crate::pitch_resolution::ResolutionChoice::indistinguishable`]; the model's own is
-/// skipped), each identified on `measurements`. An alternative that cannot be identified
+/// skipped), each identified on `measurements` with `identification` at its own resolution. An alternative that cannot be identified
 /// leaves the networks without an uncertainty, as too few configurations do.
 pub fn carried_into_networks(
     nominal: &Geometry,
-    physical: &PhysicalModel,
+    (physical, identification): (&PhysicalModel, &IdentifyOptions),
     alternative_bases: &[usize],
     measurements: &[MeasuredConfiguration],
     options: &DistillOptions,
@@ -140,7 +139,6 @@ pub fn carried_into_networks(
     progress: &(dyn Fn(u64) + Sync),
 ) -> Result<CarriedModel> {
     let own = physical.pitch.basis();
-    let identification = IdentifyOptions::physical(own);
     let measured: Vec<Pose> = measurements
         .iter()
         .map(MeasuredConfiguration::pose)
@@ -159,11 +157,11 @@ pub fn carried_into_networks(
         .copied()
         .filter(|&basis| basis != own)
         .collect();
-    let uncertainty = alternatives(nominal, measurements, &bases)
+    let uncertainty = alternatives(nominal, measurements, identification, &bases)
         .and_then(|alternatives| {
             UncertaintySource::new(
                 nominal,
-                (physical, &identification),
+                (physical, identification),
                 &alternatives,
                 measurements,
                 repeatability,

@@ -23,11 +23,18 @@ use crate::train::{can_cross_validate, commanded_legs, folds};
 /// 16.7 and 11.5 mm of the prototype's 150 mm stroke: the stroke over `n − 3` spacings).
 pub const PITCH_RESOLUTIONS: [usize; 3] = [8, 12, 16];
 
+/// The smoothness priors' weights tried at the chosen resolution besides none
+/// ([`IdentifyOptions::smoothness`]): on the blind robot at 50 configurations these three
+/// cross-validated in the order of their blind errors (docs/accuracy.md).
+pub const SMOOTHNESS_WEIGHTS: [f64; 3] = [0.003, 0.01, 0.03];
+
 /// How one resolution predicted the configurations held out of its identification.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ResolutionScore {
     /// B-spline coefficients per leg's lead-screw curve.
     pub pitch_basis: usize,
+    /// The weight of the curves' smoothness prior ([`IdentifyOptions::smoothness`]).
+    pub smoothness: f64,
     /// Eq. 21's `√Σ_i RMSE_i²` over every configuration, each predicted by the model identified
     /// without its fold, mm.
     pub cross_validated_rmse_mm: f64,
@@ -42,11 +49,17 @@ pub struct ResolutionChoice {
     /// [`crate::identify::PHYSICAL`] with the chosen resolution: the physical model's
     /// identification.
     pub options: IdentifyOptions,
-    /// Every resolution that could be cross-validated, in the order of [`PITCH_RESOLUTIONS`].
+    /// Every resolution that could be cross-validated without a smoothness prior, in the order
+    /// of [`PITCH_RESOLUTIONS`].
     pub scores: Vec<ResolutionScore>,
     /// Every resolution that could not (an identification without a fold failed, or its
     /// error is not finite), with why: left out of the choice.
     pub failed: Vec<(usize, String)>,
+    /// The resolution chosen among `scores`, with each smoothness prior of
+    /// [`SMOOTHNESS_WEIGHTS`] that could be cross-validated, in that order.
+    pub smoothed: Vec<ResolutionScore>,
+    /// Every weight that could not, with why.
+    pub smoothing_failed: Vec<(f64, String)>,
 }
 
 impl ResolutionChoice {
@@ -68,17 +81,50 @@ impl ResolutionChoice {
             })
     }
 
-    /// The chosen resolution's score.
-    pub fn chosen(&self) -> &ResolutionScore {
+    /// What the chosen resolution gave with the smoothness prior of weight `smoothness` (0:
+    /// none): its score, or why it has none. `None` for a weight not tried.
+    pub fn smoothing_outcome(
+        &self,
+        smoothness: f64,
+    ) -> Option<std::result::Result<&ResolutionScore, &str>> {
+        if smoothness == 0.0 {
+            return self.outcome(self.options.pitch_basis);
+        }
+        self.smoothed
+            .iter()
+            .find(|s| s.smoothness == smoothness)
+            .map(Ok)
+            .or_else(|| {
+                self.smoothing_failed
+                    .iter()
+                    .find(|(weight, _)| *weight == smoothness)
+                    .map(|(_, why)| Err(why.as_str()))
+            })
+    }
+
+    /// The chosen resolution's score without a smoothness prior.
+    pub fn chosen_without_prior(&self) -> &ResolutionScore {
         self.scores
             .iter()
             .find(|s| s.pitch_basis == self.options.pitch_basis)
             .expect("the chosen resolution was scored")
     }
 
+    /// The chosen resolution's and smoothness prior's score.
+    pub fn chosen(&self) -> &ResolutionScore {
+        self.scores
+            .iter()
+            .chain(&self.smoothed)
+            .find(|s| {
+                s.pitch_basis == self.options.pitch_basis && s.smoothness == self.options.smoothness
+            })
+            .expect("the chosen resolution was scored")
+    }
+
     /// The resolutions besides the chosen one that the cross-validation could not tell from
-    /// the best (within one standard error of the lowest error), coarsest first: the
-    /// uncertainty's alternatives ([`alternatives`]).
+    /// the best without a smoothness prior (within one standard error of the lowest error),
+    /// coarsest first: the uncertainty's alternatives ([`alternatives`], identified with the
+    /// chosen prior).
     pub fn indistinguishable(&self) -> Vec<usize> {
         within_one_standard_error(&self.scores)
             .map(|s| s.pitch_basis)
@@ -88,17 +134,18 @@ impl ResolutionChoice {
 }
 
 /// The physical models of lead-screw resolutions `bases` (B-spline coefficients per leg; the
-/// chosen one's [`ResolutionChoice::indistinguishable`]), each identified with
-/// [`IdentifyOptions::physical`] on every configuration of `measurements`, in the order of
-/// `bases`; an error naming the first resolution that could not be. The identifications run
-/// on the machine's cores.
+/// chosen one's [`ResolutionChoice::indistinguishable`]), each identified with `chosen` (the
+/// model's identification) at its own resolution on every configuration of `measurements`, in
+/// the order of `bases`; an error naming the first resolution that could not be. The
+/// identifications run on the machine's cores.
 pub fn alternatives(
     nominal: &Geometry,
     measurements: &[MeasuredConfiguration],
+    chosen: &IdentifyOptions,
     bases: &[usize],
 ) -> Result<Vec<PhysicalModel>> {
     in_parallel(bases, |&basis| {
-        identify(nominal, measurements, &IdentifyOptions::physical(basis))
+        identify(nominal, measurements, &chosen.at_resolution(basis))
             .map(|identified| identified.model)
             .map_err(|e| {
                 Error::InsufficientData(format!(
@@ -115,7 +162,8 @@ pub fn alternatives(
 /// robust `corrections` (one row per measurement, in the same order) on the folds
 /// [`folds`] of the corrections' commanded legs (the legs' extremes never held out): the
 /// coarsest whose model, identified without each fold, predicts the fold's corrections within
-/// one standard error of the best. The
+/// one standard error of the best; then, at that resolution, the smoothness prior among none
+/// and [`SMOOTHNESS_WEIGHTS`] whose model predicts them best. The
 /// identifications run on the machine's cores; `progress(1)` reports each one done (of
 /// [`identifications`]).
 pub fn chosen_resolution(
@@ -158,7 +206,51 @@ pub fn chosen_resolution(
         progress(1);
         missed
     });
-    choice_of(measurements.len(), fold_count, missed)
+    let choice = choice_of(measurements.len(), fold_count, missed)?;
+    let jobs: Vec<(f64, usize)> = SMOOTHNESS_WEIGHTS
+        .iter()
+        .flat_map(|&weight| (0..fold_count).map(move |f| (weight, f)))
+        .collect();
+    let missed = in_parallel(&jobs, |&(weight, f)| {
+        let options = choice.options.smoothed(weight);
+        let missed = fold_miss(nominal, measurements, corrections, &fold, f, &options);
+        progress(1);
+        missed
+    });
+    Ok(choice.smoothed_by(measurements.len(), fold_count, missed))
+}
+
+impl ResolutionChoice {
+    /// This choice, its resolution then scored with each weight of [`SMOOTHNESS_WEIGHTS`]
+    /// from every job's result (each weight's folds in order) over `configurations`
+    /// configurations, and identified with the prior that scored lowest (none if none did
+    /// better); weights that could not be scored left out and named.
+    fn smoothed_by(
+        mut self,
+        configurations: usize,
+        fold_count: usize,
+        missed: Vec<Result<Vec<(usize, f64)>>>,
+    ) -> Self {
+        let mut missed = missed.into_iter();
+        for weight in SMOOTHNESS_WEIGHTS {
+            let fold_results: Vec<_> = missed.by_ref().take(fold_count).collect();
+            let options = self.options.smoothed(weight);
+            match scored(&options, configurations, fold_results) {
+                Ok(score) => self.smoothed.push(score),
+                Err(why) => self.smoothing_failed.push((weight, why)),
+            }
+        }
+        let best = std::iter::once(self.chosen_without_prior())
+            .chain(&self.smoothed)
+            .min_by(|a, b| {
+                a.cross_validated_rmse_mm
+                    .total_cmp(&b.cross_validated_rmse_mm)
+            })
+            .expect("the resolution was scored")
+            .smoothness;
+        self.options = self.options.smoothed(best);
+        self
+    }
 }
 
 /// The choice from every job's result (each resolution of [`PITCH_RESOLUTIONS`] in turn, its
@@ -174,7 +266,11 @@ fn choice_of(
     let mut failed = Vec::new();
     for basis in PITCH_RESOLUTIONS {
         let fold_results: Vec<_> = missed.by_ref().take(fold_count).collect();
-        match scored(basis, configurations, fold_results) {
+        match scored(
+            &IdentifyOptions::physical(basis),
+            configurations,
+            fold_results,
+        ) {
             Ok(score) => scores.push(score),
             Err(why) => failed.push((basis, why)),
         }
@@ -193,12 +289,15 @@ fn choice_of(
         options: IdentifyOptions::physical(coarsest_within_one_standard_error(&scores).pitch_basis),
         scores,
         failed,
+        smoothed: Vec::new(),
+        smoothing_failed: Vec::new(),
     })
 }
 
-/// The score of `basis` from its folds' misses (in fold order), or why it has none.
+/// The score of the identification `options` from its folds' misses (in fold order), or why
+/// it has none.
 fn scored(
-    basis: usize,
+    options: &IdentifyOptions,
     configurations: usize,
     folds: Vec<Result<Vec<(usize, f64)>>>,
 ) -> std::result::Result<ResolutionScore, String> {
@@ -212,7 +311,7 @@ fn scored(
         }
     }
     let squared: Vec<f64> = squared.into_iter().flatten().collect();
-    let score = score_of(basis, &squared);
+    let score = score_of(options, &squared);
     if !(score.cross_validated_rmse_mm.is_finite() && score.standard_error_mm.is_finite()) {
         return Err(format!(
             "cross-validated to {} ± {} mm",
@@ -222,10 +321,10 @@ fn scored(
     Ok(score)
 }
 
-/// The identifications [`chosen_resolution`] runs on `fold_count` folds: each resolution
-/// without each fold.
+/// The identifications [`chosen_resolution`] runs on `fold_count` folds: each resolution, and
+/// each smoothness prior at the chosen one, without each fold.
 pub fn identifications(fold_count: usize) -> u64 {
-    (PITCH_RESOLUTIONS.len() * fold_count) as u64
+    ((PITCH_RESOLUTIONS.len() + SMOOTHNESS_WEIGHTS.len()) * fold_count) as u64
 }
 
 /// [`chosen_resolution`] when every fold has two configurations or more to hold out besides the
@@ -277,14 +376,16 @@ fn within_one_standard_error(scores: &[ResolutionScore]) -> impl Iterator<Item =
         .filter(move |s| s.cross_validated_rmse_mm <= within)
 }
 
-/// The score of `basis` from each configuration's squared miss (summed over the legs, mm²).
-fn score_of(basis: usize, squared: &[f64]) -> ResolutionScore {
+/// The score of the identification `options` from each configuration's squared miss (summed
+/// over the legs, mm²).
+fn score_of(options: &IdentifyOptions, squared: &[f64]) -> ResolutionScore {
     let n = squared.len() as f64;
     let mean = squared.iter().sum::<f64>() / n;
     let variance = squared.iter().map(|s| (s - mean).powi(2)).sum::<f64>() / (n - 1.0);
     let rmse = mean.sqrt();
     ResolutionScore {
-        pitch_basis: basis,
+        pitch_basis: options.pitch_basis,
+        smoothness: options.smoothness,
         cross_validated_rmse_mm: rmse,
         // No miss at all: nothing to be uncertain about.
         standard_error_mm: if rmse > 0.0 {
@@ -353,6 +454,7 @@ mod tests {
     fn score(pitch_basis: usize, rmse: f64, se: f64) -> ResolutionScore {
         ResolutionScore {
             pitch_basis,
+            smoothness: 0.0,
             cross_validated_rmse_mm: rmse,
             standard_error_mm: se,
         }
@@ -391,6 +493,8 @@ mod tests {
             ),
             scores,
             failed: Vec::new(),
+            smoothed: Vec::new(),
+            smoothing_failed: Vec::new(),
         };
         // The strong lead-screw robot at 100 configurations: twelve lowest, eight chosen, both
         // others within the noise.
@@ -421,13 +525,19 @@ mod tests {
     fn a_resolution_whose_fold_fails_or_misses_without_bound_is_left_out_and_says_why() {
         let fold = |misses: &[(usize, f64)]| Ok(misses.to_vec());
         let good = scored(
-            8,
+            &IdentifyOptions::physical(8),
             4,
             vec![fold(&[(0, 1.0), (2, 4.0)]), fold(&[(1, 1.0), (3, 4.0)])],
         );
-        assert_eq!(good, Ok(score_of(8, &[1.0, 1.0, 4.0, 4.0])));
+        assert_eq!(
+            good,
+            Ok(score_of(
+                &IdentifyOptions::physical(8),
+                &[1.0, 1.0, 4.0, 4.0]
+            ))
+        );
         let failed = scored(
-            12,
+            &IdentifyOptions::physical(12),
             4,
             vec![
                 fold(&[(0, 1.0), (2, 4.0)]),
@@ -438,17 +548,24 @@ mod tests {
             failed,
             Err("identified without fold 2: insufficient data: leg 3 outside the stroke".into())
         );
-        let unbounded = scored(16, 2, vec![fold(&[(0, f64::INFINITY)]), fold(&[(1, 1.0)])]);
+        let unbounded = scored(
+            &IdentifyOptions::physical(16),
+            2,
+            vec![fold(&[(0, f64::INFINITY)]), fold(&[(1, 1.0)])],
+        );
         assert!(unbounded.unwrap_err().contains("cross-validated to inf ±"));
         // Nothing missed: a zero error with a zero standard error, not an undefined one.
-        assert_eq!(score_of(8, &[0.0, 0.0]).standard_error_mm, 0.0);
+        assert_eq!(
+            score_of(&IdentifyOptions::physical(8), &[0.0, 0.0]).standard_error_mm,
+            0.0
+        );
     }
 
     #[test]
     fn the_score_is_the_rmse_over_configurations_with_its_standard_error() {
         // Squared misses 1, 1, 4, 4 mm²: mean 2.5, sample variance 3, so SE(mean) = √(3/4)
         // and the RMSE's √2.5 carries SE(mean)/(2√2.5).
-        let s = score_of(12, &[1.0, 1.0, 4.0, 4.0]);
+        let s = score_of(&IdentifyOptions::physical(12), &[1.0, 1.0, 4.0, 4.0]);
         assert_eq!(s.pitch_basis, 12);
         assert!((s.cross_validated_rmse_mm - 2.5_f64.sqrt()).abs() < 1e-15);
         let expected = (0.75_f64).sqrt() / (2.0 * 2.5_f64.sqrt());
@@ -460,8 +577,11 @@ mod tests {
         // Six configurations, the last two a leg's extremes (never held out): the two folds
         // miss the other four by 1 and 4 mm². The score is theirs alone.
         let folds = vec![Ok(vec![(0, 1.0), (2, 4.0)]), Ok(vec![(1, 1.0), (3, 4.0)])];
-        let s = scored(8, 6, folds).unwrap();
-        assert_eq!(s, score_of(8, &[1.0, 1.0, 4.0, 4.0]));
+        let s = scored(&IdentifyOptions::physical(8), 6, folds).unwrap();
+        assert_eq!(
+            s,
+            score_of(&IdentifyOptions::physical(8), &[1.0, 1.0, 4.0, 4.0])
+        );
         assert!((s.cross_validated_rmse_mm - 2.5_f64.sqrt()).abs() < 1e-15);
     }
 
@@ -518,5 +638,44 @@ mod tests {
         for basis in ["8 coefficients", "12 coefficients", "16 coefficients"] {
             assert!(e.contains(basis), "{e}");
         }
+    }
+
+    #[test]
+    fn the_smoothness_prior_scoring_lowest_at_the_chosen_resolution_is_taken() {
+        // Twelve chosen (misses of 1 mm² over its two folds); the three weights then miss by
+        // `misses` in turn (`None`: a fold failed).
+        let smoothed = |misses: [Option<f64>; 3]| {
+            let missed = [
+                folds_of(Some(4.0)),
+                folds_of(Some(1.0)),
+                folds_of(Some(9.0)),
+            ]
+            .concat();
+            let choice = choice_of(4, 2, missed).unwrap();
+            assert_eq!(choice.options.pitch_basis, 12);
+            let missed = misses.into_iter().flat_map(folds_of).collect();
+            choice.smoothed_by(4, 2, missed)
+        };
+        let middle = smoothed([Some(0.81), Some(0.64), Some(0.72)]);
+        assert_eq!(middle.options, IdentifyOptions::physical(12).smoothed(0.01));
+        assert_eq!(middle.chosen().cross_validated_rmse_mm, 0.8);
+        assert_eq!(middle.chosen_without_prior().cross_validated_rmse_mm, 1.0);
+        assert_eq!(middle.smoothed.len(), 3);
+        assert!(middle.smoothed.iter().all(|s| s.pitch_basis == 12));
+        assert!(
+            matches!(middle.smoothing_outcome(0.03), Some(Ok(s)) if s.cross_validated_rmse_mm == 0.72_f64.sqrt())
+        );
+        assert!(matches!(middle.smoothing_outcome(0.0), Some(Ok(s)) if s.smoothness == 0.0));
+        // None better than no prior: none taken.
+        let none = smoothed([Some(1.21), Some(1.44), Some(4.0)]);
+        assert_eq!(none.options, IdentifyOptions::physical(12));
+        // A weight whose fold failed is left out and named; the best of the others taken.
+        let failed = smoothed([None, Some(0.9), Some(0.64)]);
+        assert_eq!(failed.options.smoothness, 0.03);
+        assert_eq!(failed.smoothed.len(), 2);
+        assert!(
+            matches!(failed.smoothing_outcome(0.003), Some(Err(why)) if why.contains("fold 2"))
+        );
+        assert!(failed.smoothing_outcome(0.5).is_none());
     }
 }

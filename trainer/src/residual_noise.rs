@@ -62,8 +62,9 @@ pub struct ShapeSplit {
 const MOVE_RANK_TOLERANCE: f64 = 1e-9;
 
 /// `σ²` and `w` of residuals `r = (I − H) e`, `e` of covariance `σ² I + w Σ_c K_c K_cᵀ`, by the
-/// method of moments: `H = U Uᵀ` the identification's hat matrix (`kept`, its kept left singular
-/// vectors, residuals × directions), `K` = `moves` (residuals × legs) in `blocks` (each
+/// method of moments: `H = U Uᵀ` the identification's hat matrix (`kept`, the residuals' rows
+/// of its kept left singular vectors, residuals × directions: a projection without a
+/// smoothness prior, not with one), `K` = `moves` (residuals × legs) in `blocks` (each
 /// configuration's first residual and number of residuals). With `P` the projection onto the
 /// `K_c`'s spans, `E rᵀ A r = tr((I − H) A (I − H) Ω)` for `A = I` and `A = P` are two linear
 /// equations in `σ²` and `w`. Either may come out negative where the residuals' own scatter
@@ -91,7 +92,10 @@ pub(crate) fn split_by_shape(
     // Each configuration's residuals' expectations, with S = Σ_c M_c M_cᵀ (M_c = U_cᵀ K_c):
     // the platform's moves of every configuration reach these residuals through I − H, as
     // Σ_c' ‖E_cᵀ (I − H) E_c' K_c'‖² = ‖K_c‖² − 2‖M_c‖² + tr(U_c S U_cᵀ), and in the spans
-    // with P_c U_c for U_c. Summed, they are the expectations of the whole residuals.
+    // with P_c U_c for U_c; the instrument's noise as ‖E_cᵀ (I − H)‖² =
+    // n_c − 2‖U_c‖² + tr(U_c Uᵀ U U_cᵀ) (n_c − ‖U_c‖² where H is a projection, Uᵀ U = I).
+    // Summed, they are the expectations of the whole residuals.
+    let gram = kept.transpose() * kept;
     let mut spread = DMatrix::<f64>::zeros(directions, directions);
     for &(start, height) in blocks {
         let kept_moves = kept.rows(start, height).transpose() * moves.rows(start, height);
@@ -118,8 +122,10 @@ pub(crate) fn split_by_shape(
                 (basis.transpose() * here).norm_squared(),
             ],
             instrument: [
-                height as f64 - kept_here.norm_squared(),
-                spanned.len() as f64 - kept_in_span.norm_squared(),
+                height as f64 - 2.0 * kept_here.norm_squared()
+                    + (kept_here * &gram * kept_here.transpose()).trace(),
+                spanned.len() as f64 - 2.0 * kept_in_span.norm_squared()
+                    + (&kept_in_span * &gram * kept_in_span.transpose()).trace(),
             ],
             platform: [
                 own + (kept_here * &spread * kept_here.transpose()).trace(),
@@ -201,24 +207,43 @@ mod tests {
     /// Fifty configurations' `K` (random moves, mm per mm), their blocks, and the kept
     /// directions of an identification whose columns hold the legs' offsets (`K` itself, as
     /// the identification's do) and a hundred more: the physical model's size (108 columns).
-    fn identification(rng: &mut ChaCha8Rng) -> (DMatrix<f64>, Vec<(usize, usize)>, DMatrix<f64>) {
+    /// With a `prior` weight above 0 the hundred are held back as a smoothness prior holds the
+    /// curves' (rows `√prior` on each, stacked below): the kept directions are the residuals'
+    /// rows of the stacked system's, and the hat matrix no projection.
+    fn identification(
+        rng: &mut ChaCha8Rng,
+        prior: f64,
+    ) -> (DMatrix<f64>, Vec<(usize, usize)>, DMatrix<f64>) {
         let configurations = 50;
         let rows = configurations * HEIGHT;
         let moves = DMatrix::<f64>::from_fn(rows, 6, |_, _| StandardNormal.sample(&mut *rng));
         let blocks = (0..configurations).map(|c| (c * HEIGHT, HEIGHT)).collect();
-        let mut columns =
-            DMatrix::<f64>::from_fn(rows, 106, |_, _| StandardNormal.sample(&mut *rng));
-        columns.columns_mut(0, 6).copy_from(&moves);
-        let kept = columns.svd(true, false).u.unwrap();
+        let mut columns = DMatrix::<f64>::from_fn(rows + 100, 106, |r, c| match r.cmp(&rows) {
+            std::cmp::Ordering::Less => StandardNormal.sample(&mut *rng),
+            _ if c == r - rows + 6 => prior.sqrt(),
+            _ => 0.0,
+        });
+        columns.view_mut((0, 0), (rows, 6)).copy_from(&moves);
+        let kept = columns
+            .svd(true, false)
+            .u
+            .unwrap()
+            .rows(0, rows)
+            .into_owned();
         (moves, blocks, kept)
     }
 
     /// The mean split over `draws` residuals of `instrument` and `platform` variances (mm²),
     /// its standard errors, and the root mean square of the jackknife's standard error of
     /// the platform's variance.
-    fn mean_split(instrument: f64, platform: f64, draws: usize) -> ([f64; 2], [f64; 2], f64) {
+    fn mean_split(
+        instrument: f64,
+        platform: f64,
+        prior: f64,
+        draws: usize,
+    ) -> ([f64; 2], [f64; 2], f64) {
         let mut rng = ChaCha8Rng::seed_from_u64(11);
-        let (moves, blocks, kept) = identification(&mut rng);
+        let (moves, blocks, kept) = identification(&mut rng, prior);
         let mut sums = [[0.0; 2]; 2];
         let mut jackknifed = 0.0;
         for _ in 0..draws {
@@ -251,14 +276,22 @@ mod tests {
     #[test]
     fn the_split_recovers_the_instruments_and_the_platforms_variance() {
         // The virtual platform's instrument (0.02 mm a reading, three averaged) beside a
-        // platform variance of twice its repeatability's, and beside none.
-        for (instrument, platform) in [(1.33e-4, 3.2e-5), (1.33e-4, 0.0), (0.0, 1.6e-5)] {
-            let (mean, error, jackknifed) = mean_split(instrument, platform, 400);
+        // platform variance of twice its repeatability's, and beside none; without a prior, and
+        // with one holding the hundred columns back to about half of what the data sees
+        // (singular values about √450 ≈ 21, the prior's 15).
+        for (instrument, platform, prior) in [
+            (1.33e-4, 3.2e-5, 0.0),
+            (1.33e-4, 0.0, 0.0),
+            (0.0, 1.6e-5, 0.0),
+            (1.33e-4, 3.2e-5, 225.0),
+            (0.0, 1.6e-5, 225.0),
+        ] {
+            let (mean, error, jackknifed) = mean_split(instrument, platform, prior, 400);
             for (what, truth, k) in [("instrument", instrument, 0), ("platform", platform, 1)] {
                 assert!(
                     (mean[k] - truth).abs() < 4.0 * error[k] + 1e-12,
                     "{what}: {} ± {} against {truth} mm² (instrument {instrument}, platform \
-                     {platform})",
+                     {platform}, prior {prior})",
                     mean[k],
                     error[k]
                 );
@@ -279,7 +312,7 @@ mod tests {
     #[test]
     fn residuals_the_legs_can_make_everywhere_are_not_split() {
         let mut rng = ChaCha8Rng::seed_from_u64(5);
-        let (moves, _, kept) = identification(&mut rng);
+        let (moves, _, kept) = identification(&mut rng, 0.0);
         let residual = DVector::<f64>::from_fn(moves.nrows(), |_, _| 1e-3);
         // Blocks of six residuals: each K_c spans them all.
         let blocks: Vec<(usize, usize)> = (0..moves.nrows() / 6).map(|c| (c * 6, 6)).collect();

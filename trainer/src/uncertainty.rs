@@ -45,7 +45,8 @@ use nalgebra::{DMatrix, Matrix3, SMatrix};
 use crate::distill::{draw, measured_range};
 use crate::error::{Error, Result};
 use crate::identify::{
-    IdentifyOptions, LEG_OFFSET_COLUMNS, ScaledSvd, leg_sensitivities, linearise, scaled_svd,
+    IdentifyOptions, LEG_OFFSET_COLUMNS, ScaledSvd, SmoothnessPrior, leg_sensitivities, linearise,
+    scaled_svd,
 };
 use crate::physical::PhysicalModel;
 use crate::residual_noise::{ResidualNoise, ShapeSplit, split_by_shape};
@@ -203,16 +204,17 @@ impl Propagation {
         let mut poses: Vec<Pose> = rows.iter().map(MeasuredConfiguration::pose).collect();
         let (jacobian, residual) = linearise(model, options, rows, &mut poses)?;
         let moves = jacobian.columns(LEG_OFFSET_COLUMNS, LEGS).into_owned();
+        let prior = SmoothnessPrior::at(model, options);
         let ScaledSvd {
             svd,
             scales,
             cutoff,
-        } = scaled_svd(jacobian, options, true);
+            data_rows,
+        } = scaled_svd(jacobian, &prior.rows, options, true);
         let kept: Vec<usize> = (0..svd.singular_values.len())
             .filter(|k| svd.singular_values[*k] > cutoff)
             .collect();
-        let freedom = residual.len().saturating_sub(kept.len());
-        if freedom == 0 {
+        if residual.len() <= kept.len() {
             return Err(Error::InsufficientData(format!(
                 "{} residuals for {} identified parameter combinations: no residual is left to \
                  estimate the noise from",
@@ -220,7 +222,17 @@ impl Propagation {
                 kept.len()
             )));
         }
-        let u = svd.u.expect("U was asked for").select_columns(&kept);
+        // The residuals' rows of U_r: the hat matrix is U_r U_rᵀ of them, a projection without
+        // a smoothness prior (then Uᵀ U = I), not with one.
+        let u = svd
+            .u
+            .expect("U was asked for")
+            .rows(0, data_rows)
+            .select_columns(&kept);
+        let gram = u.transpose() * &u;
+        // tr((I − H)²), the residuals' share of the instrument's variance: m − r without a
+        // prior.
+        let freedom = residual.len() as f64 - 2.0 * gram.trace() + gram.norm_squared();
         let v_t = svd.v_t.expect("V was asked for");
         // F = D⁻¹ V_r S_r⁻¹.
         let mut factor = DMatrix::zeros(scales.len(), kept.len());
@@ -237,11 +249,15 @@ impl Propagation {
             blocks.push((at, height));
             at += height;
         }
-        // tr(U_r U_rᵀ K Kᵀ): the share of the repeatability the kept directions take up.
+        // tr((I − H) K Kᵀ (I − H)) over the configurations' K_c: the repeatability's share of
+        // the residuals, ‖K‖² − Σ_c (2‖M_c‖² − tr(M_cᵀ Uᵀ U M_c)), M_c = U_cᵀ K_c
+        // (‖K‖² − Σ_c ‖M_c‖² without a prior).
         let taken: f64 = blocks
             .iter()
             .map(|&(start, height)| {
-                (u.rows(start, height).transpose() * moves.rows(start, height)).norm_squared()
+                let kept_moves = u.rows(start, height).transpose() * moves.rows(start, height);
+                2.0 * kept_moves.norm_squared()
+                    - (kept_moves.transpose() * &gram * &kept_moves).trace()
             })
             .sum();
         let share = moves.norm_squared() - taken;
@@ -264,7 +280,7 @@ impl Propagation {
         }
         // What the residuals hold beyond the repeatability's share, all taken as the
         // instrument's where their shape cannot tell more.
-        let unsplit = ((held - repeatability * share) / freedom as f64).max(0.0);
+        let unsplit = ((held - repeatability * share) / freedom).max(0.0);
         // A pose measured places its targets with its noise in the platform's directions.
         let targets_measured = rows
             .iter()
@@ -467,8 +483,8 @@ pub struct UncertaintySource {
 impl UncertaintySource {
     /// The source of `model`, identified from `rows` with `options` on `nominal` whose legs
     /// repeat within `repeatability` ([`Propagation::of`]), beside `alternatives` identified
-    /// from the same rows, which they could not tell from it (each with
-    /// [`IdentifyOptions::physical`] at its own resolution,
+    /// from the same rows, which they could not tell from it (each with `options` at its own
+    /// resolution,
     /// [`Propagation::position_covariances`]); the poses over the measured range are drawn with
     /// `seed`.
     pub fn new(
@@ -483,7 +499,7 @@ impl UncertaintySource {
         let alternatives = alternatives
             .iter()
             .map(|alternative| {
-                let options = IdentifyOptions::physical(alternative.pitch.basis());
+                let options = options.at_resolution(alternative.pitch.basis());
                 let of =
                     Propagation::of(alternative, &options, rows, repeatability).map_err(|e| {
                         let of_alternative = |why| {
@@ -949,11 +965,13 @@ mod tests {
         // targets. Forty draws of the noise, each identified with eight and twelve coefficients,
         // and eight's propagation with the repeatability assumed as 0.004 mm, as `calibrate
         // --measurements` does for want of the machine's: the platform's variance its
-        // residuals' shape shows then moves the parameters instead.
+        // residuals' shape shows then moves the parameters instead. And twelve with a
+        // smoothness prior (weight 0.01), whose estimate the prior holds back.
         let g = Geometry::prototype();
         let poses = forty_poses(&g);
         let errors = repeating_machine();
-        let draws: Vec<([Propagation; 2], Propagation)> = (1..=40)
+        let smoothed = IdentifyOptions::physical(12).smoothed(0.01);
+        let draws: Vec<([Propagation; 2], Propagation, Propagation)> = (1..=40)
             .map(|seed| {
                 let rows = measured(&g, &poses, &errors, seed);
                 let [eight, twelve] = eight_and_twelve_of(&g, &rows, &errors);
@@ -964,30 +982,51 @@ mod tests {
                     Repeatability::Assumed(0.004),
                 )
                 .unwrap();
-                ([eight, twelve], assumed)
+                let model = crate::identify::identify(&g, &rows, &smoothed)
+                    .unwrap()
+                    .model;
+                let repeatability = Repeatability::Known(errors.repeatability_sigma_mm);
+                let held = Propagation::of(&model, &smoothed, &rows, repeatability).unwrap();
+                ([eight, twelve], assumed, held)
             })
             .collect();
         let first = &draws[0].0[0];
         let (mut model_predicted, mut model_scattered) = (0.0, 0.0);
         let mut assumed_predicted = 0.0;
         let (mut miss_predicted, mut miss_scattered) = (0.0, 0.0);
+        let (mut held_predicted, mut held_scattered) = (0.0, 0.0);
+        let (mut free_predicted, mut free_scattered) = (0.0, 0.0);
         for pose in &poses[20..24] {
             // Where the legs commanded by the first draw's model stand loaded against where
             // the pose needs them, under each draw's model: their scatter is G C Gᵀ's.
             let commanded = first.model.command(pose);
-            let off: Vec<SMatrix<f64, LEGS, 1>> = draws
-                .iter()
-                .map(|([eight, _], _)| {
-                    let loaded = eight.model.loaded_lengths(&commanded, pose);
-                    let needed = hexacomp_core::inverse_kinematics(&eight.model.geometry, pose);
-                    SMatrix::from_fn(|i, _| loaded[i] - needed.lengths[i])
-                })
-                .collect();
-            model_scattered += scatter(&off);
+            let off = |model: &PhysicalModel| {
+                let loaded = model.loaded_lengths(&commanded, pose);
+                let needed = hexacomp_core::inverse_kinematics(&model.geometry, pose);
+                SMatrix::<f64, LEGS, 1>::from_fn(|i, _| loaded[i] - needed.lengths[i])
+            };
+            let predicted = |of: &Propagation| {
+                let commanded = of.model.command(pose);
+                let screws = ActuationScrews::at(&of.model.geometry, pose);
+                let g = leg_sensitivities(&of.model, &of.options, &commanded, pose, &screws);
+                (&g * &of.covariance * g.transpose()).trace() / 40.0
+            };
+            let scattered_of =
+                |which: fn(&([Propagation; 2], Propagation, Propagation)) -> &PhysicalModel| {
+                    let off: Vec<_> = draws.iter().map(|draw| off(which(draw))).collect();
+                    scatter(&off)
+                };
+            model_scattered += scattered_of(|([eight, _], _, _)| &eight.model);
+            held_scattered += scattered_of(|(_, _, held)| &held.model);
+            free_scattered += scattered_of(|([_, twelve], _, _)| &twelve.model);
+            for ([_, twelve], _, held) in &draws {
+                held_predicted += predicted(held);
+                free_predicted += predicted(twelve);
+            }
             // Twelve's miss under eight's commands, in each draw: its scatter is N's. The
             // predictions are averaged over the draws.
             let mut misses = Vec::with_capacity(draws.len());
-            for ([eight, twelve], assumed) in &draws {
+            for ([eight, twelve], assumed, _) in &draws {
                 let commanded = eight.model.command(pose);
                 let screws = ActuationScrews::at(&eight.model.geometry, pose);
                 let g = leg_sensitivities(&eight.model, &eight.options, &commanded, pose, &screws);
@@ -1011,6 +1050,12 @@ mod tests {
                 assumed_predicted,
                 model_scattered,
             ),
+            ("twelve's", free_predicted, free_scattered),
+            (
+                "twelve's, with a smoothness prior,",
+                held_predicted,
+                held_scattered,
+            ),
         ] {
             let ratio = scattered / predicted;
             assert!(
@@ -1019,6 +1064,18 @@ mod tests {
                  ({scattered} against {predicted} mm²)"
             );
         }
+        // What the prior takes off the scatter is what it takes off the propagation: on the
+        // same draws the two ratios share their sampling error (0.79 and 0.81 measured; a
+        // propagation that ignored the prior would read 1.0).
+        let (scatter_kept, propagation_kept) = (
+            held_scattered / free_scattered,
+            held_predicted / free_predicted,
+        );
+        assert!(
+            scatter_kept < 0.9 && (0.93..1.07).contains(&(scatter_kept / propagation_kept)),
+            "the prior keeps {scatter_kept} of the scatter and {propagation_kept} of the \
+             propagated variance"
+        );
     }
 
     /// An anisotropic noise covariance of the legs' miss (mm²): variances 1–16 µm² along

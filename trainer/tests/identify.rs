@@ -8,7 +8,9 @@ use hexacomp_trainer::identify::{IdentifyOptions, PARAMETERS, PHYSICAL, identify
 use hexacomp_trainer::physical_candidate::{
     CandidateOptions, carried_into_networks, physical_candidate,
 };
-use hexacomp_trainer::pitch_resolution::{PITCH_RESOLUTIONS, chosen_resolution, identifications};
+use hexacomp_trainer::pitch_resolution::{
+    PITCH_RESOLUTIONS, SMOOTHNESS_WEIGHTS, chosen_resolution, identifications,
+};
 use hexacomp_trainer::uncertainty::Repeatability;
 use hexacomp_virtual::{DEFAULT_MACHINE_SEED, ErrorModel, ErrorVariant};
 
@@ -164,7 +166,7 @@ fn the_lead_screw_resolution_is_chosen_by_held_out_error_and_follows_a_short_per
                 .total_cmp(&b.cross_validated_rmse_mm)
         })
         .unwrap();
-    let chosen = choice.chosen();
+    let chosen = choice.chosen_without_prior();
     assert!(
         chosen.cross_validated_rmse_mm <= best.cross_validated_rmse_mm + best.standard_error_mm,
         "{choice:?}"
@@ -189,10 +191,32 @@ fn the_lead_screw_resolution_is_chosen_by_held_out_error_and_follows_a_short_per
     assert_eq!(
         IdentifyOptions {
             pitch_basis: PHYSICAL.pitch_basis,
+            smoothness: PHYSICAL.smoothness,
             ..choice.options
         },
         PHYSICAL
     );
+    // Then, at that resolution, each smoothness prior was scored on the same folds, and the one
+    // scoring lowest (none among them) is the model's.
+    let weights: Vec<f64> = choice.smoothed.iter().map(|s| s.smoothness).collect();
+    assert_eq!(weights, SMOOTHNESS_WEIGHTS, "{choice:?}");
+    assert!(
+        choice
+            .smoothed
+            .iter()
+            .all(|s| s.pitch_basis == chosen.pitch_basis),
+        "{choice:?}"
+    );
+    let lowest = std::iter::once(chosen)
+        .chain(&choice.smoothed)
+        .map(|s| s.cross_validated_rmse_mm)
+        .fold(f64::INFINITY, f64::min);
+    assert_eq!(
+        choice.chosen().cross_validated_rmse_mm,
+        lowest,
+        "{choice:?}"
+    );
+    assert_eq!(choice.options.pitch_basis, chosen.pitch_basis);
     // The short period needs the finer curves: eight misses the held-out corrections by far more.
     assert!(chosen.pitch_basis > 8, "{choice:?}");
     assert!(
@@ -214,7 +238,7 @@ fn the_lead_screw_resolution_is_chosen_by_held_out_error_and_follows_a_short_per
     assert_eq!(candidate.resolution, choice);
     assert_eq!(
         candidate.cross_validated_rmse_mm,
-        chosen.cross_validated_rmse_mm
+        choice.chosen().cross_validated_rmse_mm
     );
     assert!(candidate.networks_uncertainty.is_ok());
     // An alternative resolution that cannot be identified (two coefficients: at least four are
@@ -225,7 +249,7 @@ fn the_lead_screw_resolution_is_chosen_by_held_out_error_and_follows_a_short_per
     let carried = |bases: &[usize]| {
         carried_into_networks(
             &g,
-            &physical,
+            (&physical, &choice.options),
             bases,
             &kept,
             &common::cheap_distill(),

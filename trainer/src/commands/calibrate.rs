@@ -534,10 +534,11 @@ fn physical(
     let mut candidate = identified?;
     let model = &mut candidate.distilled.model;
     model.provenance.source = format!(
-        "{}: physical model ({} lead-screw coefficients per leg) as networks, {} poses, \
-         cross-validated {:.4} mm",
+        "{}: physical model ({} lead-screw coefficients per leg, smoothness {}) as networks, \
+         {} poses, cross-validated {:.4} mm",
         source(measurements.len()),
         candidate.resolution.options.pitch_basis,
+        candidate.resolution.options.smoothness,
         poses,
         candidate.score_mm
     );
@@ -560,6 +561,25 @@ fn physical(
     );
     for (basis, why) in &resolution.failed {
         println!("physical model: {basis} lead-screw coefficients per leg left out: {why}");
+    }
+    let smoothed: Vec<String> = std::iter::once(resolution.chosen_without_prior())
+        .chain(&resolution.smoothed)
+        .map(|s| {
+            format!(
+                "{}: {:.4} ± {:.4} mm",
+                s.smoothness, s.cross_validated_rmse_mm, s.standard_error_mm
+            )
+        })
+        .collect();
+    println!(
+        "physical model: the curves' smoothness prior of weight {}, the lowest cross-validated \
+         at {} coefficients ({})",
+        resolution.options.smoothness,
+        resolution.options.pitch_basis,
+        smoothed.join(", ")
+    );
+    for (weight, why) in &resolution.smoothing_failed {
+        println!("physical model: the smoothness prior of weight {weight} left out: {why}");
     }
     let alternatives = resolution.indistinguishable();
     if !alternatives.is_empty() && candidate.networks_uncertainty.is_ok() {

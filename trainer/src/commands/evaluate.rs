@@ -10,7 +10,7 @@ use hexacomp_trainer::evaluate::{
     Evaluation, EvaluationOptions, Method, Protocol, SizeResult, evaluate,
 };
 use hexacomp_trainer::identify::PHYSICAL;
-use hexacomp_trainer::pitch_resolution::PITCH_RESOLUTIONS;
+use hexacomp_trainer::pitch_resolution::{PITCH_RESOLUTIONS, SMOOTHNESS_WEIGHTS};
 use hexacomp_trainer::train::{CROSS_VALIDATION_FOLDS, TrainOptions};
 use hexacomp_virtual::{DEFAULT_MACHINE_SEED, ErrorModel, ErrorVariant};
 
@@ -220,6 +220,49 @@ pub fn print_evaluation(evaluation: &Evaluation, validation: usize) {
         for (basis, why) in size.resolution.iter().flat_map(|r| &r.failed) {
             println!(
                 "{} configurations: {basis} coefficients left out: {why}",
+                size.configurations
+            );
+        }
+    }
+
+    println!(
+        "The lead-screw curves' smoothness prior at the chosen resolution: the weight whose \
+         cross-validated error (Eq. 21, mm, ± its standard error, on the same folds) is lowest"
+    );
+    let weights: Vec<f64> = std::iter::once(0.0).chain(SMOOTHNESS_WEIGHTS).collect();
+    let mut header = vec!["configurations".to_string(), "chosen".to_string()];
+    header.extend(weights.iter().map(|w| format!("{w} (mm)")));
+    let refs: Vec<&str> = header.iter().map(String::as_str).collect();
+    let mut table = Table::<{ SMOOTHNESS_WEIGHTS.len() + 3 }>::new(
+        refs.try_into().expect("a column per weight"),
+    );
+    for size in &evaluation.sizes {
+        let Some(resolution) = &size.resolution else {
+            continue;
+        };
+        let mut row = vec![
+            size.configurations.to_string(),
+            resolution.options.smoothness.to_string(),
+        ];
+        row.extend(
+            weights
+                .iter()
+                .map(|&weight| match resolution.smoothing_outcome(weight) {
+                    Some(Ok(s)) => format!(
+                        "{:.4} ± {:.4}",
+                        s.cross_validated_rmse_mm, s.standard_error_mm
+                    ),
+                    Some(Err(_)) => "left out".to_string(),
+                    None => "—".to_string(),
+                }),
+        );
+        table.row(row.try_into().expect("a cell per weight"));
+    }
+    println!("{table}");
+    for size in &evaluation.sizes {
+        for (weight, why) in size.resolution.iter().flat_map(|r| &r.smoothing_failed) {
+            println!(
+                "{} configurations: the smoothness prior of weight {weight} left out: {why}",
                 size.configurations
             );
         }
