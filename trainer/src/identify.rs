@@ -11,7 +11,10 @@
 //!
 //! Gauss–Newton steps solve `J·δθ = r` by SVD, dropping directions whose singular value is below
 //! a fraction of the largest: parameter combinations the measurements cannot see stay at their
-//! nominal values. Compensation is then the identified geometry's inverse kinematics.
+//! nominal values. Compensation is then the identified geometry's inverse kinematics. With a
+//! smoothness prior on the lead-screw curves ([`IdentifyOptions::smoothness`]) the steps solve
+//! `J·δθ = r` stacked on the prior's rows (`√λ` times each curve's second differences, whose
+//! residuals are those differences' negatives), and lower the sum of both squares.
 //!
 //! Optionally the model is shaped further like the machine ([`crate::physical`]): a lead-screw
 //! error curve per leg (`pitch_basis` B-spline coefficients each) and the legs' compliance under
@@ -42,8 +45,9 @@ pub struct IdentifyOptions {
     pub max_iterations: usize,
     /// Stop when the largest parameter step is below this, mm.
     pub step_tolerance_mm: f64,
-    /// Stop when an iteration lowers the residual RMS by less than this fraction (noisy data
-    /// never reaches the step tolerance: the fit stalls at the noise).
+    /// Stop when an iteration lowers the root of what the steps lower (the residuals' squares
+    /// and the smoothness prior's, per residual) by less than this fraction (noisy data never
+    /// reaches the step tolerance: the fit stalls at the noise).
     pub stall_fraction: f64,
     /// Singular values below this fraction of the largest are treated as zero (unidentifiable).
     pub relative_cutoff: f64,
@@ -130,15 +134,6 @@ impl IdentifyOptions {
         }
     }
 
-    /// These options at another lead-screw resolution: `pitch_basis` B-spline coefficients
-    /// per curve.
-    pub const fn at_resolution(self, pitch_basis: usize) -> Self {
-        Self {
-            pitch_basis,
-            ..self
-        }
-    }
-
     /// These options with the lead-screw curves' smoothness prior of weight `smoothness`
     /// ([`Self::smoothness`]).
     pub const fn smoothed(self, smoothness: f64) -> Self {
@@ -156,7 +151,8 @@ pub struct Identification {
     pub model: PhysicalModel,
     /// Gauss–Newton iterations performed.
     pub iterations: usize,
-    /// Parameter directions the measurements determine (≤ [`IdentifyOptions::parameters`]).
+    /// Parameter directions the measurements determine (≤ [`IdentifyOptions::parameters`]);
+    /// with a smoothness prior, the measurements and the prior together.
     pub rank: usize,
     /// RMS of the target residuals with the nominal geometry, mm.
     pub rms_before_mm: f64,
@@ -687,7 +683,7 @@ mod tests {
             0
         );
         assert_eq!(
-            SmoothnessPrior::at(&model, &PHYSICAL.at_resolution(0).smoothed(1.0))
+            SmoothnessPrior::at(&model, &IdentifyOptions::physical(0).smoothed(1.0))
                 .rows
                 .nrows(),
             0

@@ -127,7 +127,8 @@ pub struct CarriedModel {
 /// from the model and its spread about the models of the lead-screw resolutions
 /// `alternative_bases` added (those the cross-validation could not tell from the model's,
 /// [`crate::pitch_resolution::ResolutionChoice::indistinguishable`]; the model's own is
-/// skipped), each identified on `measurements` with `identification` at its own resolution. An alternative that cannot be identified
+/// skipped), each identified on `measurements` as the cross-validation scored it
+/// ([`alternatives`]). An alternative that cannot be identified
 /// leaves the networks without an uncertainty, as too few configurations do.
 pub fn carried_into_networks(
     nominal: &Geometry,
@@ -157,7 +158,7 @@ pub fn carried_into_networks(
         .copied()
         .filter(|&basis| basis != own)
         .collect();
-    let uncertainty = alternatives(nominal, measurements, identification, &bases)
+    let uncertainty = alternatives(nominal, measurements, &bases)
         .and_then(|alternatives| {
             UncertaintySource::new(
                 nominal,

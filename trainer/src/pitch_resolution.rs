@@ -46,8 +46,8 @@ pub struct ResolutionScore {
 /// The resolution chosen for a machine, and how every one tried scored.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ResolutionChoice {
-    /// [`crate::identify::PHYSICAL`] with the chosen resolution: the physical model's
-    /// identification.
+    /// [`crate::identify::PHYSICAL`] with the chosen resolution and smoothness prior: the
+    /// physical model's identification.
     pub options: IdentifyOptions,
     /// Every resolution that could be cross-validated without a smoothness prior, in the order
     /// of [`PITCH_RESOLUTIONS`].
@@ -123,8 +123,8 @@ impl ResolutionChoice {
 
     /// The resolutions besides the chosen one that the cross-validation could not tell from
     /// the best without a smoothness prior (within one standard error of the lowest error),
-    /// coarsest first: the uncertainty's alternatives ([`alternatives`], identified with the
-    /// chosen prior).
+    /// coarsest first: the uncertainty's alternatives ([`alternatives`], identified as they
+    /// were scored).
     pub fn indistinguishable(&self) -> Vec<usize> {
         within_one_standard_error(&self.scores)
             .map(|s| s.pitch_basis)
@@ -134,18 +134,17 @@ impl ResolutionChoice {
 }
 
 /// The physical models of lead-screw resolutions `bases` (B-spline coefficients per leg; the
-/// chosen one's [`ResolutionChoice::indistinguishable`]), each identified with `chosen` (the
-/// model's identification) at its own resolution on every configuration of `measurements`, in
-/// the order of `bases`; an error naming the first resolution that could not be. The
-/// identifications run on the machine's cores.
+/// chosen one's [`ResolutionChoice::indistinguishable`]), each identified with
+/// [`IdentifyOptions::physical`], as it was scored (without a smoothness prior), on every
+/// configuration of `measurements`, in the order of `bases`; an error naming the first
+/// resolution that could not be. The identifications run on the machine's cores.
 pub fn alternatives(
     nominal: &Geometry,
     measurements: &[MeasuredConfiguration],
-    chosen: &IdentifyOptions,
     bases: &[usize],
 ) -> Result<Vec<PhysicalModel>> {
     in_parallel(bases, |&basis| {
-        identify(nominal, measurements, &chosen.at_resolution(basis))
+        identify(nominal, measurements, &IdentifyOptions::physical(basis))
             .map(|identified| identified.model)
             .map_err(|e| {
                 Error::InsufficientData(format!(

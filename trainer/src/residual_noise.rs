@@ -61,6 +61,72 @@ pub struct ShapeSplit {
 /// its legs do not move the targets in.
 const MOVE_RANK_TOLERANCE: f64 = 1e-9;
 
+/// What the hat matrix `H = U Uᵀ` of an identification (`U` the residuals' rows of its kept
+/// left singular vectors: a projection without a smoothness prior, not with one) does to the
+/// expected squares of its residuals `r = (I − H) e`, `e` of covariance
+/// `σ² I + w Σ_c K_c K_cᵀ`: each configuration's share, per unit of `σ²` and of `w`.
+struct HatMoments {
+    /// `Uᵀ U` (the identity without a prior).
+    gram: DMatrix<f64>,
+    /// `S = Σ_c M_c M_cᵀ`, `M_c = U_cᵀ K_c`.
+    spread: DMatrix<f64>,
+}
+
+impl HatMoments {
+    /// The moments of `kept` (`U`) with `moves` (`K`) in `blocks`.
+    fn of(kept: &DMatrix<f64>, moves: &DMatrix<f64>, blocks: &[(usize, usize)]) -> Self {
+        let directions = kept.ncols();
+        let mut spread = DMatrix::<f64>::zeros(directions, directions);
+        for &(start, height) in blocks {
+            let kept_moves = kept.rows(start, height).transpose() * moves.rows(start, height);
+            spread += &kept_moves * kept_moves.transpose();
+        }
+        Self {
+            gram: kept.transpose() * kept,
+            spread,
+        }
+    }
+
+    /// The coefficients of `σ²` and `w` in the expected squares of a configuration's residuals
+    /// `Qᵀ E_cᵀ r` (`Q` orthonormal columns, `dimensions` of them: the identity, or a basis of
+    /// the `K_c`'s span), `kept_here` its `Qᵀ U_c`, and `own = ‖K_c‖² − 2‖M_c‖²` (with
+    /// `Q Qᵀ K_c = K_c`). The platform's moves of every configuration reach these residuals
+    /// through `I − H`, as `Σ_c' ‖Qᵀ E_cᵀ (I − H) E_c' K_c'‖² = own + tr(Qᵀ U_c S U_cᵀ Q)`; the
+    /// instrument's noise as `‖Qᵀ E_cᵀ (I − H)‖² = dimensions − 2‖Qᵀ U_c‖² + tr(Qᵀ U_c Uᵀ U
+    /// U_cᵀ Q)` (`dimensions − ‖Qᵀ U_c‖²` where `H` is a projection).
+    fn expected(&self, kept_here: &DMatrix<f64>, dimensions: usize, own: f64) -> [f64; 2] {
+        [
+            dimensions as f64 - 2.0 * kept_here.norm_squared()
+                + (kept_here * &self.gram * kept_here.transpose()).trace(),
+            own + (kept_here * &self.spread * kept_here.transpose()).trace(),
+        ]
+    }
+}
+
+/// `‖K_c‖² − 2‖U_cᵀ K_c‖²` of a configuration's `kept_here` (`U_c`) and `leg_moves` (`K_c`).
+fn own_moves(kept_here: &DMatrix<f64>, leg_moves: &DMatrix<f64>) -> f64 {
+    leg_moves.norm_squared() - 2.0 * (kept_here.transpose() * leg_moves).norm_squared()
+}
+
+/// The coefficients of `σ²` and `w` in `E‖r‖²` for residuals `r = (I − H) e`, `e` of covariance
+/// `σ² I + w Σ_c K_c K_cᵀ` (`H = U Uᵀ`, `kept` the residuals' rows of the identification's kept
+/// left singular vectors, `K` = `moves` in `blocks`, as in [`split_by_shape`]):
+/// `tr((I − H)²)` and `Σ_c ‖(I − H) E_c K_c‖²` (`m − r` and `‖K‖² − Σ_c ‖U_cᵀ K_c‖²` without a
+/// smoothness prior).
+pub(crate) fn expected_squares(
+    kept: &DMatrix<f64>,
+    moves: &DMatrix<f64>,
+    blocks: &[(usize, usize)],
+) -> [f64; 2] {
+    let hat = HatMoments::of(kept, moves, blocks);
+    blocks.iter().fold([0.0; 2], |sum, &(start, height)| {
+        let kept_here = kept.rows(start, height).into_owned();
+        let own = own_moves(&kept_here, &moves.rows(start, height).into_owned());
+        let [instrument, platform] = hat.expected(&kept_here, height, own);
+        [sum[0] + instrument, sum[1] + platform]
+    })
+}
+
 /// `σ²` and `w` of residuals `r = (I − H) e`, `e` of covariance `σ² I + w Σ_c K_c K_cᵀ`, by the
 /// method of moments: `H = U Uᵀ` the identification's hat matrix (`kept`, the residuals' rows
 /// of its kept left singular vectors, residuals × directions: a projection without a
@@ -88,49 +154,32 @@ pub(crate) fn split_by_shape(
         Some(residual.len()),
         "the blocks tile the residuals"
     );
-    let directions = kept.ncols();
-    // Each configuration's residuals' expectations, with S = Σ_c M_c M_cᵀ (M_c = U_cᵀ K_c):
-    // the platform's moves of every configuration reach these residuals through I − H, as
-    // Σ_c' ‖E_cᵀ (I − H) E_c' K_c'‖² = ‖K_c‖² − 2‖M_c‖² + tr(U_c S U_cᵀ), and in the spans
-    // with P_c U_c for U_c; the instrument's noise as ‖E_cᵀ (I − H)‖² =
-    // n_c − 2‖U_c‖² + tr(U_c Uᵀ U U_cᵀ) (n_c − ‖U_c‖² where H is a projection, Uᵀ U = I).
-    // Summed, they are the expectations of the whole residuals.
-    let gram = kept.transpose() * kept;
-    let mut spread = DMatrix::<f64>::zeros(directions, directions);
-    for &(start, height) in blocks {
-        let kept_moves = kept.rows(start, height).transpose() * moves.rows(start, height);
-        spread += &kept_moves * kept_moves.transpose();
-    }
+    // Each configuration's residuals' expectations, whole and in the spans ([`HatMoments`]):
+    // summed, they are the expectations of the whole residuals.
+    let hat = HatMoments::of(kept, moves, blocks);
     let mut terms: Vec<Moments> = Vec::with_capacity(blocks.len());
     // A configuration without a target seen adds nothing.
     for &(start, height) in blocks.iter().filter(|(_, height)| *height > 0) {
-        let leg_moves = moves.rows(start, height);
-        let svd = leg_moves.into_owned().svd(true, false);
+        let leg_moves = moves.rows(start, height).into_owned();
+        let svd = leg_moves.clone().svd(true, false);
         let largest = svd.singular_values.max();
         let spanned: Vec<usize> = (0..svd.singular_values.len())
             .filter(|&i| svd.singular_values[i] > MOVE_RANK_TOLERANCE * largest)
             .collect();
         let basis = svd.u.expect("U was asked for").select_columns(&spanned);
-        let kept_here = kept.rows(start, height);
-        let kept_in_span = basis.transpose() * kept_here;
+        let kept_here = kept.rows(start, height).into_owned();
+        let kept_in_span = basis.transpose() * &kept_here;
         let here = residual.rows(start, height);
-        let own =
-            leg_moves.norm_squared() - 2.0 * (kept_here.transpose() * leg_moves).norm_squared();
+        let own = own_moves(&kept_here, &leg_moves);
+        let [whole_instrument, whole_platform] = hat.expected(&kept_here, height, own);
+        let [span_instrument, span_platform] = hat.expected(&kept_in_span, spanned.len(), own);
         terms.push(Moments {
             sums: [
                 here.norm_squared(),
                 (basis.transpose() * here).norm_squared(),
             ],
-            instrument: [
-                height as f64 - 2.0 * kept_here.norm_squared()
-                    + (kept_here * &gram * kept_here.transpose()).trace(),
-                spanned.len() as f64 - 2.0 * kept_in_span.norm_squared()
-                    + (&kept_in_span * &gram * kept_in_span.transpose()).trace(),
-            ],
-            platform: [
-                own + (kept_here * &spread * kept_here.transpose()).trace(),
-                own + (&kept_in_span * &spread * kept_in_span.transpose()).trace(),
-            ],
+            instrument: [whole_instrument, span_instrument],
+            platform: [whole_platform, span_platform],
         });
     }
     let total = terms
@@ -233,6 +282,68 @@ mod tests {
         (moves, blocks, kept)
     }
 
+    /// Residuals `(I − H) e` of the identification `(K, blocks, U)`, `e` drawn with `instrument`
+    /// variance per coordinate and `platform` per leg and configuration (mm²).
+    fn residual_draw(
+        rng: &mut ChaCha8Rng,
+        (moves, blocks, kept): (&DMatrix<f64>, &[(usize, usize)], &DMatrix<f64>),
+        instrument: f64,
+        platform: f64,
+    ) -> DVector<f64> {
+        let mut noise =
+            DVector::<f64>::from_fn(moves.nrows(), |_, _| StandardNormal.sample(&mut *rng))
+                * instrument.sqrt();
+        for &(start, height) in blocks {
+            let legs = DVector::<f64>::from_fn(6, |_, _| StandardNormal.sample(&mut *rng));
+            let moved = moves.rows(start, height) * legs * platform.sqrt();
+            let mut here = noise.rows_mut(start, height);
+            here += moved;
+        }
+        &noise - kept * (kept.transpose() * &noise)
+    }
+
+    #[test]
+    fn the_expected_squares_are_what_the_residuals_hold_on_average() {
+        for prior in [0.0, 225.0] {
+            let mut rng = ChaCha8Rng::seed_from_u64(13);
+            let (moves, blocks, kept) = identification(&mut rng, prior);
+            let [freedom, share] = expected_squares(&kept, &moves, &blocks);
+            if prior == 0.0 {
+                // A projection: m − r, and ‖K‖² less what the kept directions take.
+                assert!((freedom - (450.0 - 106.0)).abs() < 1e-9, "{freedom}");
+                let taken: f64 = blocks
+                    .iter()
+                    .map(|&(start, height)| {
+                        (kept.rows(start, height).transpose() * moves.rows(start, height))
+                            .norm_squared()
+                    })
+                    .sum();
+                assert!((share - (moves.norm_squared() - taken)).abs() < 1e-9 * share);
+            }
+            // Each variance alone, 400 draws: the mean sum of squares within four of its
+            // standard errors (0.4 % of it for the instrument's) of the expectation.
+            for (instrument, platform) in [(1.0, 0.0), (0.0, 1.0)] {
+                let squares: Vec<f64> = (0..400)
+                    .map(|_| {
+                        residual_draw(&mut rng, (&moves, &blocks, &kept), instrument, platform)
+                            .norm_squared()
+                    })
+                    .collect();
+                let n = squares.len() as f64;
+                let mean = squares.iter().sum::<f64>() / n;
+                let error =
+                    (squares.iter().map(|s| (s - mean).powi(2)).sum::<f64>() / (n - 1.0) / n)
+                        .sqrt();
+                let expected = instrument * freedom + platform * share;
+                assert!(
+                    (mean - expected).abs() < 4.0 * error,
+                    "prior {prior}, instrument {instrument}, platform {platform}: {mean} ± \
+                     {error} against {expected}"
+                );
+            }
+        }
+    }
+
     /// The mean split over `draws` residuals of `instrument` and `platform` variances (mm²),
     /// its standard errors, and the root mean square of the jackknife's standard error of
     /// the platform's variance.
@@ -247,16 +358,7 @@ mod tests {
         let mut sums = [[0.0; 2]; 2];
         let mut jackknifed = 0.0;
         for _ in 0..draws {
-            let mut noise =
-                DVector::<f64>::from_fn(moves.nrows(), |_, _| StandardNormal.sample(&mut rng))
-                    * instrument.sqrt();
-            for &(start, height) in &blocks {
-                let legs = DVector::<f64>::from_fn(6, |_, _| StandardNormal.sample(&mut rng));
-                let moved = moves.rows(start, height) * legs * platform.sqrt();
-                let mut here = noise.rows_mut(start, height);
-                here += moved;
-            }
-            let residual = &noise - &kept * (kept.transpose() * &noise);
+            let residual = residual_draw(&mut rng, (&moves, &blocks, &kept), instrument, platform);
             let split = split_by_shape(&residual, &kept, &moves, &blocks).unwrap();
             jackknifed += split.platform_error_mm2.powi(2);
             for (k, value) in [split.instrument_variance_mm2, split.platform_variance_mm2]

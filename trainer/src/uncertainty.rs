@@ -3,7 +3,8 @@
 //!
 //! **Propagation.** The identification's parameters `θ` move with its residuals as
 //! `δθ = B r`, `B = D⁻¹ V_r S_r⁻¹ U_rᵀ` (the truncated SVD of the column-scaled Jacobian
-//! `J D⁻¹ = U S Vᵀ` it steps with, `r` the directions it keeps), and have the covariance
+//! `J D⁻¹ = U S Vᵀ` it steps with, stacked on the lead-screw curves' smoothness prior when it
+//! has one, `r` the directions it keeps, `U_r` their residuals' rows), and have the covariance
 //! `C = B Ω Bᵀ`: `Ω` the residuals', the instrument's noise on every coordinate and the
 //! machine's repeatability shared by the targets of a configuration ([`Propagation::of`]).
 //! A parameter error `δθ` moves each loaded leg by `G(x)·δθ` at a
@@ -49,7 +50,7 @@ use crate::identify::{
     scaled_svd,
 };
 use crate::physical::PhysicalModel;
-use crate::residual_noise::{ResidualNoise, ShapeSplit, split_by_shape};
+use crate::residual_noise::{ResidualNoise, ShapeSplit, expected_squares, split_by_shape};
 
 /// A repeatability is refused when its expected share of the residuals' variance is more than
 /// this many times what they hold: far beyond their own scatter (of 40 draws of a machine
@@ -96,8 +97,8 @@ const NORMAL_QUANTILE: f64 = 1.690_6;
 pub struct Propagation {
     model: PhysicalModel,
     options: IdentifyOptions,
-    /// `B = F U_rᵀ`: the parameters' change per mm of each residual (the identification's
-    /// columns × its residuals).
+    /// `B = F U_rᵀ` (`U_r` the residuals' rows): the parameters' change per mm of each
+    /// residual (the identification's columns × its residuals).
     estimator: DMatrix<f64>,
     /// The residuals' covariance `Ω`.
     noise: ResidualNoise,
@@ -129,8 +130,8 @@ struct Variances {
 
 /// The variances of residuals whose shape split them as `split` (where it could), on a machine
 /// of `repeatability`: `all_platform_mm2` is the platform's variance per leg that all of the
-/// residuals would be (`‖r‖² / tr((I − H) K Kᵀ)`), `unsplit_mm2` the instrument's that all they
-/// hold beyond the repeatability's share would be ([`Propagation::of`]).
+/// residuals would be (`‖r‖² / tr((I − H) K Kᵀ (I − H))`), `unsplit_mm2` the instrument's that
+/// all they hold beyond the repeatability's share would be ([`Propagation::of`]).
 fn variances(
     split: Option<ShapeSplit>,
     repeatability: Repeatability,
@@ -172,9 +173,12 @@ impl Propagation {
     /// `Ω = σ² I + v Σ_c K_c K_cᵀ` (`v` the repeatability's variance, `σ²` the rest per
     /// coordinate: the instrument's noise, and what the model's form misses unless split
     /// below), and the
-    /// estimate's change `δθ = B r` (`B = F U_rᵀ`, `F = D⁻¹ V_r S_r⁻¹`) has the covariance
+    /// estimate's change `δθ = B r` (`B = F U_rᵀ`, `F = D⁻¹ V_r S_r⁻¹`; with a smoothness prior
+    /// the SVD is of the Jacobian stacked on the prior's rows, `U_r` the residuals' rows of its
+    /// kept directions, and the hat matrix `H = U_r U_rᵀ` no projection) has the covariance
     /// `B Ω Bᵀ`. `σ²` is what the residuals hold beyond the repeatability's
-    /// expected share: `E‖r‖² = σ² (m − r) + v tr((I − U_r U_rᵀ) K Kᵀ)`, and 0 where the
+    /// expected share: `E‖r‖² = σ² tr((I − H)²) + v tr((I − H) K Kᵀ (I − H))`
+    /// (`tr((I − H)²) = m − r` without a prior), and 0 where the
     /// residuals hold less than that share, as their noise lets them when the instrument's is
     /// small. A known repeatability whose share is more than twice what they hold is refused
     /// (it is not the machine's), naming the one that would be all of it; an assumed one is
@@ -201,6 +205,20 @@ impl Propagation {
                 "the machine's repeatability is {repeatability_mm} mm: a finite σ ≥ 0 is needed"
             )));
         }
+        if !(options.smoothness.is_finite() && options.smoothness >= 0.0) {
+            return Err(Error::InvalidSetting(format!(
+                "a smoothness prior's weight of {}: a finite weight ≥ 0 is needed",
+                options.smoothness
+            )));
+        }
+        if options.pitch_basis != model.pitch.basis() {
+            return Err(Error::InvalidSetting(format!(
+                "the model's lead-screw curves have {} coefficients, the identification's \
+                 options {}",
+                model.pitch.basis(),
+                options.pitch_basis
+            )));
+        }
         let mut poses: Vec<Pose> = rows.iter().map(MeasuredConfiguration::pose).collect();
         let (jacobian, residual) = linearise(model, options, rows, &mut poses)?;
         let moves = jacobian.columns(LEG_OFFSET_COLUMNS, LEGS).into_owned();
@@ -214,14 +232,6 @@ impl Propagation {
         let kept: Vec<usize> = (0..svd.singular_values.len())
             .filter(|k| svd.singular_values[*k] > cutoff)
             .collect();
-        if residual.len() <= kept.len() {
-            return Err(Error::InsufficientData(format!(
-                "{} residuals for {} identified parameter combinations: no residual is left to \
-                 estimate the noise from",
-                residual.len(),
-                kept.len()
-            )));
-        }
         // The residuals' rows of U_r: the hat matrix is U_r U_rᵀ of them, a projection without
         // a smoothness prior (then Uᵀ U = I), not with one.
         let u = svd
@@ -229,10 +239,6 @@ impl Propagation {
             .expect("U was asked for")
             .rows(0, data_rows)
             .select_columns(&kept);
-        let gram = u.transpose() * &u;
-        // tr((I − H)²), the residuals' share of the instrument's variance: m − r without a
-        // prior.
-        let freedom = residual.len() as f64 - 2.0 * gram.trace() + gram.norm_squared();
         let v_t = svd.v_t.expect("V was asked for");
         // F = D⁻¹ V_r S_r⁻¹.
         let mut factor = DMatrix::zeros(scales.len(), kept.len());
@@ -249,18 +255,18 @@ impl Propagation {
             blocks.push((at, height));
             at += height;
         }
-        // tr((I − H) K Kᵀ (I − H)) over the configurations' K_c: the repeatability's share of
-        // the residuals, ‖K‖² − Σ_c (2‖M_c‖² − tr(M_cᵀ Uᵀ U M_c)), M_c = U_cᵀ K_c
-        // (‖K‖² − Σ_c ‖M_c‖² without a prior).
-        let taken: f64 = blocks
-            .iter()
-            .map(|&(start, height)| {
-                let kept_moves = u.rows(start, height).transpose() * moves.rows(start, height);
-                2.0 * kept_moves.norm_squared()
-                    - (kept_moves.transpose() * &gram * &kept_moves).trace()
-            })
-            .sum();
-        let share = moves.norm_squared() - taken;
+        // The residuals' expected squares per unit of σ² (tr((I − H)²): m − r without a prior)
+        // and of the repeatability's variance.
+        let [freedom, share] = expected_squares(&u, &moves, &blocks);
+        // (Half a degree: without a prior the count is whole, to rounding.)
+        if freedom < 0.5 {
+            return Err(Error::InsufficientData(format!(
+                "{} residuals for {} identified parameter combinations leave {freedom:.2} \
+                 degrees of freedom: no residual is left to estimate the noise from",
+                residual.len(),
+                kept.len()
+            )));
+        }
         let held = residual.norm_squared();
         // An assumed repeatability is not trusted over the residuals: at most all they hold.
         let (machine, repeatability) = match repeatability {
@@ -483,8 +489,8 @@ pub struct UncertaintySource {
 impl UncertaintySource {
     /// The source of `model`, identified from `rows` with `options` on `nominal` whose legs
     /// repeat within `repeatability` ([`Propagation::of`]), beside `alternatives` identified
-    /// from the same rows, which they could not tell from it (each with `options` at its own
-    /// resolution,
+    /// from the same rows, which they could not tell from it (each with
+    /// [`IdentifyOptions::physical`] at its own resolution, as the cross-validation scored them,
     /// [`Propagation::position_covariances`]); the poses over the measured range are drawn with
     /// `seed`.
     pub fn new(
@@ -499,7 +505,7 @@ impl UncertaintySource {
         let alternatives = alternatives
             .iter()
             .map(|alternative| {
-                let options = options.at_resolution(alternative.pitch.basis());
+                let options = IdentifyOptions::physical(alternative.pitch.basis());
                 let of =
                     Propagation::of(alternative, &options, rows, repeatability).map_err(|e| {
                         let of_alternative = |why| {
@@ -1400,6 +1406,16 @@ mod tests {
             "{taken} mm against {largest}"
         );
         assert_eq!(assumed.noise.instrument_variance_mm2, 0.0);
+        // Options that are not the model's identification: refused, not propagated.
+        let known = Repeatability::Known(0.004);
+        for (other, says) in [
+            (IdentifyOptions::physical(12), "12"),
+            (options.smoothed(f64::NAN), "smoothness prior"),
+            (options.smoothed(-0.01), "smoothness prior"),
+        ] {
+            let e = Propagation::of(&model, &other, &rows, known).unwrap_err();
+            assert!(e.to_string().contains(says), "{e}");
+        }
     }
 
     /// The trace of the sample covariance of `values`, mm².

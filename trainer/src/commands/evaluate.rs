@@ -231,13 +231,19 @@ pub fn print_evaluation(evaluation: &Evaluation, validation: usize) {
     );
     let weights: Vec<f64> = std::iter::once(0.0).chain(SMOOTHNESS_WEIGHTS).collect();
     let mut header = vec!["configurations".to_string(), "chosen".to_string()];
-    header.extend(weights.iter().map(|w| format!("{w} (mm)")));
+    header.extend(weights.iter().map(|w| format!("λ = {w} (mm)")));
     let refs: Vec<&str> = header.iter().map(String::as_str).collect();
     let mut table = Table::<{ SMOOTHNESS_WEIGHTS.len() + 3 }>::new(
         refs.try_into().expect("a column per weight"),
     );
     for size in &evaluation.sizes {
         let Some(resolution) = &size.resolution else {
+            let mut row = vec![
+                size.configurations.to_string(),
+                "0 (too few to cross-validate)".to_string(),
+            ];
+            row.extend(weights.iter().map(|_| "—".to_string()));
+            table.row(row.try_into().expect("a cell per weight"));
             continue;
         };
         let mut row = vec![
