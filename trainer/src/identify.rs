@@ -430,12 +430,8 @@ pub(crate) fn linearise(
     let mut residual = DVector::zeros(total);
     let mut at = 0;
     for ((row, pose), which) in rows.iter().zip(poses.iter_mut()).zip(&points) {
-        *pose = loaded_pose(model, &row.legs, pose).map_err(|e| {
-            Error::InsufficientData(format!(
-                "configuration {}: forward kinematics of the identified geometry: {e}",
-                row.id
-            ))
-        })?;
+        *pose = loaded_pose(model, &row.legs, pose)
+            .map_err(|why| Error::InsufficientData(format!("configuration {}: {why}", row.id)))?;
         let screws = ActuationScrews::at(geometry, pose);
         let t = screws.motion_jacobian().ok_or_else(|| {
             Error::InsufficientData(format!("configuration {} is singular", row.id))
@@ -458,8 +454,9 @@ pub(crate) fn linearise(
 /// Passes at most of [`loaded_pose`]'s fixed point.
 const LOADED_POSE_PASSES: usize = 8;
 
-/// The loaded legs' lengths are taken as settled when a pass moves none by more than this, mm.
-const LOADED_POSE_TOLERANCE_MM: f64 = 1e-12;
+/// The loaded legs' lengths are taken as settled when a pass moves none by more than this, mm:
+/// the forward kinematics' own tolerance on the legs (it returns its seed within it).
+const LOADED_POSE_TOLERANCE_MM: f64 = 1e-9;
 
 /// The pose `model`'s machine stands at with its legs commanded to `commanded` (mm), from
 /// `seed`: the legs' loaded lengths depend on the pose through their sag under the weight, so
@@ -467,25 +464,32 @@ const LOADED_POSE_TOLERANCE_MM: f64 = 1e-12;
 /// loaded at the last pose (each shrinks the gap by the sag's slope, a small fraction). One
 /// pass from a pose far off (a commanded one, 0.7 mm and 0.2° from where the machine stands)
 /// left the identification's residuals' squares a quarter above their value: the answer must
-/// not depend on where it starts.
+/// not depend on where it starts. Why not, where the forward kinematics fails or the passes do
+/// not settle (a model whose sag moves faster than the pose: a step the identification halves).
 fn loaded_pose(
     model: &PhysicalModel,
     commanded: &[f64; LEGS],
     seed: &Pose,
-) -> std::result::Result<Pose, hexacomp_core::Error> {
+) -> std::result::Result<Pose, String> {
     let fk = ForwardOptions::default();
+    let kinematics = |lengths: &[f64; LEGS], seed: &Pose| {
+        forward_kinematics(&model.geometry, lengths, seed, &fk)
+            .map_err(|e| format!("forward kinematics of the identified geometry: {e}"))
+    };
     let mut lengths = model.loaded_lengths(commanded, seed);
-    let mut pose = forward_kinematics(&model.geometry, &lengths, seed, &fk)?;
-    for _ in 1..LOADED_POSE_PASSES {
+    let mut pose = kinematics(&lengths, seed)?;
+    for _ in 0..LOADED_POSE_PASSES {
         let loaded = model.loaded_lengths(commanded, &pose);
         let moved = (0..LEGS).fold(0.0f64, |m, i| m.max((loaded[i] - lengths[i]).abs()));
         if moved <= LOADED_POSE_TOLERANCE_MM {
-            break;
+            return Ok(pose);
         }
         lengths = loaded;
-        pose = forward_kinematics(&model.geometry, &lengths, &pose, &fk)?;
+        pose = kinematics(&lengths, &pose)?;
     }
-    Ok(pose)
+    Err(format!(
+        "the legs' sag and the pose did not settle together in {LOADED_POSE_PASSES} passes"
+    ))
 }
 
 /// `G` at `pose` for legs commanded to `commanded` (mm): row `i` is how far leg `i`'s loaded
@@ -779,6 +783,17 @@ mod tests {
             .unwrap();
         let options = IdentifyOptions::physical(12);
         let identified = identify(&g, &rows, &options).unwrap();
+        // The identified model sags (else the sag cannot depend on the pose).
+        assert!(
+            identified
+                .model
+                .compliance
+                .iter()
+                .flatten()
+                .any(|c| *c != 0.0),
+            "{:?}",
+            identified.model.compliance
+        );
         // From the commanded poses (0.7 mm and more from where the machine stands, for this
         // robot), and again from the poses reached.
         let mut seeds: Vec<Pose> = rows.iter().map(MeasuredConfiguration::pose).collect();

@@ -15,6 +15,12 @@
 //! they carry): the pose-error twist has the covariance `T (G C Gᵀ + w I) Tᵀ`, and the position
 //! error its upper-left 3 × 3 block `Σ`.
 //!
+//! Two approximations: `J` holds the pose while a parameter moves the legs, not the sag's
+//! change with the pose it moves to (a slope of about 1e-2: `B` about 1 % off); and with a
+//! smoothness prior, the curvature the prior takes off the curves stays in the residuals and is
+//! counted as noise (`σ²` a little high: the uncertainty errs wide), while the bias it leaves
+//! in the curves is in no covariance (measured against the band, docs/accuracy.md).
+//!
 //! **The resolutions the data cannot tell apart.** The covariance holds the parameters' noise,
 //! not the model's form: where the cross-validation could not tell other lead-screw
 //! resolutions from the chosen one ([`crate::pitch_resolution::alternatives`]), each is taken
@@ -258,8 +264,10 @@ impl Propagation {
         // The residuals' expected squares per unit of σ² (tr((I − H)²): m − r without a prior)
         // and of the repeatability's variance.
         let [freedom, share] = expected_squares(&u, &moves, &blocks);
-        // (Half a degree: without a prior the count is whole, to rounding.)
-        if freedom < 0.5 {
+        // (Half a degree: without a prior the count is whole, to rounding. With one, the prior
+        // may see directions the residuals do not: as many residuals as directions are refused
+        // all the same.)
+        if freedom < 0.5 || residual.len() <= kept.len() {
             return Err(Error::InsufficientData(format!(
                 "{} residuals for {} identified parameter combinations leave {freedom:.2} \
                  degrees of freedom: no residual is left to estimate the noise from",
@@ -1409,7 +1417,7 @@ mod tests {
         // Options that are not the model's identification: refused, not propagated.
         let known = Repeatability::Known(0.004);
         for (other, says) in [
-            (IdentifyOptions::physical(12), "12"),
+            (IdentifyOptions::physical(12), "coefficients"),
             (options.smoothed(f64::NAN), "smoothness prior"),
             (options.smoothed(-0.01), "smoothness prior"),
         ] {
