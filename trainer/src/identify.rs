@@ -599,6 +599,26 @@ mod tests {
         delta
     }
 
+    /// `count` configurations of the default plan (plan seed 3) measured on the virtual machine
+    /// of `variant` (machine seed 1, noise seed 3).
+    fn planned_and_measured(
+        g: &Geometry,
+        variant: ErrorVariant,
+        count: usize,
+    ) -> Vec<MeasuredConfiguration> {
+        let mut platform = VirtualPlatform::new(g, &ErrorModel::variant(variant), 1, 3).unwrap();
+        let poses = crate::plan::plan(
+            g,
+            &crate::plan::PlanOptions {
+                count,
+                seed: 3,
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        crate::acquire::measure_plan(&mut platform, &crate::plan::numbered_rows(&poses)).unwrap()
+    }
+
     #[test]
     fn rank_deficient_data_moves_only_the_parameter_combinations_it_determines() {
         let g = Geometry::prototype();
@@ -697,20 +717,7 @@ mod tests {
     #[test]
     fn a_heavy_smoothness_prior_straightens_the_curves_and_a_bad_weight_is_refused() {
         let g = Geometry::prototype();
-        let mut platform =
-            VirtualPlatform::new(&g, &ErrorModel::variant(ErrorVariant::StrongPitch), 1, 3)
-                .unwrap();
-        let poses = crate::plan::plan(
-            &g,
-            &crate::plan::PlanOptions {
-                count: 40,
-                seed: 3,
-                ..Default::default()
-            },
-        )
-        .unwrap();
-        let rows = crate::acquire::measure_plan(&mut platform, &crate::plan::numbered_rows(&poses))
-            .unwrap();
+        let rows = planned_and_measured(&g, ErrorVariant::StrongPitch, 40);
         // The largest second difference of any leg's curve, mm.
         let bend = |smoothness: f64| {
             let options = IdentifyOptions::physical(12).smoothed(smoothness);
@@ -768,19 +775,7 @@ mod tests {
     #[test]
     fn the_residuals_of_a_compliant_model_do_not_depend_on_the_pose_they_start_from() {
         let g = Geometry::prototype();
-        let mut platform =
-            VirtualPlatform::new(&g, &ErrorModel::variant(ErrorVariant::Unseen), 1, 3).unwrap();
-        let poses = crate::plan::plan(
-            &g,
-            &crate::plan::PlanOptions {
-                count: 50,
-                seed: 3,
-                ..Default::default()
-            },
-        )
-        .unwrap();
-        let rows = crate::acquire::measure_plan(&mut platform, &crate::plan::numbered_rows(&poses))
-            .unwrap();
+        let rows = planned_and_measured(&g, ErrorVariant::Unseen, 50);
         let options = IdentifyOptions::physical(12);
         let identified = identify(&g, &rows, &options).unwrap();
         // The identified model sags (else the sag cannot depend on the pose).

@@ -616,13 +616,7 @@ mod tests {
         assert!(matches!(choice.outcome(16), Some(Ok(s)) if s.cross_validated_rmse_mm == 1.0));
         assert!(choice.outcome(10).is_none());
         // Each resolution's folds are its own: sixteen far worse than twelve, twelve chosen.
-        let missed = [
-            folds_of(Some(4.0)),
-            folds_of(Some(1.0)),
-            folds_of(Some(9.0)),
-        ]
-        .concat();
-        let choice = choice_of(4, 2, missed).unwrap();
+        let choice = twelve_chosen();
         assert_eq!(choice.options.pitch_basis, 12);
         assert!(choice.failed.is_empty());
         let errors: Vec<f64> = choice
@@ -639,18 +633,24 @@ mod tests {
         }
     }
 
+    /// The choice when eight, twelve and sixteen miss their two folds' configurations by 4, 1
+    /// and 9 mm²: twelve.
+    fn twelve_chosen() -> ResolutionChoice {
+        let missed = [
+            folds_of(Some(4.0)),
+            folds_of(Some(1.0)),
+            folds_of(Some(9.0)),
+        ]
+        .concat();
+        choice_of(4, 2, missed).unwrap()
+    }
+
     #[test]
     fn the_smoothness_prior_scoring_lowest_at_the_chosen_resolution_is_taken() {
         // Twelve chosen (misses of 1 mm² over its two folds); the three weights then miss by
         // `misses` in turn (`None`: a fold failed).
         let smoothed = |misses: [Option<f64>; 3]| {
-            let missed = [
-                folds_of(Some(4.0)),
-                folds_of(Some(1.0)),
-                folds_of(Some(9.0)),
-            ]
-            .concat();
-            let choice = choice_of(4, 2, missed).unwrap();
+            let choice = twelve_chosen();
             assert_eq!(choice.options.pitch_basis, 12);
             let missed = misses.into_iter().flat_map(folds_of).collect();
             choice.smoothed_by(4, 2, missed)
