@@ -424,16 +424,39 @@ fn calibrate_runs_the_whole_pipeline_and_summarises() {
     for basis in ["8: ", "12: ", "16: "] {
         assert!(tried.contains(basis), "{resolution}");
     }
-    let chosen_error = tried
-        .split(", ")
-        .find_map(|s| s.strip_prefix(&format!("{chosen}: ")))
-        .unwrap()
-        .split_whitespace()
-        .next()
-        .unwrap();
+    // The error of `what` among `tried` ("8: 0.0353 ± 0.0010 mm, 12: …").
+    let error_of = |tried: &str, what: &str| -> String {
+        tried
+            .split(", ")
+            .find_map(|s| s.strip_prefix(&format!("{what}: ")))
+            .unwrap_or_else(|| panic!("no {what} in {tried}"))
+            .split_whitespace()
+            .next()
+            .unwrap()
+            .to_string()
+    };
+    // Then the smoothness prior at that resolution: each weight tried, none among them with the
+    // resolution's own error, and the chosen weight's error the model's.
+    let smoothing = report
+        .lines()
+        .find_map(|l| l.strip_prefix("physical model: the curves' smoothness prior of weight "))
+        .unwrap_or_else(|| panic!("{report}"));
+    let weight = smoothing.split(',').next().unwrap();
+    assert!(
+        smoothing.contains(&format!(
+            "the lowest cross-validated at {chosen} coefficients"
+        )),
+        "{smoothing}"
+    );
+    let weights = smoothing.split_once('(').unwrap().1;
+    assert_eq!(error_of(weights, "0"), error_of(tried, chosen), "{report}");
+    for tried_weight in ["0.003", "0.01", "0.03"] {
+        error_of(weights, tried_weight);
+    }
     assert!(
         report.contains(&format!(
-            "physical model: {chosen_error} mm cross-validated"
+            "physical model: {} mm cross-validated",
+            error_of(weights, weight)
         )),
         "{report}"
     );
