@@ -69,16 +69,7 @@ impl ResolutionChoice {
         &self,
         pitch_basis: usize,
     ) -> Option<std::result::Result<&ResolutionScore, &str>> {
-        self.scores
-            .iter()
-            .find(|s| s.pitch_basis == pitch_basis)
-            .map(Ok)
-            .or_else(|| {
-                self.failed
-                    .iter()
-                    .find(|(basis, _)| *basis == pitch_basis)
-                    .map(|(_, why)| Err(why.as_str()))
-            })
+        outcome_in(&self.scores, |s| s.pitch_basis, &self.failed, pitch_basis)
     }
 
     /// What the chosen resolution gave with the smoothness prior of weight `smoothness` (0:
@@ -90,35 +81,26 @@ impl ResolutionChoice {
         if smoothness == 0.0 {
             return self.outcome(self.options.pitch_basis);
         }
-        self.smoothed
-            .iter()
-            .find(|s| s.smoothness == smoothness)
-            .map(Ok)
-            .or_else(|| {
-                self.smoothing_failed
-                    .iter()
-                    .find(|(weight, _)| *weight == smoothness)
-                    .map(|(_, why)| Err(why.as_str()))
-            })
+        outcome_in(
+            &self.smoothed,
+            |s| s.smoothness,
+            &self.smoothing_failed,
+            smoothness,
+        )
     }
 
     /// The chosen resolution's score without a smoothness prior.
     pub fn chosen_without_prior(&self) -> &ResolutionScore {
-        self.scores
-            .iter()
-            .find(|s| s.pitch_basis == self.options.pitch_basis)
+        self.smoothing_outcome(0.0)
+            .and_then(std::result::Result::ok)
             .expect("the chosen resolution was scored")
     }
 
     /// The chosen resolution's and smoothness prior's score.
     pub fn chosen(&self) -> &ResolutionScore {
-        self.scores
-            .iter()
-            .chain(&self.smoothed)
-            .find(|s| {
-                s.pitch_basis == self.options.pitch_basis && s.smoothness == self.options.smoothness
-            })
-            .expect("the chosen resolution was scored")
+        self.smoothing_outcome(self.options.smoothness)
+            .and_then(std::result::Result::ok)
+            .expect("the chosen resolution and prior were scored")
     }
 
     /// The resolutions besides the chosen one that the cross-validation could not tell from
@@ -131,6 +113,26 @@ impl ResolutionChoice {
             .filter(|&basis| basis != self.options.pitch_basis)
             .collect()
     }
+}
+
+/// The score among `scores` whose `key` is `wanted`, or why it has none among `failed`; `None`
+/// where it is in neither.
+fn outcome_in<'a, K: PartialEq>(
+    scores: &'a [ResolutionScore],
+    key: impl Fn(&ResolutionScore) -> K,
+    failed: &'a [(K, String)],
+    wanted: K,
+) -> Option<std::result::Result<&'a ResolutionScore, &'a str>> {
+    scores
+        .iter()
+        .find(|s| key(s) == wanted)
+        .map(Ok)
+        .or_else(|| {
+            failed
+                .iter()
+                .find(|(k, _)| *k == wanted)
+                .map(|(_, why)| Err(why.as_str()))
+        })
 }
 
 /// The physical models of lead-screw resolutions `bases` (B-spline coefficients per leg; the
@@ -195,28 +197,45 @@ pub fn chosen_resolution(
         )));
     }
     let fold = folds(&legs, fold_count, seed);
-    let jobs: Vec<(usize, usize)> = PITCH_RESOLUTIONS
-        .iter()
-        .flat_map(|&basis| (0..fold_count).map(move |f| (basis, f)))
-        .collect();
-    let missed = in_parallel(&jobs, |&(basis, f)| {
-        let options = IdentifyOptions::physical(basis);
-        let missed = fold_miss(nominal, measurements, corrections, &fold, f, &options);
-        progress(1);
-        missed
-    });
+    // Each of `candidates` identified without each fold, on the machine's cores: every job's
+    // misses, each candidate's folds in order.
+    let misses = |candidates: Vec<IdentifyOptions>| {
+        let jobs: Vec<(IdentifyOptions, usize)> = candidates
+            .into_iter()
+            .flat_map(|options| (0..fold_count).map(move |f| (options, f)))
+            .collect();
+        in_parallel(&jobs, |(options, f)| {
+            let missed = fold_miss(nominal, measurements, corrections, &fold, *f, options);
+            progress(1);
+            missed
+        })
+    };
+    let missed = misses(PITCH_RESOLUTIONS.map(IdentifyOptions::physical).to_vec());
     let choice = choice_of(measurements.len(), fold_count, missed)?;
-    let jobs: Vec<(f64, usize)> = SMOOTHNESS_WEIGHTS
-        .iter()
-        .flat_map(|&weight| (0..fold_count).map(move |f| (weight, f)))
-        .collect();
-    let missed = in_parallel(&jobs, |&(weight, f)| {
-        let options = choice.options.smoothed(weight);
-        let missed = fold_miss(nominal, measurements, corrections, &fold, f, &options);
-        progress(1);
-        missed
-    });
+    let missed = misses(
+        SMOOTHNESS_WEIGHTS
+            .map(|w| choice.options.smoothed(w))
+            .to_vec(),
+    );
     Ok(choice.smoothed_by(measurements.len(), fold_count, missed))
+}
+
+/// The score of each of `candidates`, or why it has none, from every job's misses (each
+/// candidate's `fold_count` folds in order) over `configurations` configurations.
+fn scores_of(
+    candidates: impl IntoIterator<Item = IdentifyOptions>,
+    configurations: usize,
+    fold_count: usize,
+    missed: Vec<Result<Vec<(usize, f64)>>>,
+) -> Vec<std::result::Result<ResolutionScore, String>> {
+    let mut missed = missed.into_iter();
+    candidates
+        .into_iter()
+        .map(|options| {
+            let fold_results: Vec<_> = missed.by_ref().take(fold_count).collect();
+            scored(&options, configurations, fold_results)
+        })
+        .collect()
 }
 
 impl ResolutionChoice {
@@ -230,11 +249,14 @@ impl ResolutionChoice {
         fold_count: usize,
         missed: Vec<Result<Vec<(usize, f64)>>>,
     ) -> Self {
-        let mut missed = missed.into_iter();
-        for weight in SMOOTHNESS_WEIGHTS {
-            let fold_results: Vec<_> = missed.by_ref().take(fold_count).collect();
-            let options = self.options.smoothed(weight);
-            match scored(&options, configurations, fold_results) {
+        let candidates = SMOOTHNESS_WEIGHTS.map(|weight| self.options.smoothed(weight));
+        for (weight, score) in SMOOTHNESS_WEIGHTS.into_iter().zip(scores_of(
+            candidates,
+            configurations,
+            fold_count,
+            missed,
+        )) {
+            match score {
                 Ok(score) => self.smoothed.push(score),
                 Err(why) => self.smoothing_failed.push((weight, why)),
             }
@@ -260,16 +282,15 @@ fn choice_of(
     fold_count: usize,
     missed: Vec<Result<Vec<(usize, f64)>>>,
 ) -> Result<ResolutionChoice> {
-    let mut missed = missed.into_iter();
     let mut scores = Vec::with_capacity(PITCH_RESOLUTIONS.len());
     let mut failed = Vec::new();
-    for basis in PITCH_RESOLUTIONS {
-        let fold_results: Vec<_> = missed.by_ref().take(fold_count).collect();
-        match scored(
-            &IdentifyOptions::physical(basis),
-            configurations,
-            fold_results,
-        ) {
+    let candidates = PITCH_RESOLUTIONS.map(IdentifyOptions::physical);
+    for (basis, score) in
+        PITCH_RESOLUTIONS
+            .into_iter()
+            .zip(scores_of(candidates, configurations, fold_count, missed))
+    {
+        match score {
             Ok(score) => scores.push(score),
             Err(why) => failed.push((basis, why)),
         }

@@ -10,7 +10,7 @@ use hexacomp_trainer::evaluate::{
     Evaluation, EvaluationOptions, Method, Protocol, SizeResult, evaluate,
 };
 use hexacomp_trainer::identify::PHYSICAL;
-use hexacomp_trainer::pitch_resolution::{PITCH_RESOLUTIONS, SMOOTHNESS_WEIGHTS};
+use hexacomp_trainer::pitch_resolution::{PITCH_RESOLUTIONS, ResolutionScore, SMOOTHNESS_WEIGHTS};
 use hexacomp_trainer::train::{CROSS_VALIDATION_FOLDS, TrainOptions};
 use hexacomp_virtual::{DEFAULT_MACHINE_SEED, ErrorModel, ErrorVariant};
 
@@ -194,16 +194,11 @@ pub fn print_evaluation(evaluation: &Evaluation, validation: usize) {
         match &size.resolution {
             Some(resolution) => {
                 row.push(resolution.options.pitch_basis.to_string());
-                row.extend(PITCH_RESOLUTIONS.iter().map(
-                    |&basis| match resolution.outcome(basis) {
-                        Some(Ok(s)) => format!(
-                            "{:.4} ± {:.4}",
-                            s.cross_validated_rmse_mm, s.standard_error_mm
-                        ),
-                        Some(Err(_)) => "left out".to_string(),
-                        None => "—".to_string(),
-                    },
-                ));
+                row.extend(
+                    PITCH_RESOLUTIONS
+                        .iter()
+                        .map(|&basis| score_cell(resolution.outcome(basis))),
+                );
             }
             None => {
                 row.push(format!(
@@ -253,14 +248,7 @@ pub fn print_evaluation(evaluation: &Evaluation, validation: usize) {
         row.extend(
             weights
                 .iter()
-                .map(|&weight| match resolution.smoothing_outcome(weight) {
-                    Some(Ok(s)) => format!(
-                        "{:.4} ± {:.4}",
-                        s.cross_validated_rmse_mm, s.standard_error_mm
-                    ),
-                    Some(Err(_)) => "left out".to_string(),
-                    None => "—".to_string(),
-                }),
+                .map(|&weight| score_cell(resolution.smoothing_outcome(weight))),
         );
         table.row(row.try_into().expect("a cell per weight"));
     }
@@ -515,4 +503,17 @@ pub fn write_figures(evaluation: &Evaluation, dir: &Path) -> anyhow::Result<()> 
 fn write(dir: &Path, file: &str, chart: &Chart) -> anyhow::Result<()> {
     let path = dir.join(file);
     Ok(super::write_bytes(&path, chart.to_svg()?.as_bytes())?)
+}
+
+/// A cross-validated score's cell: its error ± standard error (mm), "left out" where it could
+/// not be scored, "—" where it was not tried.
+fn score_cell(outcome: Option<Result<&ResolutionScore, &str>>) -> String {
+    match outcome {
+        Some(Ok(s)) => format!(
+            "{:.4} ± {:.4}",
+            s.cross_validated_rmse_mm, s.standard_error_mm
+        ),
+        Some(Err(_)) => "left out".to_string(),
+        None => "—".to_string(),
+    }
 }
