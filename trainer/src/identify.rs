@@ -134,6 +134,24 @@ impl IdentifyOptions {
         }
     }
 
+    /// These options if a model can be identified with them: a lead-screw curve of none or at
+    /// least four coefficients, and a smoothness prior's weight finite and ≥ 0.
+    pub(crate) fn validate(&self) -> Result<()> {
+        if (1..4).contains(&self.pitch_basis) {
+            return Err(Error::InvalidSetting(format!(
+                "{} B-spline coefficients per lead-screw curve: 0 (none) or at least 4 are needed",
+                self.pitch_basis
+            )));
+        }
+        if !(self.smoothness.is_finite() && self.smoothness >= 0.0) {
+            return Err(Error::InvalidSetting(format!(
+                "a smoothness prior's weight of {}: a finite weight ≥ 0 is needed",
+                self.smoothness
+            )));
+        }
+        Ok(())
+    }
+
     /// These options with the lead-screw curves' smoothness prior of weight `smoothness`
     /// ([`Self::smoothness`]).
     pub const fn smoothed(self, smoothness: f64) -> Self {
@@ -174,18 +192,7 @@ pub fn identify(
             rows.len()
         )));
     }
-    if (1..4).contains(&options.pitch_basis) {
-        return Err(Error::InvalidSetting(format!(
-            "{} B-spline coefficients per lead-screw curve: 0 (none) or at least 4 are needed",
-            options.pitch_basis
-        )));
-    }
-    if !(options.smoothness.is_finite() && options.smoothness >= 0.0) {
-        return Err(Error::InvalidSetting(format!(
-            "a smoothness prior's weight of {}: a finite weight ≥ 0 is needed",
-            options.smoothness
-        )));
-    }
+    options.validate()?;
     let mut model = PhysicalModel::geometric(nominal.clone());
     model.pitch = PitchCurves::zero(nominal.leg_range, options.pitch_basis);
     let parameters = options.parameters();

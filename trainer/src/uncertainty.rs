@@ -211,12 +211,7 @@ impl Propagation {
                 "the machine's repeatability is {repeatability_mm} mm: a finite σ ≥ 0 is needed"
             )));
         }
-        if !(options.smoothness.is_finite() && options.smoothness >= 0.0) {
-            return Err(Error::InvalidSetting(format!(
-                "a smoothness prior's weight of {}: a finite weight ≥ 0 is needed",
-                options.smoothness
-            )));
-        }
+        options.validate()?;
         if options.pitch_basis != model.pitch.basis() {
             return Err(Error::InvalidSetting(format!(
                 "the model's lead-screw curves have {} coefficients, the identification's \
@@ -1033,22 +1028,20 @@ mod tests {
             model_scattered += scattered_of(|([eight, _], _, _)| &eight.model);
             held_scattered += scattered_of(|(_, _, held)| &held.model);
             free_scattered += scattered_of(|([_, twelve], _, _)| &twelve.model);
-            for ([_, twelve], _, held) in &draws {
-                held_predicted += predicted(held);
-                free_predicted += predicted(twelve);
-            }
             // Twelve's miss under eight's commands, in each draw: its scatter is N's. The
             // predictions are averaged over the draws.
             let mut misses = Vec::with_capacity(draws.len());
-            for ([eight, twelve], assumed, _) in &draws {
+            for ([eight, twelve], assumed, held) in &draws {
+                model_predicted += predicted(eight);
+                assumed_predicted += predicted(assumed);
+                free_predicted += predicted(twelve);
+                held_predicted += predicted(held);
                 let commanded = eight.model.command(pose);
                 let screws = ActuationScrews::at(&eight.model.geometry, pose);
                 let g = leg_sensitivities(&eight.model, &eight.options, &commanded, pose, &screws);
                 let own = &g * &eight.estimator;
                 let (miss, fits) = eight.miss_of(twelve, pose, &commanded, &own);
                 misses.push(miss);
-                model_predicted += (&g * &eight.covariance * g.transpose()).trace() / 40.0;
-                assumed_predicted += (&g * &assumed.covariance * g.transpose()).trace() / 40.0;
                 miss_predicted += fits.trace() / 40.0;
             }
             miss_scattered += scatter(&misses);
