@@ -588,6 +588,12 @@ fn physical(
              coefficients per leg, which the cross-validation could not tell from it"
         );
     }
+    if resolution.options.smoothness > 0.0 && candidate.networks_uncertainty.is_ok() {
+        println!(
+            "physical model: its uncertainty holds the smoothness prior's bias, its miss to the \
+             same resolution identified without the prior beyond the two fits' noise"
+        );
+    }
 
     if let Ok(uncertainty) = &candidate.networks_uncertainty
         && let Some(split) = uncertainty.source.shape_split()
