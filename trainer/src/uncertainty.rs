@@ -21,10 +21,12 @@
 //! counted as noise (`σ²` a little high: the uncertainty errs wide).
 //!
 //! **The smoothness prior's bias.** The prior holds the curves' noise back and bends them
-//! toward straight lines: a bias no covariance holds. The same resolution identified without
-//! the prior has none; where the machine were as it says, this model's commands would miss by
-//! `d`, of which the two fits' noise explains a part. That miss, shrunk as the alternatives'
-//! is, is added whole ([`Propagation::with_prior_bias`]).
+//! toward straight lines: a bias `C` does not hold. The same resolution identified without
+//! the prior has none; were the machine as it says, this model's commands would miss by `d`,
+//! of which the two fits' noise explains a part. That miss, shrunk as the alternatives' is,
+//! takes this model's own place among the forms (whole where there is no alternative), and
+//! the legs' variance at a fresh move is the unpenalised fit's, whose residuals do not hold
+//! the curvature the prior took off ([`Propagation::with_prior_bias`]).
 //!
 //! **The resolutions the data cannot tell apart.** The covariance holds the parameters' noise,
 //! not the model's form: where the cross-validation could not tell other lead-screw
@@ -336,26 +338,30 @@ impl Propagation {
     }
 
     /// This propagation, of a model identified with a smoothness prior, with `unpenalised`:
-    /// the same resolution identified from the same rows without it. The prior trades the
-    /// curves' noise for a bias toward straight curves, which no covariance holds; the
-    /// unpenalised estimate has none, so where the machine were as it says, the legs this
-    /// model commands would stand off by its miss `d` ([`Self::position_covariances`]), less
-    /// the two fits' own noise. That miss beyond the noise is this model's error, not a choice
-    /// among forms: it is added whole, not shared as the alternatives' spread is. Refused for
-    /// a model without a prior, or an `unpenalised` with one or of another resolution.
+    /// the same resolution identified from the same rows with the same options but the prior.
+    /// The prior trades the curves' noise for a bias toward straight curves, which `C` does
+    /// not hold; the unpenalised estimate has none, so were the machine as it says, the legs
+    /// this model commands would stand off by its miss `d` ([`Self::position_covariances`]),
+    /// less the two fits' own noise. That miss beyond the noise takes this model's own place
+    /// among the forms the alternatives' spread weighs (where the machine has this model's
+    /// form, it is the error its commands make), and whole where there is no alternative.
+    /// Refused for a model without a prior, or an `unpenalised` whose options are not these
+    /// without it, or identified from other rows (another count of residuals).
     pub fn with_prior_bias(self, unpenalised: Propagation) -> Result<Self> {
         if self.options.smoothness <= 0.0
-            || unpenalised.options.smoothness != 0.0
-            || unpenalised.options.pitch_basis != self.options.pitch_basis
+            || unpenalised.options != self.options.smoothed(0.0)
             || unpenalised.residuals() != self.residuals()
         {
             return Err(Error::InvalidSetting(format!(
-                "a prior's bias is measured against the same resolution without it: this model \
-                 has {} coefficients and a prior of {}, the other {} and {}",
+                "a prior's bias is measured against the same identification without it, from \
+                 the same rows: this model has {} coefficients, a prior of {} and {} residuals, \
+                 the other {} coefficients, a prior of {} and {} residuals",
                 self.options.pitch_basis,
                 self.options.smoothness,
+                self.residuals(),
                 unpenalised.options.pitch_basis,
-                unpenalised.options.smoothness
+                unpenalised.options.smoothness,
+                unpenalised.residuals()
             )));
         }
         Ok(Self {
@@ -380,8 +386,9 @@ impl Propagation {
     /// `s = d_kᵀ N_k⁻¹ d_k`, `p` the directions `N_k` holds: `s − p` estimates `s`'s share
     /// beyond the noise),
     /// over the `K` alternatives and this model taken as equally likely (`/ (K + 1)`), is
-    /// added to the legs' covariance; and where the model has a smoothness prior, the miss to
-    /// the unpenalised model so shrunk, whole: the prior's bias ([`Self::with_prior_bias`]).
+    /// added to the legs' covariance. Where the model has a smoothness prior, its own form's
+    /// share is not zero but the miss to the same resolution without the prior, so shrunk:
+    /// the prior's bias ([`Self::with_prior_bias`]).
     pub fn position_covariances(
         &self,
         pose: &Pose,
@@ -397,13 +404,11 @@ impl Propagation {
         let choices = (alternatives.len() + 1) as f64;
         if !alternatives.is_empty() || self.unpenalised.is_some() {
             let own = &g * &self.estimator;
-            for alternative in alternatives {
-                let (d, fits) = self.miss_of(alternative, pose, &commanded, &own);
+            // Each alternative's miss holds the prior's bias too: it is measured under this
+            // model's commands. Its own form's share is the bias alone.
+            for form in self.unpenalised.as_deref().into_iter().chain(alternatives) {
+                let (d, fits) = self.miss_of(form, pose, &commanded, &own);
                 legs += beyond_noise(&d, &fits) / choices;
-            }
-            if let Some(unpenalised) = &self.unpenalised {
-                let (d, fits) = self.miss_of(unpenalised, pose, &commanded, &own);
-                legs += beyond_noise(&d, &fits);
             }
         }
         let position = |m: SMatrix<f64, LEGS, LEGS>| {
@@ -433,6 +438,12 @@ impl Propagation {
         let g_k = leg_sensitivities(model, &alternative.options, commanded, pose, &screws);
         let fits = self.noise.sandwich(&(g_k * &alternative.estimator - own));
         (d, SMatrix::from_iterator(fits.iter().copied()))
+    }
+
+    /// The fit that stands for this model's form: the same identification without the
+    /// smoothness prior where it has one ([`Self::with_prior_bias`]), else this one.
+    fn own_form(&self) -> &Propagation {
+        self.unpenalised.as_deref().unwrap_or(self)
     }
 
     /// The number of residuals the model was identified from (three per measured point).
@@ -518,8 +529,8 @@ pub struct BeyondRepeatability {
 /// among the configurations' nominal legs.
 #[derive(Debug, Clone)]
 pub struct UncertaintySource {
-    /// `w` of the model's [`Propagation`] and its alternatives', averaged (each form taken as
-    /// equally likely), mm².
+    /// `w` of the model's [`Propagation`] (of its fit without the smoothness prior, where it
+    /// has one) and its alternatives', averaged (each form taken as equally likely), mm².
     leg_variance_mm2: f64,
     /// The model's residuals' variance told apart by shape, where it can be.
     split: Option<ShapeSplit>,
@@ -600,17 +611,14 @@ impl UncertaintySource {
             })
             .collect();
         // Each form taken as equally likely, as in the spread between them: had the machine
-        // been alternative k's, what the form misses would be k's.
-        let leg_variance_mm2 = (propagation.leg_variance_mm2
-            + alternatives
-                .iter()
-                .map(|alternative| alternative.leg_variance_mm2)
-                .sum::<f64>())
+        // been alternative k's, what the form misses would be k's. The model's own form is
+        // its fit without the prior where it has one (whose residuals do not hold the
+        // curvature the prior took off: that is its bias, in the spread's own share).
+        let forms = || std::iter::once(propagation.own_form()).chain(&alternatives);
+        let leg_variance_mm2 = forms().map(|form| form.leg_variance_mm2).sum::<f64>()
             / (alternatives.len() + 1) as f64;
         let beyond = BeyondRepeatability {
-            at_fresh_moves: std::iter::once(&propagation)
-                .chain(&alternatives)
-                .any(|of| of.leg_variance_mm2 > of.repeatability_variance_mm2),
+            at_fresh_moves: forms().any(|of| of.leg_variance_mm2 > of.repeatability_variance_mm2),
             moving_parameters: propagation.noise.repeatability_variance_mm2
                 > propagation.repeatability_variance_mm2,
         };
@@ -625,7 +633,8 @@ impl UncertaintySource {
     }
 
     /// The variance of each leg's length at a fresh move the uncertainty is fitted with: `w`
-    /// of the model's [`Propagation`] and of its alternatives', averaged, mm².
+    /// of the model's [`Propagation`] (of its fit without the smoothness prior, where it has
+    /// one) and of its alternatives', averaged, mm².
     pub fn leg_variance_mm2(&self) -> f64 {
         self.leg_variance_mm2
     }
@@ -1397,29 +1406,28 @@ mod tests {
     }
 
     #[test]
-    fn a_smoothness_priors_bias_is_added_whole_as_far_as_the_machine_shows_it() {
-        // A noiseless default robot, whose lead-screw curves twelve coefficients follow: the
-        // model of twelve without a prior reaches every pose (within 0.1 µm here), so the
-        // model of twelve with a prior misses by the prior's bias alone, and its uncertainty
-        // must add that miss — against where the machine really goes. (A weight of 1, above
-        // the ones calibrate tries, for a bias of 5–22 µm, well above twelve's own miss.)
+    fn a_smoothness_priors_bias_is_added_as_far_as_the_machine_shows_it() {
+        // A noiseless default robot, whose lead-screw curves twelve and sixteen coefficients
+        // follow: the models of twelve and of sixteen without a prior reach every pose (within
+        // 0.1 µm here), so the model of twelve with a prior misses by the prior's bias alone,
+        // and its uncertainty must add that miss — against where the machine really goes.
+        // (A weight of 1, above the ones calibrate tries, for a bias of 5–22 µm, well above
+        // twelve's own miss.) Beside sixteen as an alternative, whose form describes the
+        // machine as well, the two forms' shares together are still that one miss: each
+        // alternative's miss holds the prior's bias too.
         let g = Geometry::prototype();
         let errors = hexacomp_virtual::ErrorModel::default().without_noise();
         let rows = measured(&g, &forty_poses(&g), &errors, 1);
-        let smoothed = IdentifyOptions::physical(12).smoothed(1.0);
-        let unpenalised = IdentifyOptions::physical(12);
-        let model = crate::identify::identify(&g, &rows, &smoothed)
-            .unwrap()
-            .model;
-        let without = crate::identify::identify(&g, &rows, &unpenalised)
-            .unwrap()
-            .model;
         let repeatability = Repeatability::Known(0.0);
-        let alone = Propagation::of(&model, &smoothed, &rows, repeatability).unwrap();
-        let with_bias = alone
-            .clone()
-            .with_prior_bias(Propagation::of(&without, &unpenalised, &rows, repeatability).unwrap())
-            .unwrap();
+        let propagated = |options: &IdentifyOptions| {
+            let model = crate::identify::identify(&g, &rows, options).unwrap().model;
+            Propagation::of(&model, options, &rows, repeatability).unwrap()
+        };
+        let smoothed = IdentifyOptions::physical(12).smoothed(1.0);
+        let alone = propagated(&smoothed);
+        let without = propagated(&IdentifyOptions::physical(12));
+        let sixteen = propagated(&IdentifyOptions::physical(16));
+        let with_bias = alone.clone().with_prior_bias(without.clone()).unwrap();
         let machine = hexacomp_virtual::VirtualPlatform::new(&g, &errors, 1, 1)
             .unwrap()
             .machine()
@@ -1435,34 +1443,40 @@ mod tests {
         .unwrap();
         let mut largest = 0.0f64;
         for pose in &fresh {
-            let (before, legs_before) = alone.position_covariances(pose, &[]).unwrap();
-            let (after, legs_after) = with_bias.position_covariances(pose, &[]).unwrap();
-            assert_eq!(
-                legs_before, legs_after,
-                "the leg variance's part is unchanged"
-            );
             let reached = machine
-                .settle(&machine.unloaded_lengths(&model.command(pose)), pose)
+                .settle(&machine.unloaded_lengths(&alone.model.command(pose)), pose)
                 .unwrap();
             let off = reached.position - pose.position;
             let off = nalgebra::Vector3::new(off.x, off.y, off.z);
             let expected = off * off.transpose();
             largest = largest.max(off.norm());
-            // Within what the linear map leaves out (the sag held while the pose moves) and
-            // what twelve coefficients miss of the machine's curves: 2 % of the trace measured.
-            assert!(
-                (after - before - expected).norm() <= 3e-2 * expected.norm(),
-                "pose {pose:?}: added {} against {expected}",
-                after - before
-            );
+            let before = alone.position_covariances(pose, &[]).unwrap().0;
+            for alternatives in [&[][..], std::slice::from_ref(&sixteen)] {
+                let after = with_bias
+                    .position_covariances(pose, alternatives)
+                    .unwrap()
+                    .0;
+                // Within what the linear map leaves out (the sag held while the pose moves)
+                // and what the unpenalised models miss of the machine's curves: 1.5 % of the
+                // trace measured.
+                assert!(
+                    (after - before - expected).norm() <= 3e-2 * expected.norm(),
+                    "pose {pose:?}, {} alternatives: added {} against {expected}",
+                    alternatives.len(),
+                    after - before
+                );
+            }
         }
         // The prior moves the poses by micrometres: the check is about something.
         assert!(largest > 1e-3, "the prior's bias is {largest} mm at most");
-        // A model without a prior has no bias to bound, and the reference must be unpenalised.
-        assert!(matches!(
-            alone.clone().with_prior_bias(alone.clone()),
-            Err(Error::InvalidSetting(_))
-        ));
+        // The reference must be this identification without the prior, and this model must
+        // have one.
+        for (model, reference) in [(&alone, &alone), (&alone, &sixteen), (&without, &without)] {
+            assert!(matches!(
+                model.clone().with_prior_bias(reference.clone()),
+                Err(Error::InvalidSetting(_))
+            ));
+        }
     }
 
     #[test]
