@@ -17,8 +17,11 @@
 //!
 //! Two approximations: `J` holds the pose while a parameter moves the legs, not the sag's
 //! change with the pose it moves to (a slope of about 1e-2: `B` about 1 % off); and with a
-//! smoothness prior, the curvature the prior takes off the curves stays in the residuals and is
-//! counted as noise (`σ²` a little high: the uncertainty errs wide).
+//! smoothness prior, the curvature the prior takes off the curves stays in the penalised fit's
+//! residuals and is counted as noise in its `Ω` (`σ²`, and `v` where the repeatability is
+//! assumed, a little high: `C` errs wide, and so does `N` below, which shrinks the prior's
+//! bias more: that side errs narrow); the leg variance at a fresh move is the unpenalised
+//! fit's.
 //!
 //! **The smoothness prior's bias.** The prior holds the curves' noise back and bends them
 //! toward straight lines: a bias `C` does not hold. The same resolution identified without
@@ -517,10 +520,12 @@ pub fn one_sigma_mm(sigma: &Matrix3<f64>) -> f64 {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct BeyondRepeatability {
     /// The model's or an alternative's residuals moved the platform by more than the
-    /// repeatability: every fresh move takes it.
+    /// repeatability: every fresh move takes it. (The model's own: those of its fit without
+    /// the smoothness prior, where it has one, as in the leg variance.)
     pub at_fresh_moves: bool,
     /// The model's excess moved its identified parameters too (`Ω`): the repeatability was
-    /// assumed, and the excess may be the machine's own.
+    /// assumed, and the excess may be the machine's own. (The model's own fit, with its prior:
+    /// the parameters' covariance is its.)
     pub moving_parameters: bool,
 }
 
@@ -532,7 +537,8 @@ pub struct UncertaintySource {
     /// `w` of the model's [`Propagation`] (of its fit without the smoothness prior, where it
     /// has one) and its alternatives', averaged (each form taken as equally likely), mm².
     leg_variance_mm2: f64,
-    /// The model's residuals' variance told apart by shape, where it can be.
+    /// The model's residuals' variance told apart by shape, where it can be (of its fit
+    /// without the smoothness prior, where it has one, as the leg variance).
     split: Option<ShapeSplit>,
     /// What the leg variance holds beyond the repeatability, and where.
     beyond: BeyondRepeatability,
@@ -624,7 +630,7 @@ impl UncertaintySource {
         };
         Ok(Self {
             leg_variance_mm2,
-            split: propagation.split,
+            split: propagation.own_form().split,
             beyond,
             leverage,
             samples,
@@ -639,7 +645,8 @@ impl UncertaintySource {
         self.leg_variance_mm2
     }
 
-    /// The model's residuals' variance told apart by shape: the instrument's per coordinate,
+    /// The model's residuals' variance told apart by shape (of its fit without the smoothness
+    /// prior, where it has one): the instrument's per coordinate,
     /// the platform's per leg and configuration ([`crate::residual_noise`]);
     /// `None` where the measurements cannot tell them apart.
     pub fn shape_split(&self) -> Option<ShapeSplit> {
