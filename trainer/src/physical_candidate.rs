@@ -18,7 +18,7 @@ use crate::distill::{DistillOptions, Fidelity, distill, fidelity};
 use crate::error::{Error, Result};
 use crate::identify::{IdentifyOptions, identify};
 use crate::physical::PhysicalModel;
-use crate::pitch_resolution::{ResolutionChoice, alternatives};
+use crate::pitch_resolution::{ResolutionChoice, identified_on_every_configuration};
 use crate::train::Trained;
 use crate::uncertainty::{Repeatability, UncertaintySource};
 
@@ -121,15 +121,18 @@ pub struct CarriedModel {
 }
 
 /// Carries `physical`, identified on `measurements` with `identification` (its uncertainty is
-/// propagated with those options' cutoff, compliance terms and smoothness prior), into networks ([`distill`]) that carry its position uncertainty
-/// for legs repeating within `repeatability` (1 σ per move, mm; more where the residuals'
-/// shape shows more, [`crate::uncertainty::Propagation`]), the networks' own departure
-/// from the model and its spread about the models of the lead-screw resolutions
-/// `alternative_bases` added (those the cross-validation could not tell from the model's,
+/// propagated with those options' cutoff, compliance terms and smoothness prior), into networks
+/// ([`distill`]) that carry its position uncertainty for legs repeating within `repeatability`
+/// (1 σ per move, mm; more where the residuals' shape shows more,
+/// [`crate::uncertainty::Propagation`]), the networks' own departure from the model and its
+/// spread about the models of the lead-screw resolutions `alternative_bases` added (those the
+/// cross-validation could not tell from the model's,
 /// [`crate::pitch_resolution::ResolutionChoice::indistinguishable`]; the model's own is
-/// skipped), each identified on `measurements` as the cross-validation scored it
-/// ([`alternatives`]). An alternative that cannot be identified
-/// leaves the networks without an uncertainty, as too few configurations do.
+/// skipped), each identified on `measurements` as the cross-validation scored it, and, where
+/// `identification` has a smoothness prior, the prior's bias, bounded by the same resolution
+/// identified without it ([`identified_on_every_configuration`]). A model among these that
+/// cannot be identified leaves the networks without an uncertainty, as too few configurations
+/// do.
 pub fn carried_into_networks(
     nominal: &Geometry,
     (physical, identification): (&PhysicalModel, &IdentifyOptions),
@@ -153,17 +156,26 @@ pub fn carried_into_networks(
         options,
         FIDELITY_POSES,
     )?;
-    let bases: Vec<usize> = alternative_bases
-        .iter()
-        .copied()
-        .filter(|&basis| basis != own)
+    // The model without its prior first, where it has one, then the alternatives: identified
+    // together, on the machine's cores.
+    let without_prior = (identification.smoothness > 0.0).then(|| identification.smoothed(0.0));
+    let forms: Vec<IdentifyOptions> = without_prior
+        .into_iter()
+        .chain(
+            alternative_bases
+                .iter()
+                .filter(|&&basis| basis != own)
+                .map(|&basis| IdentifyOptions::physical(basis)),
+        )
         .collect();
-    let uncertainty = alternatives(nominal, measurements, &bases)
-        .and_then(|alternatives| {
+    let uncertainty = identified_on_every_configuration(nominal, measurements, &forms)
+        .and_then(|mut identified| {
+            let without_prior = without_prior.map(|_| identified.remove(0));
             UncertaintySource::new(
                 nominal,
                 (physical, identification),
-                &alternatives,
+                without_prior.as_ref(),
+                &identified,
                 measurements,
                 repeatability,
                 options.seed,

@@ -105,8 +105,8 @@ impl ResolutionChoice {
 
     /// The resolutions besides the chosen one that the cross-validation could not tell from
     /// the best without a smoothness prior (within one standard error of the lowest error),
-    /// coarsest first: the uncertainty's alternatives ([`alternatives`], identified as they
-    /// were scored).
+    /// coarsest first: the uncertainty's alternatives ([`identified_on_every_configuration`] as
+    /// they were scored).
     pub fn indistinguishable(&self) -> Vec<usize> {
         within_one_standard_error(&self.scores)
             .map(|s| s.pitch_basis)
@@ -135,23 +135,26 @@ fn outcome_in<'a, K: PartialEq>(
         })
 }
 
-/// The physical models of lead-screw resolutions `bases` (B-spline coefficients per leg; the
-/// chosen one's [`ResolutionChoice::indistinguishable`]), each identified with
-/// [`IdentifyOptions::physical`], as it was scored (without a smoothness prior), on every
-/// configuration of `measurements`, in the order of `bases`; an error naming the first
-/// resolution that could not be. The identifications run on the machine's cores.
-pub fn alternatives(
+/// The physical models identified with each of `forms` on every configuration of
+/// `measurements`, in the order of `forms`: the resolutions the cross-validation could not tell
+/// from the chosen one ([`ResolutionChoice::indistinguishable`], each with
+/// [`IdentifyOptions::physical`], as it was scored), and the chosen one without its smoothness
+/// prior, which bounds the prior's bias ([`crate::uncertainty::Propagation::with_prior_bias`]);
+/// an error naming the first that could not be. The identifications run on the machine's
+/// cores.
+pub fn identified_on_every_configuration(
     nominal: &Geometry,
     measurements: &[MeasuredConfiguration],
-    bases: &[usize],
+    forms: &[IdentifyOptions],
 ) -> Result<Vec<PhysicalModel>> {
-    in_parallel(bases, |&basis| {
-        identify(nominal, measurements, &IdentifyOptions::physical(basis))
+    in_parallel(forms, |options| {
+        identify(nominal, measurements, options)
             .map(|identified| identified.model)
             .map_err(|e| {
                 Error::InsufficientData(format!(
-                    "the alternative of {basis} lead-screw coefficients per leg, identified on \
-                     every configuration: {e}"
+                    "the physical model of {} lead-screw coefficients per leg with a smoothness \
+                     prior of {}, identified on every configuration: {e}",
+                    options.pitch_basis, options.smoothness
                 ))
             })
     })

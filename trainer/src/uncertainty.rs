@@ -33,7 +33,7 @@
 //!
 //! **The resolutions the data cannot tell apart.** The covariance holds the parameters' noise,
 //! not the model's form: where the cross-validation could not tell other lead-screw
-//! resolutions from the chosen one ([`crate::pitch_resolution::alternatives`]), each is taken
+//! resolutions from the chosen one ([`crate::pitch_resolution::identified_on_every_configuration`]), each is taken
 //! equally likely, and the spread of the legs' errors a machine of its form would make under the
 //! chosen model's commands, shrunk by what the two fits' own noise explains, is added
 //! ([`Propagation::position_covariances`]): `d dᵀ` of each miss `d`, scaled by `(1 − p/s)₊`, `s`
@@ -62,8 +62,8 @@ use nalgebra::{DMatrix, Matrix3, SMatrix};
 use crate::distill::{draw, measured_range};
 use crate::error::{Error, Result};
 use crate::identify::{
-    IdentifyOptions, LEG_OFFSET_COLUMNS, ScaledSvd, SmoothnessPrior, identify, leg_sensitivities,
-    linearise, scaled_svd,
+    IdentifyOptions, LEG_OFFSET_COLUMNS, ScaledSvd, SmoothnessPrior, leg_sensitivities, linearise,
+    scaled_svd,
 };
 use crate::physical::PhysicalModel;
 use crate::residual_noise::{ResidualNoise, ShapeSplit, expected_squares, split_by_shape};
@@ -542,6 +542,8 @@ pub struct UncertaintySource {
     split: Option<ShapeSplit>,
     /// What the leg variance holds beyond the repeatability, and where.
     beyond: BeyondRepeatability,
+    /// The smoothness prior's bias is in the covariances ([`Propagation::with_prior_bias`]).
+    prior_bias: bool,
     /// The leverage's normalisation and whitening (variances zero).
     leverage: PositionUncertainty,
     /// At each pose the propagation is defined at: its leverage, and the position covariance's
@@ -556,32 +558,44 @@ impl UncertaintySource {
     /// repeat within `repeatability` ([`Propagation::of`]), beside `alternatives` identified
     /// from the same rows, which they could not tell from it (each with
     /// [`IdentifyOptions::physical`] at its own resolution, as the cross-validation scored them,
-    /// [`Propagation::position_covariances`]), and, where `options` have a smoothness prior,
-    /// the same resolution identified without it, which bounds the prior's bias
-    /// ([`Propagation::with_prior_bias`]); the poses over the measured range are drawn with
-    /// `seed`.
+    /// [`Propagation::position_covariances`]), and `without_prior`, the same resolution
+    /// identified from the same rows without the smoothness prior, which bounds the prior's
+    /// bias ([`Propagation::with_prior_bias`]): given exactly where `options` have a prior,
+    /// refused otherwise. The poses over the measured range are drawn with `seed`.
     pub fn new(
         nominal: &Geometry,
         (model, options): (&PhysicalModel, &IdentifyOptions),
+        without_prior: Option<&PhysicalModel>,
         alternatives: &[PhysicalModel],
         rows: &[MeasuredConfiguration],
         repeatability: Repeatability,
         seed: u64,
     ) -> Result<Self> {
         let mut propagation = Propagation::of(model, options, rows, repeatability)?;
-        if options.smoothness > 0.0 {
-            let unpenalised = options.smoothed(0.0);
-            let of = identify(nominal, rows, &unpenalised)
-                .and_then(|identified| {
-                    Propagation::of(&identified.model, &unpenalised, rows, repeatability)
-                })
-                .map_err(|e| {
-                    naming(
-                        e,
-                        "the model without its smoothness prior, which bounds the prior's bias",
-                    )
-                })?;
-            propagation = propagation.with_prior_bias(of)?;
+        match without_prior {
+            Some(unpenalised) if options.smoothness > 0.0 => {
+                let of = Propagation::of(unpenalised, &options.smoothed(0.0), rows, repeatability)
+                    .map_err(|e| {
+                        naming(
+                            e,
+                            "the model without its smoothness prior, which bounds the prior's bias",
+                        )
+                    })?;
+                propagation = propagation.with_prior_bias(of)?;
+            }
+            None if options.smoothness <= 0.0 => {}
+            _ => {
+                return Err(Error::InvalidSetting(format!(
+                    "the uncertainty of a model with a smoothness prior of {} takes the same \
+                     resolution identified without it, and only such a model's: {} given",
+                    options.smoothness,
+                    if without_prior.is_some() {
+                        "one"
+                    } else {
+                        "none"
+                    }
+                )));
+            }
         }
         let alternatives = alternatives
             .iter()
@@ -632,6 +646,7 @@ impl UncertaintySource {
             leg_variance_mm2,
             split: propagation.own_form().split,
             beyond,
+            prior_bias: propagation.unpenalised.is_some(),
             leverage,
             samples,
             poses: poses.len(),
@@ -656,6 +671,12 @@ impl UncertaintySource {
     /// What [`Self::leg_variance_mm2`] holds beyond the repeatability, and where.
     pub fn beyond_repeatability(&self) -> BeyondRepeatability {
         self.beyond
+    }
+
+    /// Whether the covariances hold the model's smoothness prior's bias (a model identified
+    /// with a prior, [`Propagation::with_prior_bias`]).
+    pub fn holds_prior_bias(&self) -> bool {
+        self.prior_bias
     }
 
     /// The model file's uncertainty for networks that depart from the model by independent
@@ -1375,7 +1396,8 @@ mod tests {
             (Repeatability::Assumed(0.1), false, false),
         ] {
             let source =
-                UncertaintySource::new(&g, (&model, &options), &[], &rows, machine, 1).unwrap();
+                UncertaintySource::new(&g, (&model, &options), None, &[], &rows, machine, 1)
+                    .unwrap();
             assert_eq!(
                 source.beyond_repeatability(),
                 BeyondRepeatability {
@@ -1476,11 +1498,91 @@ mod tests {
         }
         // The prior moves the poses by micrometres: the check is about something.
         assert!(largest > 1e-3, "the prior's bias is {largest} mm at most");
-        // The reference must be this identification without the prior, and this model must
-        // have one.
-        for (model, reference) in [(&alone, &alone), (&alone, &sixteen), (&without, &without)] {
+        // The reference must be this identification without the prior, from the same rows,
+        // and this model must have one.
+        let physical = IdentifyOptions::physical(12);
+        let other_rows =
+            Propagation::of(&without.model, &physical, &rows[1..], repeatability).unwrap();
+        let other_options = [
+            IdentifyOptions {
+                compliance: false,
+                ..physical
+            },
+            IdentifyOptions {
+                relative_cutoff: 10.0 * physical.relative_cutoff,
+                ..physical
+            },
+        ]
+        .map(|options| Propagation::of(&without.model, &options, &rows, repeatability).unwrap());
+        let references = [&alone, &sixteen, &other_rows]
+            .into_iter()
+            .chain(&other_options)
+            .map(|reference| (&alone, reference))
+            .chain([(&without, &without)]);
+        for (model, reference) in references {
+            assert!(
+                matches!(
+                    model.clone().with_prior_bias(reference.clone()),
+                    Err(Error::InvalidSetting(_))
+                ),
+                "{:?} with {} residuals taken as {:?}'s without its prior",
+                reference.options,
+                reference.residuals(),
+                model.options
+            );
+        }
+    }
+
+    #[test]
+    fn a_priors_model_takes_its_leg_variance_from_its_fit_without_the_prior() {
+        // The machine repeating within 0.02 mm, its repeatability given as 0.004 mm: the
+        // excess is the form's misfit at fresh moves, and the prior's own curvature must not
+        // count in it — the fit without the prior stands for the model's form.
+        let (g, rows, physical, without) = the_repeating_machine_identified();
+        let smoothed = physical.smoothed(1.0);
+        let model = crate::identify::identify(&g, &rows, &smoothed)
+            .unwrap()
+            .model;
+        let repeatability = Repeatability::Known(0.004);
+        let penalised = Propagation::of(&model, &smoothed, &rows, repeatability).unwrap();
+        let unpenalised = Propagation::of(&without, &physical, &rows, repeatability).unwrap();
+        let source = UncertaintySource::new(
+            &g,
+            (&model, &smoothed),
+            Some(&without),
+            &[],
+            &rows,
+            repeatability,
+            1,
+        )
+        .unwrap();
+        assert_eq!(source.leg_variance_mm2(), unpenalised.leg_variance_mm2);
+        assert_eq!(source.shape_split(), unpenalised.split);
+        assert!(source.holds_prior_bias());
+        // The two fits' leg variances differ: the check is about something.
+        assert!(
+            penalised.leg_variance_mm2 > 1.1 * unpenalised.leg_variance_mm2,
+            "{} against {}",
+            penalised.leg_variance_mm2,
+            unpenalised.leg_variance_mm2
+        );
+        // The fit without the prior is given exactly where the model has one.
+        for (options, without_prior) in [(&smoothed, None), (&physical, Some(&without))] {
+            let model = if options.smoothness > 0.0 {
+                &model
+            } else {
+                &without
+            };
             assert!(matches!(
-                model.clone().with_prior_bias(reference.clone()),
+                UncertaintySource::new(
+                    &g,
+                    (model, options),
+                    without_prior,
+                    &[],
+                    &rows,
+                    repeatability,
+                    1
+                ),
                 Err(Error::InvalidSetting(_))
             ));
         }

@@ -588,7 +588,11 @@ fn physical(
              coefficients per leg, which the cross-validation could not tell from it"
         );
     }
-    if resolution.options.smoothness > 0.0 && candidate.networks_uncertainty.is_ok() {
+    if candidate
+        .networks_uncertainty
+        .as_ref()
+        .is_ok_and(|u| u.source.holds_prior_bias())
+    {
         println!(
             "physical model: its uncertainty holds the smoothness prior's bias, its miss to the \
              same resolution identified without the prior beyond the two fits' noise"
