@@ -1065,6 +1065,117 @@ mod tests {
         }
     }
 
+    /// Per draw of the noise, the share of `validation` poses within 2σ: of the σ the
+    /// physical model of eight coefficients identified on the default robot's `configurations`
+    /// gives, and of the true σ (what the errors of the other draws at the pose scatter by,
+    /// their bias included). Each draw's errors share its model's: one draw is one sample.
+    fn coverage_over_draws(
+        g: &Geometry,
+        configurations: &[Pose],
+        validation: &[Pose],
+        draws: u64,
+    ) -> (Vec<f64>, Vec<f64>) {
+        let errors = hexacomp_virtual::ErrorModel::default();
+        let options = IdentifyOptions::physical(8);
+        let repeatability = Repeatability::Known(errors.repeatability_sigma_mm);
+        let nominal_legs = |pose: &Pose| hexacomp_core::inverse_kinematics(g, pose).lengths;
+        let (reached, sigmas): (Vec<Vec<nalgebra::Vector3<f64>>>, Vec<Vec<f64>>) = (1..=draws)
+            .map(|seed| {
+                let mut platform =
+                    hexacomp_virtual::VirtualPlatform::new(g, &errors, 1, seed).unwrap();
+                let rows = crate::acquire::measure_plan(
+                    &mut platform,
+                    &crate::plan::numbered_rows(configurations),
+                )
+                .unwrap();
+                let model = crate::identify::identify(g, &rows, &options).unwrap().model;
+                let uncertainty = UncertaintySource::new(
+                    g,
+                    (&model, &options),
+                    None,
+                    &[],
+                    &rows,
+                    repeatability,
+                    1,
+                )
+                .and_then(|source| source.fitted(0.0))
+                .unwrap();
+                validation
+                    .iter()
+                    .map(|pose| {
+                        // The machine goes on moving with its repeatability after the
+                        // configurations: a fresh move.
+                        let at = platform.move_legs(&model.command(pose), pose).unwrap();
+                        let off = at.position - pose.position;
+                        let off = nalgebra::Vector3::new(off.x, off.y, off.z);
+                        (off, uncertainty.sigma_mm(&nominal_legs(pose)))
+                    })
+                    .unzip()
+            })
+            .unzip();
+        let share = |inside: usize| 100.0 * inside as f64 / validation.len() as f64;
+        (0..reached.len())
+            .map(|draw| {
+                let (mut true_inside, mut inside) = (0, 0);
+                for pose in 0..validation.len() {
+                    let others = (0..reached.len()).filter(|&other| other != draw);
+                    let second_moment = others
+                        .map(|other| reached[other][pose] * reached[other][pose].transpose())
+                        .sum::<Matrix3<f64>>()
+                        / (reached.len() - 1) as f64;
+                    let error = reached[draw][pose].norm();
+                    true_inside += usize::from(error <= 2.0 * one_sigma_mm(&second_moment));
+                    inside += usize::from(error <= 2.0 * sigmas[draw][pose]);
+                }
+                (share(inside), share(true_inside))
+            })
+            .unzip()
+    }
+
+    #[test]
+    fn over_draws_of_the_noise_the_coverage_is_the_true_sigmas() {
+        // The default robot, 50 and 150 configurations of one plan, forty draws of the noise:
+        // the coverage of the propagated σ averages what the true σ's does (95.45 % for a
+        // covariance known), and scatters from draw to draw not much more than the true σ's,
+        // which scatters too: every pose of a draw meets the same model's error. (Eight
+        // coefficients, no prior and no alternative: the propagation, the residuals' split
+        // and the file's form alone.)
+        let g = Geometry::prototype();
+        let plan = crate::plan::plan(&g, &crate::plan::PlanOptions::default()).unwrap();
+        let validation = hexacomp_core::sampling::WorkspaceSampler::new(&g, 7, Default::default())
+            .unwrap()
+            .samples(200)
+            .unwrap();
+        let statistics = |shares: &[f64]| {
+            let mean = shares.iter().sum::<f64>() / shares.len() as f64;
+            let variance =
+                shares.iter().map(|s| (s - mean).powi(2)).sum::<f64>() / (shares.len() - 1) as f64;
+            let outside = shares
+                .iter()
+                .filter(|s| !(90.0..=98.0).contains(*s))
+                .count();
+            (mean, variance.sqrt(), outside)
+        };
+        for count in [50, 150] {
+            let (ours, truth) = coverage_over_draws(&g, &plan[..count], &validation, 40);
+            let (mean, deviation, outside) = statistics(&ours);
+            let (true_mean, true_deviation, true_outside) = statistics(&truth);
+            eprintln!(
+                "{count} configurations, 40 draws: within 2σ {mean:.2} % on average, {deviation:.2} \
+                 from draw to draw, {outside} outside 90-98 %; with the true σ {true_mean:.2} %, \
+                 {true_deviation:.2}, {true_outside}"
+            );
+            // The true σ's share is what a covariance known gives, within what forty draws
+            // scattering by 1.5-3 points tell (and the χ² approximation's 0.2 points).
+            assert!((94.0..=97.0).contains(&true_mean), "{true_mean}");
+            assert!((93.5..=97.5).contains(&mean), "{mean}");
+            assert!(
+                deviation <= 1.8 * true_deviation,
+                "{deviation} against {true_deviation}"
+            );
+        }
+    }
+
     #[test]
     fn the_propagated_covariances_hold_what_fits_of_other_draws_scatter_by() {
         // A machine whose legs repeat within 0.02 mm, measured by an instrument of 0.002 mm a
