@@ -169,13 +169,20 @@ pub fn carried_into_networks(
         )
         .collect();
     let uncertainty = identified_on_every_configuration(nominal, measurements, &forms)
-        .and_then(|mut identified| {
-            let without_prior = without_prior.map(|_| identified.remove(0));
+        .and_then(|identified| {
+            // As `forms` put them: the model without its prior first, where it has one.
+            let (without_prior, alternatives) = match without_prior {
+                Some(_) => identified
+                    .split_first()
+                    .map(|(first, rest)| (Some(first), rest))
+                    .expect("one model per form"),
+                None => (None, identified.as_slice()),
+            };
             UncertaintySource::new(
                 nominal,
                 (physical, identification),
-                without_prior.as_ref(),
-                &identified,
+                without_prior,
+                alternatives,
                 measurements,
                 repeatability,
                 options.seed,

@@ -136,12 +136,12 @@ fn outcome_in<'a, K: PartialEq>(
 }
 
 /// The physical models identified with each of `forms` on every configuration of
-/// `measurements`, in the order of `forms`: the resolutions the cross-validation could not tell
-/// from the chosen one ([`ResolutionChoice::indistinguishable`], each with
-/// [`IdentifyOptions::physical`], as it was scored), and the chosen one without its smoothness
-/// prior, which bounds the prior's bias ([`crate::uncertainty::Propagation::with_prior_bias`]);
-/// an error naming the first that could not be. The identifications run on the machine's
-/// cores.
+/// `measurements`, in the order of `forms`: such as the chosen resolution without its
+/// smoothness prior, which bounds the prior's bias
+/// ([`crate::uncertainty::Propagation::with_prior_bias`]), and the resolutions the
+/// cross-validation could not tell from the chosen one ([`ResolutionChoice::indistinguishable`],
+/// each with [`IdentifyOptions::physical`], as it was scored); an error naming the first that
+/// could not be (by its resolution and prior). The identifications run on the machine's cores.
 pub fn identified_on_every_configuration(
     nominal: &Geometry,
     measurements: &[MeasuredConfiguration],
@@ -151,10 +151,15 @@ pub fn identified_on_every_configuration(
         identify(nominal, measurements, options)
             .map(|identified| identified.model)
             .map_err(|e| {
+                let prior = if options.smoothness > 0.0 {
+                    format!("with a smoothness prior of {}", options.smoothness)
+                } else {
+                    "without a smoothness prior".to_string()
+                };
                 Error::InsufficientData(format!(
-                    "the physical model of {} lead-screw coefficients per leg with a smoothness \
-                     prior of {}, identified on every configuration: {e}",
-                    options.pitch_basis, options.smoothness
+                    "the physical model of {} lead-screw coefficients per leg {prior}, \
+                     identified on every configuration: {e}",
+                    options.pitch_basis
                 ))
             })
     })

@@ -33,8 +33,9 @@
 //!
 //! **The resolutions the data cannot tell apart.** The covariance holds the parameters' noise,
 //! not the model's form: where the cross-validation could not tell other lead-screw
-//! resolutions from the chosen one ([`crate::pitch_resolution::identified_on_every_configuration`]), each is taken
-//! equally likely, and the spread of the legs' errors a machine of its form would make under the
+//! resolutions from the chosen one (each identified on every configuration,
+//! [`crate::pitch_resolution::identified_on_every_configuration`]), each is taken equally
+//! likely, and the spread of the legs' errors a machine of its form would make under the
 //! chosen model's commands, shrunk by what the two fits' own noise explains, is added
 //! ([`Propagation::position_covariances`]): `d dᵀ` of each miss `d`, scaled by `(1 − p/s)₊`, `s`
 //! its squared Mahalanobis length over the `p` directions of that noise.
@@ -562,6 +563,12 @@ impl UncertaintySource {
     /// identified from the same rows without the smoothness prior, which bounds the prior's
     /// bias ([`Propagation::with_prior_bias`]): given exactly where `options` have a prior,
     /// refused otherwise. The poses over the measured range are drawn with `seed`.
+    ///
+    /// `without_prior` is trusted to be that identification (as
+    /// [`crate::pitch_resolution::identified_on_every_configuration`] makes it with
+    /// `options.smoothed(0.0)`): its resolution is checked, but another model of the same
+    /// resolution, the penalised one itself included, is not told from it, and would leave
+    /// the prior's bias out.
     pub fn new(
         nominal: &Geometry,
         (model, options): (&PhysicalModel, &IdentifyOptions),
@@ -584,16 +591,19 @@ impl UncertaintySource {
                 propagation = propagation.with_prior_bias(of)?;
             }
             None if options.smoothness <= 0.0 => {}
-            _ => {
+            Some(_) => {
+                return Err(Error::InvalidSetting(
+                    "a model without a smoothness prior was given a fit without the prior \
+                     beside it: it has no prior's bias to bound"
+                        .into(),
+                ));
+            }
+            None => {
                 return Err(Error::InvalidSetting(format!(
-                    "the uncertainty of a model with a smoothness prior of {} takes the same \
-                     resolution identified without it, and only such a model's: {} given",
-                    options.smoothness,
-                    if without_prior.is_some() {
-                        "one"
-                    } else {
-                        "none"
-                    }
+                    "the uncertainty of a model with a smoothness prior of {} needs the same \
+                     resolution identified without the prior, which bounds the prior's bias; \
+                     none was given",
+                    options.smoothness
                 )));
             }
         }
@@ -1066,8 +1076,8 @@ mod tests {
     }
 
     /// Per draw of the noise, the share of `validation` poses within 2σ: of the σ the
-    /// physical model of eight coefficients identified on the default robot's `configurations`
-    /// gives, and of the true σ (what the errors of the other draws at the pose scatter by,
+    /// physical model of eight coefficients identified on `configurations` of a default robot
+    /// (machine seed 1) gives, and of the true σ (what the errors of the other draws at the pose scatter by,
     /// their bias included). Each draw's errors share its model's: one draw is one sample.
     fn coverage_over_draws(
         g: &Geometry,
@@ -1134,7 +1144,8 @@ mod tests {
 
     #[test]
     fn over_draws_of_the_noise_the_coverage_is_the_true_sigmas() {
-        // The default robot, 50 and 150 configurations of one plan, forty draws of the noise:
+        // A default robot (machine seed 1), 50 and 150 configurations of one plan, forty draws
+        // of the noise:
         // the coverage of the propagated σ averages what the true σ's does (95.45 % for a
         // covariance known), and scatters from draw to draw not much more than the true σ's,
         // which scatters too: every pose of a draw meets the same model's error. (Eight
@@ -1166,7 +1177,8 @@ mod tests {
                  {true_deviation:.2}, {true_outside}"
             );
             // The true σ's share is what a covariance known gives, within what forty draws
-            // scattering by 1.5-3 points tell (and the χ² approximation's 0.2 points).
+            // scattering by 2-3.5 points tell (and the χ² approximation's 0.2 points, and the
+            // leave-one-out second moment of 39 draws, a few tenths narrow).
             assert!((94.0..=97.0).contains(&true_mean), "{true_mean}");
             assert!((93.5..=97.5).contains(&mean), "{mean}");
             assert!(
@@ -1647,8 +1659,9 @@ mod tests {
     #[test]
     fn a_priors_model_takes_its_leg_variance_from_its_fit_without_the_prior() {
         // The machine repeating within 0.02 mm, its repeatability given as 0.004 mm: the
-        // excess is the form's misfit at fresh moves, and the prior's own curvature must not
-        // count in it — the fit without the prior stands for the model's form.
+        // excess (the machine's own repeatability here, read as the form's misfit, as a given
+        // repeatability makes it) is taken at fresh moves, and the prior's own curvature must
+        // not count in it — the fit without the prior stands for the model's form.
         let (g, rows, physical, without) = the_repeating_machine_identified();
         let smoothed = physical.smoothed(1.0);
         let model = crate::identify::identify(&g, &rows, &smoothed)
