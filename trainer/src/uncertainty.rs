@@ -580,7 +580,8 @@ impl UncertaintySource {
     ) -> Result<Self> {
         let mut propagation = Propagation::of(model, options, rows, repeatability)?;
         match without_prior {
-            Some(unpenalised) if options.smoothness > 0.0 => {
+            // `with_prior_bias` refuses it beside a model without a prior.
+            Some(unpenalised) => {
                 let of = Propagation::of(unpenalised, &options.smoothed(0.0), rows, repeatability)
                     .map_err(|e| {
                         naming(
@@ -590,15 +591,7 @@ impl UncertaintySource {
                     })?;
                 propagation = propagation.with_prior_bias(of)?;
             }
-            None if options.smoothness <= 0.0 => {}
-            Some(_) => {
-                return Err(Error::InvalidSetting(
-                    "a model without a smoothness prior was given a fit without the prior \
-                     beside it: it has no prior's bias to bound"
-                        .into(),
-                ));
-            }
-            None => {
+            None if options.smoothness > 0.0 => {
                 return Err(Error::InvalidSetting(format!(
                     "the uncertainty of a model with a smoothness prior of {} needs the same \
                      resolution identified without the prior, which bounds the prior's bias; \
@@ -606,6 +599,7 @@ impl UncertaintySource {
                     options.smoothness
                 )));
             }
+            None => {}
         }
         let alternatives = alternatives
             .iter()
