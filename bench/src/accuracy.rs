@@ -4,11 +4,11 @@
 //! floor no compensation can go below, the machine's repeatability.
 
 use anyhow::Context;
+use hexacomp_calibration::uncertainty::Coverage;
 use hexacomp_client::CompensatedPoint;
 use hexacomp_core::stats::{PoseErrorNorm, PoseErrorStats};
 use hexacomp_core::{Pose, inverse_kinematics};
-use hexacomp_trainer::chart::{Axis, Chart, Series};
-use hexacomp_trainer::uncertainty::Coverage;
+use hexacomp_report::chart::{Axis, Chart, Series};
 use hexacomp_virtual::VirtualPlatform;
 
 /// The path errors before and after compensation, and at the floor.

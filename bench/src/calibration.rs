@@ -5,18 +5,18 @@
 //! uncertainty.
 
 use anyhow::Context;
-use hexacomp_core::Geometry;
-use hexacomp_core::model::Model;
-use hexacomp_trainer::distill::DistillOptions;
-use hexacomp_trainer::identify::{PHYSICAL, identify};
-use hexacomp_trainer::physical_candidate::carried_into_networks;
-use hexacomp_trainer::pipeline::Pipeline;
-use hexacomp_trainer::pitch_resolution::{
+use hexacomp_calibration::distill::DistillOptions;
+use hexacomp_calibration::identify::{PHYSICAL, identify};
+use hexacomp_calibration::physical_candidate::carried_into_networks;
+use hexacomp_calibration::pipeline::Pipeline;
+use hexacomp_calibration::pitch_resolution::{
     ResolutionChoice, chosen_if_cross_validated, identifications,
 };
-use hexacomp_trainer::plan::PlanOptions;
-use hexacomp_trainer::train::{Architecture, CROSS_VALIDATION_FOLDS, training_work};
-use hexacomp_trainer::uncertainty::Repeatability;
+use hexacomp_calibration::plan::PlanOptions;
+use hexacomp_calibration::train::{Architecture, CROSS_VALIDATION_FOLDS, training_work};
+use hexacomp_calibration::uncertainty::Repeatability;
+use hexacomp_core::Geometry;
+use hexacomp_core::model::Model;
 use hexacomp_virtual::{ErrorModel, ErrorVariant, VirtualPlatform};
 use indicatif::{ProgressBar, ProgressStyle};
 
@@ -84,7 +84,7 @@ pub fn calibrate(
         },
         ..Default::default()
     };
-    let (_, measurements) = pipeline.measure_virtual(platform)?;
+    let (_, measurements) = hexacomp_lab::measure_virtual(&pipeline.plan, platform)?;
     let solved = pipeline
         .solve(&geometry, &measurements)
         .context("solving the virtual platform's corrections")?;

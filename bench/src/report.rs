@@ -8,7 +8,7 @@ use std::path::Path;
 use anyhow::Context;
 use hdrhistogram::Histogram;
 use hexacomp_core::durable::replace_file;
-use hexacomp_trainer::chart::{Axis, Chart, Series};
+use hexacomp_report::chart::{Axis, Chart, Series};
 use serde::Serialize;
 
 use crate::stream::StreamRun;
@@ -82,7 +82,7 @@ fn micros(ns: u64) -> String {
 
 /// A table of latency percentiles (µs) and throughput, one row per variant.
 pub fn latency_table(rows: &[(&str, Summary, f64)]) -> String {
-    let mut table = hexacomp_trainer::table::Table::new([
+    let mut table = hexacomp_report::table::Table::new([
         "variant",
         "p50 µs",
         "p90 µs",

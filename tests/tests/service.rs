@@ -4,6 +4,9 @@
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
+use hexacomp_calibration::pipeline::Pipeline;
+use hexacomp_calibration::plan::PlanOptions;
+use hexacomp_calibration::train::{Architecture, TrainOptions};
 use hexacomp_client::wire::RequestKind;
 use hexacomp_client::{CompensatedPoint, DeployOutcome, PointStatus};
 use hexacomp_core::compensator::{compensate_legs, compensate_pose};
@@ -13,9 +16,6 @@ use hexacomp_core::sampling::{SamplerOptions, WorkspaceSampler};
 use hexacomp_core::stats::PoseErrorNorm;
 use hexacomp_core::{Geometry, Pose, inverse_kinematics};
 use hexacomp_tests::{ServiceProcess, test_uncertainty, unique_instance};
-use hexacomp_trainer::pipeline::Pipeline;
-use hexacomp_trainer::plan::PlanOptions;
-use hexacomp_trainer::train::{Architecture, TrainOptions};
 use hexacomp_virtual::{DEFAULT_MACHINE_SEED, ErrorModel, VirtualPlatform};
 
 /// A small decoupled model of the default virtual machine, trained with `seed`, saved in `dir`.
@@ -37,7 +37,7 @@ fn small_model(dir: &Path, seed: u64) -> (Model, PathBuf) {
     };
     let mut platform =
         VirtualPlatform::new(&g, &ErrorModel::default(), DEFAULT_MACHINE_SEED, seed).unwrap();
-    let (_, measurements) = pipeline.measure_virtual(&mut platform).unwrap();
+    let (_, measurements) = hexacomp_lab::measure_virtual(&pipeline.plan, &mut platform).unwrap();
     let calibration = pipeline
         .calibrate(&g, &measurements, &[Architecture::Decoupled], &|_, _| {})
         .unwrap();

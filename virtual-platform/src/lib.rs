@@ -29,7 +29,9 @@ use rand_chacha::ChaCha8Rng;
 use hexacomp_core::error::Result;
 use hexacomp_core::geometry::{Geometry, LEGS};
 use hexacomp_core::kinematics::{inverse_kinematics, target_points};
+use hexacomp_core::observation::Observation;
 use hexacomp_core::pose::Pose;
+use hexacomp_core::records::{MeasuredConfiguration, NamedPose};
 use hexacomp_core::stats::PoseErrorNorm;
 use machine::{normal, normal3};
 
@@ -149,6 +151,22 @@ impl VirtualPlatform {
             targets,
             reached_pose,
         })
+    }
+
+    /// Moves to every planned pose (nominal inverse kinematics, uncompensated) and measures every
+    /// target: one measurements row per pose, in plan order, with the pose exactly as planned.
+    pub fn measure_plan(&mut self, plan: &[NamedPose]) -> Result<Vec<MeasuredConfiguration>> {
+        plan.iter()
+            .map(|row| {
+                let m = self.measure(&row.pose())?;
+                Ok(MeasuredConfiguration {
+                    id: row.id.clone(),
+                    pose_mm_deg: row.pose_mm_deg,
+                    legs: m.commanded_legs,
+                    observed: Observation::Targets(m.targets.into_iter().map(Some).collect()),
+                })
+            })
+            .collect()
     }
 
     /// The uncompensated pose errors (reached against commanded) at each of `poses`.

@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 
 use hexacomp_client::wire::MAX_BATCH;
-use hexacomp_trainer::chart::{Axis, Chart, Series};
+use hexacomp_report::chart::{Axis, Chart, Series};
 
 use crate::path::interpolate;
 use crate::report::{write_into, write_json};
@@ -61,7 +61,7 @@ pub fn run(command: &BatchesCommand) -> anyhow::Result<()> {
         curves.push((kind, rates));
     }
 
-    let mut table = hexacomp_trainer::table::Table::new([
+    let mut table = hexacomp_report::table::Table::new([
         "batch",
         "hexacomp pts/s",
         "echo pts/s",

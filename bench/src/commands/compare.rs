@@ -186,7 +186,7 @@ fn print_ratio_table(summaries: &[(VariantKind, Summary, f64)]) {
             .expect("every variant ran")
     };
     let hexacomp = find(VariantKind::Hexacomp);
-    let mut table = hexacomp_trainer::table::Table::new([
+    let mut table = hexacomp_report::table::Table::new([
         "hexacomp ÷",
         "p50",
         "p90",

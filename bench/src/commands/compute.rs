@@ -235,7 +235,7 @@ fn clock_pair_p50_ns(samples: usize) -> u64 {
 
 fn print(report: &ComputeReport) {
     let mut table =
-        hexacomp_trainer::table::Table::new(["per point", "reference", "fused", "fused speed-up"]);
+        hexacomp_report::table::Table::new(["per point", "reference", "fused", "fused speed-up"]);
     let (r, f) = (&report.reference, &report.fused);
     table.row([
         "one point alone, p50 (ns)".into(),

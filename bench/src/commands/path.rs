@@ -236,7 +236,7 @@ pub fn report_path(
     };
     let stats = accuracy.stats();
     if !accuracy.before.is_empty() {
-        let mut table = hexacomp_trainer::table::Table::new([
+        let mut table = hexacomp_report::table::Table::new([
             "legs commanded",
             "mean ‖δ_A‖ mm",
             "max ‖δ_A‖ mm",

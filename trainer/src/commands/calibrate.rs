@@ -4,6 +4,19 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::Context;
+use hexacomp_calibration::distill::DistillOptions;
+use hexacomp_calibration::identify::{IdentifyOptions, identify};
+use hexacomp_calibration::physical_candidate::{
+    CandidateOptions, NetworksUncertainty, physical_candidate,
+};
+use hexacomp_calibration::pipeline::{Pipeline, Solved};
+use hexacomp_calibration::pitch_resolution::{chosen_resolution, identifications};
+use hexacomp_calibration::plan::PlanOptions;
+use hexacomp_calibration::train::{
+    Architecture, CROSS_VALIDATION_FOLDS, TrainOptions, Trained, can_cross_validate,
+    commanded_legs, cross_validated_rmse, training_work,
+};
+use hexacomp_calibration::uncertainty::Repeatability;
 use hexacomp_core::compensator::compensate_pose;
 use hexacomp_core::records::MeasuredConfiguration;
 use hexacomp_core::sampling::{SamplerOptions, WorkspaceSampler};
@@ -12,20 +25,7 @@ use hexacomp_core::{Geometry, inverse_kinematics};
 use hexacomp_formats::{
     Records, read_measurements, read_registration, write_measurements, write_poses,
 };
-use hexacomp_trainer::distill::DistillOptions;
-use hexacomp_trainer::evaluate::{drive, uncertainty_coverage};
-use hexacomp_trainer::identify::{IdentifyOptions, identify};
-use hexacomp_trainer::physical_candidate::{
-    CandidateOptions, NetworksUncertainty, physical_candidate,
-};
-use hexacomp_trainer::pipeline::{Pipeline, Solved};
-use hexacomp_trainer::pitch_resolution::{chosen_resolution, identifications};
-use hexacomp_trainer::plan::PlanOptions;
-use hexacomp_trainer::train::{
-    Architecture, CROSS_VALIDATION_FOLDS, TrainOptions, Trained, can_cross_validate,
-    commanded_legs, cross_validated_rmse, training_work,
-};
-use hexacomp_trainer::uncertainty::Repeatability;
+use hexacomp_lab::evaluate::{drive, uncertainty_coverage};
 use hexacomp_virtual::{DEFAULT_MACHINE_SEED, ErrorModel, ErrorVariant, VirtualPlatform};
 
 use super::solve::{MeasuredScreeningArgs, solve_screened, write_outcomes};
@@ -36,7 +36,7 @@ use hexacomp_formats::write_file;
 
 use super::measurements_input::MeasurementsInput;
 use super::{ResultsFolder, write_bytes};
-use hexacomp_trainer::table::Table;
+use hexacomp_report::table::Table;
 
 /// Calibrate in one command: plan → measure (the virtual platform, or --measurements from a real
 /// device) → solve the robust joint corrections → train coupled and decoupled networks with
@@ -380,7 +380,7 @@ fn acquire(
         args.reading.apply(registration.as_ref(), &mut records);
         return Ok(records);
     }
-    let (poses, measured) = pipeline.measure_virtual(platform)?;
+    let (poses, measured) = hexacomp_lab::measure_virtual(&pipeline.plan, platform)?;
     write_file(&dir.join("poses.csv"), |w| write_poses(w, &poses))?;
     write_file(&written, |w| write_measurements(w, &measured))?;
     let mut records = read_measurements(&written)?;
@@ -498,10 +498,7 @@ fn physical(
     solved: &Solved,
     measurements: &[MeasuredConfiguration],
     repeatability: Repeatability,
-) -> anyhow::Result<(
-    Candidate,
-    hexacomp_trainer::error::Result<NetworksUncertainty>,
-)> {
+) -> anyhow::Result<(Candidate, hexacomp_calibration::Result<NetworksUncertainty>)> {
     let options = CandidateOptions {
         distill: DistillOptions::default(),
         repeatability,

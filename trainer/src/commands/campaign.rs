@@ -12,8 +12,9 @@ use hexacomp_formats::{
     JOURNAL_COLUMNS, JournalKind, MeasurementsJournal, Records, read_measurements, read_poses,
     read_registration,
 };
-use hexacomp_trainer::campaign::{Campaign, tour};
-use hexacomp_trainer::drift::Decision;
+use hexacomp_measuring::Error;
+use hexacomp_measuring::campaign::{Campaign, tour};
+use hexacomp_measuring::drift::Decision;
 
 use super::drift_log::DriftLog;
 use super::end_fiducials;
@@ -340,13 +341,10 @@ pub fn run(geometry: &Geometry, args: &CampaignArgs) -> anyhow::Result<()> {
             };
             readings_log
                 .append(&row, combined, temperatures)
-                .map_err(|e| {
-                    hexacomp_trainer::Error::InsufficientData(format!(
-                        "{}: cannot log the readings of configuration {}: {e} (the rows before \
-                         it are on disk; run again to continue)",
-                        readings_log.path().display(),
-                        row.id
-                    ))
+                .map_err(|e| Error::RecordNotWritten {
+                    path: readings_log.path().to_path_buf(),
+                    what: format!("the readings of configuration {}", row.id),
+                    message: e.to_string(),
                 })?;
             let measured_at = humantime::format_rfc3339_seconds(SystemTime::now()).to_string();
             journal
@@ -359,13 +357,10 @@ pub fn run(geometry: &Geometry, args: &CampaignArgs) -> anyhow::Result<()> {
                         measured_at,
                     ],
                 )
-                .map_err(|e| {
-                    hexacomp_trainer::Error::InsufficientData(format!(
-                        "{}: cannot record configuration {}: {e} (the rows before it are on \
-                         disk; run again to continue)",
-                        args.out.display(),
-                        row.id
-                    ))
+                .map_err(|e| Error::RecordNotWritten {
+                    path: args.out.clone(),
+                    what: format!("configuration {}", row.id),
+                    message: e.to_string(),
                 })
         },
         &mut |reference| {
@@ -389,13 +384,10 @@ pub fn run(geometry: &Geometry, args: &CampaignArgs) -> anyhow::Result<()> {
             let Some(log) = drift_log.as_mut() else {
                 return Ok(());
             };
-            log.append(reference).map_err(|e| {
-                hexacomp_trainer::Error::InsufficientData(format!(
-                    "{}: cannot log the reference {}: {e} (the campaign stops; run again to \
-                     continue)",
-                    log.path().display(),
-                    reference.id
-                ))
+            log.append(reference).map_err(|e| Error::RecordNotWritten {
+                path: log.path().to_path_buf(),
+                what: format!("the reference {}", reference.id),
+                message: e.to_string(),
             })
         },
         &mut || bar.inc(1),

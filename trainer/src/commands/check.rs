@@ -6,10 +6,10 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use hexacomp_core::Geometry;
-use hexacomp_trainer::check::{CheckResult, Verdict, promised, verified_poses};
-use hexacomp_trainer::iso9283::approach_pose;
-use hexacomp_trainer::verify::{PoseTest, TestRun};
-use hexacomp_trainer::verify_report::{VerifyReport, raw_csv};
+use hexacomp_iso9283::check::{CheckResult, Verdict, promised, verified_poses};
+use hexacomp_iso9283::pose_test::approach_pose;
+use hexacomp_iso9283::verify::{PoseTest, TestRun};
+use hexacomp_iso9283::verify_report::{VerifyReport, raw_csv};
 
 /// Check that the calibration still holds (monthly, or after a crash or a move of the machine).
 ///

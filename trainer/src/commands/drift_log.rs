@@ -11,7 +11,7 @@ use hexacomp_formats::{
     DRIFT_COLUMNS, DriftEntry, JournalKind, MeasurementsJournal, Records, RegistrationFile,
     read_drift_log,
 };
-use hexacomp_trainer::drift::{DriftCheck, ReferenceMeasurement, WarmUp};
+use hexacomp_measuring::drift::{DriftCheck, ReferenceMeasurement, WarmUp};
 
 use super::{optional_cell, registration_cells};
 

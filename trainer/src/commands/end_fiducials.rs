@@ -5,8 +5,8 @@
 use std::path::{Path, PathBuf};
 
 use hexacomp_formats::{RegistrationFile, read_fiducials, write_fiducials_with};
-use hexacomp_trainer::campaign::{CampaignOptions, Instrument};
-use hexacomp_trainer::fiducial_check::{FiducialCheck, compare, remeasure};
+use hexacomp_measuring::campaign::{CampaignOptions, Instrument};
+use hexacomp_measuring::fiducial_check::{FiducialCheck, compare, remeasure};
 
 /// The columns after `name,x,y,z`: the registration's weight, the movement since the
 /// registration (mm), the readings' spread (mm) and the readings kept.

@@ -2,21 +2,23 @@
 
 use std::path::{Path, PathBuf};
 
+use hexacomp_calibration::distill::DistillOptions;
+use hexacomp_calibration::identify::PHYSICAL;
+use hexacomp_calibration::pitch_resolution::{
+    PITCH_RESOLUTIONS, ResolutionScore, SMOOTHNESS_WEIGHTS,
+};
+use hexacomp_calibration::train::{CROSS_VALIDATION_FOLDS, TrainOptions};
 use hexacomp_core::Geometry;
 use hexacomp_core::stats::{ErrorStats, PoseErrorStats};
-use hexacomp_trainer::chart::{Axis, Chart, Series};
-use hexacomp_trainer::distill::DistillOptions;
-use hexacomp_trainer::evaluate::{
+use hexacomp_lab::evaluate::{
     Evaluation, EvaluationOptions, Method, Protocol, SizeResult, evaluate,
 };
-use hexacomp_trainer::identify::PHYSICAL;
-use hexacomp_trainer::pitch_resolution::{PITCH_RESOLUTIONS, ResolutionScore, SMOOTHNESS_WEIGHTS};
-use hexacomp_trainer::train::{CROSS_VALIDATION_FOLDS, TrainOptions};
+use hexacomp_report::chart::{Axis, Chart, Series};
 use hexacomp_virtual::{DEFAULT_MACHINE_SEED, ErrorModel, ErrorVariant};
 
 use super::ResultsFolder;
 use super::train::InputArg;
-use hexacomp_trainer::table::Table;
+use hexacomp_report::table::Table;
 
 /// Compare the compensation methods on the virtual platform, on fresh validation poses that no
 /// training used: uncompensated, the model-based baseline (identified geometry), the physical

@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 
 use hexacomp_core::{Geometry, Workspace};
-use hexacomp_trainer::linuxcnc::{ConversionOptions, LinuxCncHexapod};
+use hexacomp_measuring::linuxcnc::{ConversionOptions, LinuxCncHexapod};
 
 /// Print the geometry in use (the built-in `prototype` unless --geometry is given) as TOML, or
 /// convert a LinuxCNC hexapod configuration (--from-linuxcnc).

@@ -3,9 +3,9 @@
 use std::path::PathBuf;
 
 use anyhow::Context;
+use hexacomp_calibration::identify::{IdentifyOptions, PARAMETERS, identify};
+use hexacomp_calibration::pipeline::Pipeline;
 use hexacomp_core::{Geometry, LEGS};
-use hexacomp_trainer::identify::{IdentifyOptions, PARAMETERS, identify};
-use hexacomp_trainer::pipeline::Pipeline;
 
 use super::measurements_input::MeasurementsInput;
 use super::solve::{MeasuredScreeningArgs, solve_screened};

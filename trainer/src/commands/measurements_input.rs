@@ -10,7 +10,7 @@ use hexacomp_core::observation::Observation;
 use hexacomp_core::pose::PoseConvention;
 use hexacomp_core::records::MeasuredConfiguration;
 use hexacomp_formats::{Records, RegistrationFile, read_measurements_in, read_registration};
-use hexacomp_trainer::registration::into_base_frame;
+use hexacomp_measuring::registration::into_base_frame;
 
 /// The options that say how a measurements file is to be read.
 #[derive(Debug, clap::Args)]

@@ -2,10 +2,10 @@
 
 use std::path::PathBuf;
 
+use hexacomp_calibration::plan::{PlanOptions, numbered_rows, plan_with_progress, plan_work};
 use hexacomp_core::Geometry;
 use hexacomp_core::sampling::SamplerOptions;
 use hexacomp_formats::write_poses;
-use hexacomp_trainer::plan::{PlanOptions, numbered_rows, plan_with_progress, plan_work};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use hexacomp_formats::write_file;

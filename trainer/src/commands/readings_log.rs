@@ -9,8 +9,8 @@ use std::time::{Duration, SystemTime};
 use hexacomp_core::observation::Observation;
 use hexacomp_core::records::MeasuredConfiguration;
 use hexacomp_formats::{JournalKind, MeasurementsJournal, READINGS_COLUMNS};
-use hexacomp_trainer::campaign::Combined;
-use hexacomp_trainer::command_instrument::first_line;
+use hexacomp_measuring::campaign::Combined;
+use hexacomp_measuring::command_instrument::first_line;
 
 use super::{optional_cell, registration_cells};
 
@@ -32,8 +32,8 @@ pub struct Temperatures {
 /// cell may be empty) with `timeout`; why not, when it fails or prints something else.
 pub fn read_temperatures(program: &[String], timeout: Duration) -> Result<Temperatures, String> {
     let line = first_line(program, &[], timeout).map_err(|e| match e {
-        hexacomp_trainer::campaign::ReadError::Failed(why)
-        | hexacomp_trainer::campaign::ReadError::Broken(why) => why,
+        hexacomp_measuring::campaign::ReadError::Failed(why)
+        | hexacomp_measuring::campaign::ReadError::Broken(why) => why,
     })?;
     let cells: Vec<&str> = line.split(',').map(str::trim).collect();
     let [air, machine] = cells.as_slice() else {

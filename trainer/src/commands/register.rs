@@ -9,11 +9,11 @@ use hexacomp_core::kinematics::target_points;
 use hexacomp_core::records::NamedPoint;
 use hexacomp_core::rigid_fit::{Locked, PARAMETER_NAMES};
 use hexacomp_formats::{RegistrationFile, read_fiducials};
-use hexacomp_trainer::registration::{
+use hexacomp_measuring::registration::{
     InstrumentMpe, RegistrationOptions, SupportedAccuracy, accuracy_from_residuals, register,
     supported_accuracy,
 };
-use hexacomp_trainer::table::Table;
+use hexacomp_report::table::Table;
 
 use super::write_bytes;
 

@@ -6,13 +6,12 @@ use std::time::Duration;
 use hexacomp_core::Geometry;
 use hexacomp_core::fused::FusedModel;
 use hexacomp_core::model::Model;
-use hexacomp_trainer::campaign::{
-    CampaignOptions, Instrument, Machine, VirtualHardware, VirtualInstrument, VirtualMachine,
-};
-use hexacomp_trainer::command_instrument::CommandInstrument;
-use hexacomp_trainer::followed_file::FollowedFile;
-use hexacomp_trainer::linuxcnc_machine::{LinuxCncMachine, LinuxCncOptions};
-use hexacomp_trainer::manual::{ManualInstrument, ManualMachine};
+use hexacomp_lab::virtual_rig::{VirtualHardware, VirtualInstrument, VirtualMachine};
+use hexacomp_measuring::campaign::{CampaignOptions, Instrument, Machine};
+use hexacomp_measuring::command_instrument::CommandInstrument;
+use hexacomp_measuring::followed_file::FollowedFile;
+use hexacomp_measuring::linuxcnc_machine::{LinuxCncMachine, LinuxCncOptions};
+use hexacomp_measuring::manual::{ManualInstrument, ManualMachine};
 use hexacomp_virtual::{DEFAULT_MACHINE_SEED, ErrorModel, ErrorVariant, VirtualPlatform};
 
 /// The machine, the instrument and how each pose is read.

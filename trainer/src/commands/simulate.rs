@@ -7,7 +7,7 @@ use hexacomp_core::Geometry;
 use hexacomp_core::error::compact;
 use hexacomp_core::pose::PoseConvention;
 use hexacomp_formats::{read_fiducials, read_poses, write_fiducials, write_measurements_in};
-use hexacomp_trainer::acquire::{Reporting, as_reported, measure_plan};
+use hexacomp_lab::acquire::{Reporting, as_reported};
 use hexacomp_virtual::{
     DEFAULT_MACHINE_SEED, ErrorModel, ErrorVariant, VirtualPlatform, measure_fiducials,
 };
@@ -147,7 +147,8 @@ pub fn run(geometry: &Geometry, args: &SimulateArgs) -> anyhow::Result<()> {
                 compact(length, 3)
             );
         }
-        let measured = measure_plan(&mut platform, std::slice::from_ref(row))
+        let measured = platform
+            .measure_plan(std::slice::from_ref(row))
             .with_context(|| format!("{}: cannot be measured on the virtual machine", at()))?;
         rows.extend(measured);
     }

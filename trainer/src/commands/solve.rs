@@ -4,13 +4,13 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+use hexacomp_calibration::corrections::{Checks, Outcome, Solution, SolverOptions};
+use hexacomp_calibration::pipeline::{Pipeline, Solved};
+use hexacomp_calibration::screening::{Screening, ScreeningOptions, screen_corrections};
 use hexacomp_core::Geometry;
 use hexacomp_core::records::JointCorrection;
 use hexacomp_core::records::MeasuredConfiguration;
 use hexacomp_formats::{Records, write_corrections};
-use hexacomp_trainer::corrections::{Checks, Outcome, Solution, SolverOptions};
-use hexacomp_trainer::pipeline::{Pipeline, Solved};
-use hexacomp_trainer::screening::{Screening, ScreeningOptions, screen_corrections};
 
 use hexacomp_formats::write_file;
 
@@ -205,7 +205,7 @@ fn print_exclusions<T>(screening: &Screening, records: &Records<T>, id: impl Fn(
 /// Prints the screening of `records` (every excluded row, the counts), and turns a refusal into
 /// an error that names the file, after listing its rows.
 fn decided<T, R>(
-    result: hexacomp_trainer::Result<R>,
+    result: hexacomp_calibration::Result<R>,
     screening_of: impl Fn(&R) -> &Screening,
     records: &Records<T>,
     id: impl Fn(&T) -> &str,
@@ -215,7 +215,7 @@ fn decided<T, R>(
             print_exclusions(screening_of(&value), records, id);
             Ok(value)
         }
-        Err(hexacomp_trainer::Error::Refused { reason, screening }) => {
+        Err(hexacomp_calibration::Error::Refused { reason, screening }) => {
             print_exclusions(&screening, records, id);
             anyhow::bail!("{}: refused: {reason}", records.file)
         }

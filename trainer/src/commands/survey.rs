@@ -8,7 +8,7 @@ use hexacomp_virtual::{
     DEFAULT_MACHINE_SEED, DEFAULT_NOISE_SEED, ErrorModel, ErrorVariant, VirtualPlatform,
 };
 
-use hexacomp_trainer::table::Table;
+use hexacomp_report::table::Table;
 
 /// Drive the virtual platform uncompensated to random workspace poses and report its pose
 /// errors (max/mean/std of the position error ‖δ_A‖ in mm and the orientation error ‖ε‖ in

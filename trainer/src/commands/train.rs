@@ -3,18 +3,18 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
+use hexacomp_calibration::pipeline::Pipeline;
 use hexacomp_core::Geometry;
 use hexacomp_core::model::NetworkInput;
 use hexacomp_core::records::JointCorrection;
 use hexacomp_formats::read_corrections;
-use hexacomp_trainer::pipeline::Pipeline;
 
 use super::solve::{ScreeningArgs, screen_corrections_file};
-use hexacomp_trainer::chart::{Axis, Chart, Series};
-use hexacomp_trainer::train::{Architecture, Selection, TrainOptions, Trained, training_work};
+use hexacomp_calibration::train::{Architecture, Selection, TrainOptions, Trained, training_work};
+use hexacomp_report::chart::{Axis, Chart, Series};
 use indicatif::{ProgressBar, ProgressStyle};
 
-use hexacomp_trainer::table::Table;
+use hexacomp_report::table::Table;
 
 /// Fit the joint-correction function Δq = N(q) with three-layer networks (tanh hidden layer,
 /// linear output, inputs normalised by Eq. 13) and write a model file.
@@ -269,7 +269,7 @@ pub fn print_selection(trained: &Trained, architecture: Architecture) {
 fn composite(
     selections: &[Selection],
     row: usize,
-    pick: impl Fn(&hexacomp_trainer::train::SweepPoint) -> f64,
+    pick: impl Fn(&hexacomp_calibration::train::SweepPoint) -> f64,
 ) -> f64 {
     selections
         .iter()
@@ -286,13 +286,14 @@ pub fn write_selection_plot(
 ) -> anyhow::Result<()> {
     let s = &trained.selections;
     let sizes: Vec<f64> = s[0].sweep.iter().map(|p| p.hidden as f64).collect();
-    let curve = |pick: &dyn Fn(&hexacomp_trainer::train::SweepPoint) -> f64| -> Vec<(f64, f64)> {
-        sizes
-            .iter()
-            .enumerate()
-            .map(|(row, &h)| (h, composite(s, row, pick)))
-            .collect()
-    };
+    let curve =
+        |pick: &dyn Fn(&hexacomp_calibration::train::SweepPoint) -> f64| -> Vec<(f64, f64)> {
+            sizes
+                .iter()
+                .enumerate()
+                .map(|(row, &h)| (h, composite(s, row, pick)))
+                .collect()
+        };
     let mut series = vec![
         Series::line("training", curve(&|p| p.training_rmse_mm)),
         Series::line("validation", curve(&|p| p.validation_rmse_mm)),

@@ -7,11 +7,11 @@ use std::time::{Duration, SystemTime};
 
 use anyhow::Context;
 use hexacomp_core::Geometry;
-use hexacomp_trainer::iso9283::{TestPoseOptions, approach_pose, cycle_poses, test_cube};
-use hexacomp_trainer::registration::InstrumentMpe;
-use hexacomp_trainer::table::Table;
-use hexacomp_trainer::verify::{PoseTest, TestRun, characteristics_of};
-use hexacomp_trainer::verify_report::{Conditions, VerifyReport, html, improvement, raw_csv};
+use hexacomp_iso9283::pose_test::{TestPoseOptions, approach_pose, cycle_poses, test_cube};
+use hexacomp_iso9283::verify::{PoseTest, TestRun, characteristics_of};
+use hexacomp_iso9283::verify_report::{Conditions, VerifyReport, html, improvement, raw_csv};
+use hexacomp_measuring::registration::InstrumentMpe;
+use hexacomp_report::table::Table;
 
 /// Test the machine's pose accuracy and repeatability as ISO 9283 defines them.
 ///
