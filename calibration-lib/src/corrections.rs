@@ -61,13 +61,19 @@ impl SolverOptions {
         ];
         for (name, value, zero_ok) in positive {
             if !(value.is_finite() && (value > 0.0 || (zero_ok && value == 0.0))) {
-                return Err(Error::InvalidSetting(format!(
-                    "{name} = {value} must be a finite number > 0"
-                )));
+                return Err(Error::OutOfRange {
+                    setting: name,
+                    value,
+                    valid: "must be a finite number > 0",
+                });
             }
         }
         if self.max_iterations == 0 {
-            return Err(Error::InvalidSetting("max-iterations must be ≥ 1".into()));
+            return Err(Error::OutOfRange {
+                setting: "max-iterations",
+                value: 0.0,
+                valid: "must be ≥ 1",
+            });
         }
         Ok(())
     }
@@ -106,7 +112,7 @@ pub struct Solution {
 /// `W` is singular at an iterate (`T` does not exist), or when the normal equations of a step
 /// cannot be solved ([`Error::SingularNormalEquations`]); and before iterating, when the
 /// observation does not belong to the geometry or does not determine the pose (fewer than three
-/// targets seen: [`Error::InsufficientData`]).
+/// targets seen: [`Error::Undetermined`]).
 pub fn solve(
     geometry: &Geometry,
     commanded: &[f64; LEGS],
@@ -114,9 +120,14 @@ pub fn solve(
     seed: &Pose,
     options: &SolverOptions,
 ) -> Result<Solution> {
-    measured.check(geometry).map_err(Error::GeometryMismatch)?;
+    measured
+        .check(geometry)
+        .map_err(|problem| Error::MeasurementsMismatch {
+            configuration: None,
+            problem,
+        })?;
     if let Some(reason) = measured.undetermined(geometry) {
-        return Err(Error::InsufficientData(reason));
+        return Err(Error::Undetermined { reason });
     }
     let fk = ForwardOptions::default();
     let mut legs = *commanded;
@@ -245,9 +256,11 @@ impl Checks {
             ("legs-tolerance", self.legs_tolerance_mm),
         ] {
             if value.is_nan() || value <= 0.0 {
-                return Err(Error::InvalidSetting(format!(
-                    "{name} = {value} must be a number > 0"
-                )));
+                return Err(Error::OutOfRange {
+                    setting: name,
+                    value,
+                    valid: "must be a number > 0",
+                });
             }
         }
         Ok(())
@@ -271,7 +284,7 @@ pub struct Outcome {
     /// The commanded legs `q⁽⁰⁾`, mm.
     pub commanded: [f64; LEGS],
     /// The solution, or why there is none.
-    pub solution: std::result::Result<Solution, String>,
+    pub solution: Result<Solution>,
     /// The per-configuration checks it failed (empty for a clean one).
     pub flags: Vec<Flag>,
 }
@@ -300,10 +313,10 @@ pub fn solve_all(
         .iter()
         .find_map(|row| row.observed.check(geometry).err().map(|why| (row, why)))
     {
-        return Err(Error::GeometryMismatch(format!(
-            "configuration {}: {problem}",
-            row.id
-        )));
+        return Err(Error::MeasurementsMismatch {
+            configuration: Some(row.id.clone()),
+            problem,
+        });
     }
     Ok(rows
         .iter()
@@ -328,8 +341,7 @@ fn solve_row(
             max_mm: disagreement,
         });
     }
-    let solution =
-        solve(geometry, &row.legs, &row.observed, &pose, options).map_err(|e| e.to_string());
+    let solution = solve(geometry, &row.legs, &row.observed, &pose, options);
     if let Ok(s) = &solution {
         if !s.converged {
             flags.push(Flag::NotConverged);

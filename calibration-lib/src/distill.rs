@@ -108,11 +108,11 @@ pub(crate) fn draw(
         }
     }
     if drawn.len() < count {
-        return Err(Error::InsufficientData(format!(
-            "only {} of {attempts} workspace poses lie within the measured legs' range; the \
-             physical model needs {count} to be carried into networks",
-            drawn.len(),
-        )));
+        return Err(Error::TooFewPosesInRange {
+            drawn: drawn.len(),
+            attempts,
+            needed: count,
+        });
     }
     Ok(drawn)
 }

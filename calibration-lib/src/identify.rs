@@ -138,16 +138,18 @@ impl IdentifyOptions {
     /// least four coefficients, and a smoothness prior's weight finite and ≥ 0.
     pub(crate) fn validate(&self) -> Result<()> {
         if (1..4).contains(&self.pitch_basis) {
-            return Err(Error::InvalidSetting(format!(
-                "{} B-spline coefficients per lead-screw curve: 0 (none) or at least 4 are needed",
-                self.pitch_basis
-            )));
+            return Err(Error::OutOfRange {
+                setting: "B-spline coefficients per lead-screw curve",
+                value: self.pitch_basis as f64,
+                valid: "must be 0 (none) or at least 4",
+            });
         }
         if !(self.smoothness.is_finite() && self.smoothness >= 0.0) {
-            return Err(Error::InvalidSetting(format!(
-                "a smoothness prior's weight of {}: a finite weight ≥ 0 is needed",
-                self.smoothness
-            )));
+            return Err(Error::OutOfRange {
+                setting: "the smoothness prior's weight",
+                value: self.smoothness,
+                valid: "must be finite and ≥ 0",
+            });
         }
         Ok(())
     }
@@ -187,10 +189,11 @@ pub fn identify(
     // 9 equations per configuration; 42 unknowns need at least 5 configurations, and far more
     // for a well-conditioned answer.
     if rows.len() < 5 {
-        return Err(Error::InsufficientData(format!(
-            "identification needs at least 5 measured configurations, got {}",
-            rows.len()
-        )));
+        return Err(Error::TooFewConfigurations {
+            task: "identification",
+            needed: 5,
+            got: rows.len(),
+        });
     }
     options.validate()?;
     let mut model = PhysicalModel::geometric(nominal.clone());
@@ -216,56 +219,22 @@ pub fn identify(
             break;
         }
         cost_previous = cost;
-        let ScaledSvd {
-            svd,
-            scales,
-            cutoff,
-            ..
-        } = scaled_svd(jacobian, &prior.rows, options, true);
-        rank = svd.singular_values.iter().filter(|s| **s > cutoff).count();
-        let stacked = DVector::from_iterator(
-            residual.len() + prior.residual.len(),
-            residual.iter().chain(prior.residual.iter()).copied(),
-        );
-        let step = svd
-            .solve(&stacked, cutoff)
-            .map_err(|e| Error::InsufficientData(format!("identification step: {e}")))?
-            .component_div(&scales);
-        // A step that raises the objective, or takes the legs where the geometry cannot reach
-        // them, is halved (up to ten times): a direction the data barely sees must not throw
-        // the model away. None lowering it: the fit is done, unless no step could be taken at
-        // all because every one left the reach of the geometry.
-        let mut unreachable = None;
-        let accepted = (0..10).find_map(|halvings| {
-            let step = &step * 0.5f64.powi(halvings);
-            let mut trial = model.clone();
-            apply(&mut trial, options, &step);
-            let mut trial_poses = poses.clone();
-            match linearise(&trial, options, rows, &mut trial_poses) {
-                Ok((_, r))
-                    if r.norm_squared()
-                        + SmoothnessPrior::at(&trial, options).residual.norm_squared()
-                        < objective =>
-                {
-                    Some((trial, trial_poses, step))
-                }
-                Ok(_) => None,
-                Err(e) => {
-                    unreachable = Some(e);
-                    None
-                }
-            }
-        });
-        let Some((trial, trial_poses, taken)) = accepted else {
+        let (step, kept) = scaled_step(jacobian, &residual, &prior, options)?;
+        rank = kept;
+        let (accepted, unreachable) =
+            halved_until_lower(&model, options, rows, &poses, &step, objective);
+        // None lowering it: the fit is done, unless no step could be taken at all because every
+        // one left the reach of the geometry.
+        let Some(accepted) = accepted else {
             match unreachable {
                 Some(e) if iterations == 0 => return Err(ill_conditioned(e, rank, parameters)),
                 _ => break,
             }
         };
-        model = trial;
-        poses = trial_poses;
+        model = accepted.model;
+        poses = accepted.poses;
         iterations += 1;
-        if taken.amax() < options.step_tolerance_mm {
+        if accepted.step.amax() < options.step_tolerance_mm {
             break;
         }
     }
@@ -279,6 +248,80 @@ pub fn identify(
         rms_before_mm: rms_before.unwrap_or(0.0),
         rms_after_mm: (residual.norm_squared() / residual.len() as f64).sqrt(),
     })
+}
+
+/// The least-squares step of the stacked residuals and smoothness prior (the SVD of the
+/// column-scaled Jacobian, cut at the options' cutoff), in the parameters' units, and the
+/// number of directions kept.
+fn scaled_step(
+    jacobian: DMatrix<f64>,
+    residual: &DVector<f64>,
+    prior: &SmoothnessPrior,
+    options: &IdentifyOptions,
+) -> Result<(DVector<f64>, usize)> {
+    let ScaledSvd {
+        svd,
+        scales,
+        cutoff,
+        ..
+    } = scaled_svd(jacobian, &prior.rows, options, true);
+    let kept = svd.singular_values.iter().filter(|s| **s > cutoff).count();
+    let stacked = DVector::from_iterator(
+        residual.len() + prior.residual.len(),
+        residual.iter().chain(prior.residual.iter()).copied(),
+    );
+    let step = svd
+        .solve(&stacked, cutoff)
+        .map_err(|cause| Error::IdentificationStep { cause })?
+        .component_div(&scales);
+    Ok((step, kept))
+}
+
+/// A step the identification took: the model and poses after it, and the step itself.
+struct AcceptedStep {
+    model: PhysicalModel,
+    poses: Vec<Pose>,
+    step: DVector<f64>,
+}
+
+/// `step` from `model`, halved (up to ten times) until it lowers `objective` (the residuals'
+/// squares and the smoothness prior's) and keeps the legs within the geometry's reach: a
+/// direction the data barely sees must not throw the model away. The model, poses and step
+/// taken, if any; and the last error of a step that left the geometry's reach.
+fn halved_until_lower(
+    model: &PhysicalModel,
+    options: &IdentifyOptions,
+    rows: &[MeasuredConfiguration],
+    poses: &[Pose],
+    step: &DVector<f64>,
+    objective: f64,
+) -> (Option<AcceptedStep>, Option<Error>) {
+    let mut unreachable = None;
+    let accepted = (0..10).find_map(|halvings| {
+        let step = step * 0.5f64.powi(halvings);
+        let mut trial = model.clone();
+        apply(&mut trial, options, &step);
+        let mut trial_poses = poses.to_vec();
+        match linearise(&trial, options, rows, &mut trial_poses) {
+            Ok((_, r))
+                if r.norm_squared()
+                    + SmoothnessPrior::at(&trial, options).residual.norm_squared()
+                    < objective =>
+            {
+                Some(AcceptedStep {
+                    model: trial,
+                    poses: trial_poses,
+                    step,
+                })
+            }
+            Ok(_) => None,
+            Err(e) => {
+                unreachable = Some(e);
+                None
+            }
+        }
+    });
+    (accepted, unreachable)
 }
 
 /// The norm of `row`'s target residuals `r_Pm − r_Pc` at `geometry` (the targets seen, or the
@@ -406,10 +449,11 @@ fn ill_conditioned(error: Error, rank: usize, parameters: usize) -> Error {
     if rank == 0 || rank >= parameters {
         return error;
     }
-    Error::InsufficientData(format!(
-        "{error}; the configurations determine only {rank} of the {parameters} parameter \
-         combinations (ill-conditioned: measure configurations spread over the whole workspace)"
-    ))
+    Error::IllConditioned {
+        cause: Box::new(error),
+        rank,
+        parameters,
+    }
 }
 
 /// The Jacobian `∂r_Pc/∂θ` (3 rows per measured point × the parameters of `options`; per
@@ -437,12 +481,16 @@ pub(crate) fn linearise(
     let mut residual = DVector::zeros(total);
     let mut at = 0;
     for ((row, pose), which) in rows.iter().zip(poses.iter_mut()).zip(&points) {
-        *pose = loaded_pose(model, &row.legs, pose)
-            .map_err(|why| Error::InsufficientData(format!("configuration {}: {why}", row.id)))?;
-        let screws = ActuationScrews::at(geometry, pose);
-        let t = screws.motion_jacobian().ok_or_else(|| {
-            Error::InsufficientData(format!("configuration {} is singular", row.id))
+        *pose = loaded_pose(model, &row.legs, pose).map_err(|cause| Error::Unreachable {
+            configuration: row.id.clone(),
+            cause: Box::new(cause),
         })?;
+        let screws = ActuationScrews::at(geometry, pose);
+        let t = screws
+            .motion_jacobian()
+            .ok_or_else(|| Error::SingularConfiguration {
+                configuration: row.id.clone(),
+            })?;
         let g = leg_sensitivities(model, options, &row.legs, pose, &screws);
         let t = DMatrix::from_column_slice(LEGS, LEGS, t.as_slice());
         let block = point_matrix(geometry, pose, which) * t * g;
@@ -473,15 +521,11 @@ const LOADED_POSE_TOLERANCE_MM: f64 = 1e-9;
 /// left the identification's residuals' squares a quarter above their value: the answer must
 /// not depend on where it starts. Why not, where the forward kinematics fails or the passes do
 /// not settle (a model whose sag moves faster than the pose: a step the identification halves).
-fn loaded_pose(
-    model: &PhysicalModel,
-    commanded: &[f64; LEGS],
-    seed: &Pose,
-) -> std::result::Result<Pose, String> {
+fn loaded_pose(model: &PhysicalModel, commanded: &[f64; LEGS], seed: &Pose) -> Result<Pose> {
     let fk = ForwardOptions::default();
     let kinematics = |lengths: &[f64; LEGS], seed: &Pose| {
         forward_kinematics(&model.geometry, lengths, seed, &fk)
-            .map_err(|e| format!("forward kinematics of the identified geometry: {e}"))
+            .map_err(|e| Error::from(e).of("forward kinematics of the identified geometry"))
     };
     let mut lengths = model.loaded_lengths(commanded, seed);
     let mut pose = kinematics(&lengths, seed)?;
@@ -494,9 +538,9 @@ fn loaded_pose(
         lengths = loaded;
         pose = kinematics(&lengths, &pose)?;
     }
-    Err(format!(
-        "the legs' sag and the pose did not settle together in {LOADED_POSE_PASSES} passes"
-    ))
+    Err(Error::LoadedPoseUnsettled {
+        passes: LOADED_POSE_PASSES,
+    })
 }
 
 /// `G` at `pose` for legs commanded to `commanded` (mm): row `i` is how far leg `i`'s loaded

@@ -86,11 +86,11 @@ pub fn physical_candidate(
     let (mut distilled, fidelity) = (carried.distilled, carried.fidelity);
     let score_mm = (cross_validated_rmse_mm.powi(2) + LEGS as f64 * fidelity.rms_mm.powi(2)).sqrt();
     if !score_mm.is_finite() {
-        return Err(Error::InvalidSetting(format!(
-            "the physical model's score is {score_mm} (cross-validated {cross_validated_rmse_mm} \
-             mm, networks' departure {} mm)",
-            fidelity.rms_mm
-        )));
+        return Err(Error::ScoreNotFinite {
+            score_mm,
+            cross_validated_mm: cross_validated_rmse_mm,
+            departure_mm: fidelity.rms_mm,
+        });
     }
     distilled.model.provenance.configurations = measurements.len();
     Ok(PhysicalCandidate {

@@ -156,9 +156,9 @@ pub fn identified_on_every_configuration(
                 } else {
                     "without a smoothness prior".to_string()
                 };
-                Error::InsufficientData(format!(
+                e.of(format!(
                     "the physical model of {} lead-screw coefficients per leg {prior}, \
-                     identified on every configuration: {e}",
+                     identified on every configuration",
                     options.pitch_basis
                 ))
             })
@@ -189,20 +189,19 @@ pub fn chosen_resolution(
             .zip(corrections)
             .any(|(m, c)| m.id != c.id)
     {
-        return Err(Error::InvalidSetting(
-            "the physical model needs one robust correction per measured configuration, in \
-             the same order"
-                .into(),
-        ));
+        return Err(Error::CorrectionsMismatch {
+            measurements: measurements.len(),
+            corrections: corrections.len(),
+        });
     }
     let legs = commanded_legs(corrections);
     if !can_cross_validate(&legs, fold_count) {
-        return Err(Error::InvalidSetting(format!(
-            "cross-validating the physical model needs at least 2 folds ({fold_count} given) \
-             and two configurations per fold to hold out besides the legs' extremes ({} \
-             configurations)",
-            measurements.len()
-        )));
+        return Err(Error::CrossValidationImpossible {
+            what: "the physical model".into(),
+            folds: fold_count,
+            rows: measurements.len(),
+            sizes_match: true,
+        });
     }
     let fold = folds(&legs, fold_count, seed);
     // Each of `candidates` identified without each fold, on the machine's cores: every job's
@@ -235,7 +234,7 @@ fn scores_of(
     configurations: usize,
     fold_count: usize,
     missed: Vec<Result<Vec<(usize, f64)>>>,
-) -> Vec<std::result::Result<ResolutionScore, String>> {
+) -> Vec<Result<ResolutionScore>> {
     let mut missed = missed.into_iter();
     candidates
         .into_iter()
@@ -266,7 +265,7 @@ impl ResolutionChoice {
         )) {
             match score {
                 Ok(score) => self.smoothed.push(score),
-                Err(why) => self.smoothing_failed.push((weight, why)),
+                Err(why) => self.smoothing_failed.push((weight, why.to_string())),
             }
         }
         let best = std::iter::once(self.chosen_without_prior())
@@ -300,18 +299,11 @@ fn choice_of(
     {
         match score {
             Ok(score) => scores.push(score),
-            Err(why) => failed.push((basis, why)),
+            Err(why) => failed.push((basis, why.to_string())),
         }
     }
     if scores.is_empty() {
-        let reasons: Vec<String> = failed
-            .iter()
-            .map(|(basis, why)| format!("{basis} coefficients: {why}"))
-            .collect();
-        return Err(Error::InsufficientData(format!(
-            "no lead-screw resolution of the physical model could be cross-validated ({})",
-            reasons.join("; ")
-        )));
+        return Err(Error::NoResolutionCrossValidated { reasons: failed });
     }
     Ok(ResolutionChoice {
         options: IdentifyOptions::physical(coarsest_within_one_standard_error(&scores).pitch_basis),
@@ -328,12 +320,15 @@ fn scored(
     options: &IdentifyOptions,
     configurations: usize,
     folds: Vec<Result<Vec<(usize, f64)>>>,
-) -> std::result::Result<ResolutionScore, String> {
+) -> Result<ResolutionScore> {
     // Each held-out configuration's squared miss in the plan's order: the score does not
     // depend on which core ran which fold.
     let mut squared = vec![None; configurations];
     for (f, result) in folds.into_iter().enumerate() {
-        let misses = result.map_err(|e| format!("identified without fold {}: {e}", f + 1))?;
+        let misses = result.map_err(|e| Error::FoldFailed {
+            fold: f + 1,
+            cause: Box::new(e),
+        })?;
         for (k, miss) in misses {
             squared[k] = Some(miss);
         }
@@ -341,10 +336,10 @@ fn scored(
     let squared: Vec<f64> = squared.into_iter().flatten().collect();
     let score = score_of(options, &squared);
     if !(score.cross_validated_rmse_mm.is_finite() && score.standard_error_mm.is_finite()) {
-        return Err(format!(
-            "cross-validated to {} ± {} mm",
-            score.cross_validated_rmse_mm, score.standard_error_mm
-        ));
+        return Err(Error::ScoreUnbounded {
+            rmse_mm: score.cross_validated_rmse_mm,
+            standard_error_mm: score.standard_error_mm,
+        });
     }
     Ok(score)
 }
@@ -569,19 +564,26 @@ mod tests {
             4,
             vec![
                 fold(&[(0, 1.0), (2, 4.0)]),
-                Err(Error::InsufficientData("leg 3 outside the stroke".into())),
+                Err(Error::SingularConfiguration {
+                    configuration: "3".into(),
+                }),
             ],
         );
         assert_eq!(
-            failed,
-            Err("identified without fold 2: insufficient data: leg 3 outside the stroke".into())
+            failed.unwrap_err().to_string(),
+            "identified without fold 2: insufficient data: configuration 3 is singular"
         );
         let unbounded = scored(
             &IdentifyOptions::physical(16),
             2,
             vec![fold(&[(0, f64::INFINITY)]), fold(&[(1, 1.0)])],
         );
-        assert!(unbounded.unwrap_err().contains("cross-validated to inf ±"));
+        assert!(
+            unbounded
+                .unwrap_err()
+                .to_string()
+                .contains("cross-validated to inf ±")
+        );
         // Nothing missed: a zero error with a zero standard error, not an undefined one.
         assert_eq!(
             score_of(&IdentifyOptions::physical(8), &[0.0, 0.0]).standard_error_mm,
@@ -620,7 +622,9 @@ mod tests {
             Some(m) => vec![Ok(vec![(0, m), (2, m)]), Ok(vec![(1, m), (3, m)])],
             None => vec![
                 Ok(vec![(0, 1.0), (2, 1.0)]),
-                Err(Error::InsufficientData("leg 3 outside the stroke".into())),
+                Err(Error::SingularConfiguration {
+                    configuration: "3".into(),
+                }),
             ],
         }
     }

@@ -101,9 +101,11 @@ pub fn plan_with_progress(
     progress: &dyn Fn(u64),
 ) -> Result<Vec<Pose>> {
     if options.candidates == 0 {
-        return Err(Error::InvalidSetting(
-            "a plan needs at least one candidate per configuration".into(),
-        ));
+        return Err(Error::OutOfRange {
+            setting: "candidates per configuration",
+            value: 0.0,
+            valid: "must be ≥ 1",
+        });
     }
     let mut sampler = WorkspaceSampler::new(geometry, options.seed, options.sampler)?;
     let scale = Normaliser::new(geometry);

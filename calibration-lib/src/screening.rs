@@ -86,16 +86,19 @@ impl ScreeningOptions {
         ];
         for (name, value) in positive {
             if value.is_nan() || value <= 0.0 {
-                return Err(Error::InvalidSetting(format!(
-                    "{name} = {value} must be a number > 0"
-                )));
+                return Err(Error::OutOfRange {
+                    setting: name,
+                    value,
+                    valid: "must be a number > 0",
+                });
             }
         }
         if !(0.0..=1.0).contains(&self.max_excluded_share) {
-            return Err(Error::InvalidSetting(format!(
-                "max-excluded-share = {} must be between 0 and 1",
-                self.max_excluded_share
-            )));
+            return Err(Error::OutOfRange {
+                setting: "max-excluded-share",
+                value: self.max_excluded_share,
+                valid: "must be between 0 and 1",
+            });
         }
         Ok(())
     }
@@ -221,7 +224,7 @@ pub fn screen_measured(
         .map(
             |(o, row)| match (&o.solution, row.observed.undetermined(geometry)) {
                 (Err(_), Some(why)) => vec![Reason::Unmeasured(why)],
-                (Err(why), None) => vec![Reason::Unsolvable(why.clone())],
+                (Err(why), None) => vec![Reason::Unsolvable(why.to_string())],
                 (Ok(_), _) => o.flags.iter().cloned().map(Reason::Flagged).collect(),
             },
         )
@@ -249,6 +252,12 @@ pub fn screen_measured(
         && let Err(why) =
             check_against_identification(geometry, measurements, &mut reasons, options)
     {
+        let why = match why {
+            Error::TooFewConfigurations { needed, got, .. } => {
+                format!("{got} configurations, it needs {needed}")
+            }
+            other => other.to_string(),
+        };
         notes.push(format!(
             "the consistency check (against the identified geometry) was left out: {why}"
         ));
@@ -360,7 +369,7 @@ fn check_against_identification(
     measurements: &[MeasuredConfiguration],
     reasons: &mut [Vec<Reason>],
     options: &ScreeningOptions,
-) -> std::result::Result<(), String> {
+) -> Result<()> {
     let indices: Vec<usize> = (0..measurements.len())
         .filter(|&i| reasons[i].is_empty())
         .collect();
@@ -377,16 +386,17 @@ fn check_against_identification(
             .collect();
         if fitted.len() < MIN_ROWS_FOR_IDENTIFICATION {
             if judged.is_none() {
-                return Err(format!(
-                    "{} configurations, it needs {MIN_ROWS_FOR_IDENTIFICATION}",
-                    fitted.len()
-                ));
+                return Err(Error::TooFewConfigurations {
+                    task: "the consistency check",
+                    needed: MIN_ROWS_FOR_IDENTIFICATION,
+                    got: fitted.len(),
+                });
             }
             break;
         }
         let identified = match identify(geometry, &fitted, &IdentifyOptions::default()) {
             Ok(identified) => identified,
-            Err(e) if judged.is_none() => return Err(e.to_string()),
+            Err(e) if judged.is_none() => return Err(e),
             Err(_) => break,
         };
         // Unreachable by the identified geometry: as far as can be.

@@ -333,14 +333,16 @@ pub fn cross_validated_rmse(
     let networks = network_outputs(architecture);
     let legs = commanded_legs(rows);
     if !can_cross_validate(&legs, fold_count) || hidden.len() != networks.len() {
-        return Err(Error::InvalidSetting(format!(
-            "cross-validation of {} networks needs one size per network ({} given), at least 2 \
-             folds ({fold_count}) and two rows per fold to hold out besides the legs' extremes \
-             ({} rows)",
-            networks.len(),
-            hidden.len(),
-            rows.len()
-        )));
+        return Err(Error::CrossValidationImpossible {
+            what: format!(
+                "{} networks ({} hidden sizes given)",
+                networks.len(),
+                hidden.len()
+            ),
+            folds: fold_count,
+            rows: rows.len(),
+            sizes_match: hidden.len() == networks.len(),
+        });
     }
     let (inputs, targets) = samples(rows, options.input);
     let normalisation = Normalisation::of(&inputs)?;
@@ -389,15 +391,14 @@ pub fn train(
 ) -> Result<Trained> {
     let start = Instant::now();
     if rows.len() < 6 {
-        return Err(Error::InsufficientData(format!(
-            "training needs at least 6 configurations, got {}",
-            rows.len()
-        )));
+        return Err(Error::TooFewConfigurations {
+            task: "training",
+            needed: 6,
+            got: rows.len(),
+        });
     }
     if options.hidden_sizes.is_empty() || options.restarts == 0 {
-        return Err(Error::InvalidSetting(
-            "training needs at least one hidden size and one restart".into(),
-        ));
+        return Err(Error::NothingToTrain);
     }
     let (inputs, targets) = samples(rows, options.input);
     let normalisation = Normalisation::of(&inputs)?;

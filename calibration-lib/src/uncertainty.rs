@@ -149,6 +149,118 @@ struct Variances {
     fresh_move: f64,
 }
 
+/// Refuses a repeatability that is not a finite σ ≥ 0 (mm), options out of range, and options
+/// of another lead-screw resolution than `model`'s.
+fn check_propagation_inputs(
+    model: &PhysicalModel,
+    options: &IdentifyOptions,
+    repeatability: Repeatability,
+) -> Result<()> {
+    let repeatability_mm = repeatability.sigma_mm();
+    if !(repeatability_mm.is_finite() && repeatability_mm >= 0.0) {
+        return Err(Error::OutOfRange {
+            setting: "the machine's repeatability (1 σ, mm)",
+            value: repeatability_mm,
+            valid: "must be finite and ≥ 0",
+        });
+    }
+    options.validate()?;
+    if options.pitch_basis != model.pitch.basis() {
+        return Err(Error::ResolutionMismatch {
+            model: model.pitch.basis(),
+            options: options.pitch_basis,
+        });
+    }
+    Ok(())
+}
+
+/// The identification's Jacobian factorised for the propagation.
+struct Factorised {
+    /// The residuals' rows of `U_r` (the kept directions): the hat matrix is `U_r U_rᵀ` of
+    /// them, a projection without a smoothness prior (then `Uᵀ U = I`), not with one.
+    u: DMatrix<f64>,
+    /// `F = D⁻¹ V_r S_r⁻¹`: the parameters' change per unit of each kept direction.
+    factor: DMatrix<f64>,
+    /// How many directions are kept (above the SVD's cutoff).
+    kept: usize,
+}
+
+/// The scaled SVD of `jacobian` stacked on the smoothness prior's `prior_rows`, cut as the
+/// identification cuts it.
+fn factorised(
+    jacobian: DMatrix<f64>,
+    prior_rows: &DMatrix<f64>,
+    options: &IdentifyOptions,
+) -> Factorised {
+    let ScaledSvd {
+        svd,
+        scales,
+        cutoff,
+        data_rows,
+    } = scaled_svd(jacobian, prior_rows, options, true);
+    let kept: Vec<usize> = (0..svd.singular_values.len())
+        .filter(|k| svd.singular_values[*k] > cutoff)
+        .collect();
+    let u = svd
+        .u
+        .expect("U was asked for")
+        .rows(0, data_rows)
+        .select_columns(&kept);
+    let v_t = svd.v_t.expect("V was asked for");
+    let mut factor = DMatrix::zeros(scales.len(), kept.len());
+    for (column, &k) in kept.iter().enumerate() {
+        let inverse = 1.0 / svd.singular_values[k];
+        for j in 0..scales.len() {
+            factor[(j, column)] = v_t[(k, j)] * inverse / scales[j];
+        }
+    }
+    Factorised {
+        u,
+        factor,
+        kept: kept.len(),
+    }
+}
+
+/// Each configuration's block of residual rows: (first row, height), three rows per target
+/// point it holds.
+fn target_blocks(rows: &[MeasuredConfiguration], geometry: &Geometry) -> Vec<(usize, usize)> {
+    let mut blocks = Vec::with_capacity(rows.len());
+    let mut at = 0;
+    for row in rows {
+        let height = 3 * row.observed.points(geometry).len();
+        blocks.push((at, height));
+        at += height;
+    }
+    blocks
+}
+
+/// The repeatability the propagation takes, and its variance (mm²), from the residuals'
+/// squares `held` and their expected squares per unit of the repeatability's variance `share`.
+/// An assumed repeatability is not trusted over the residuals: at most all they hold. A known
+/// one whose share is more than twice what they hold is refused, naming the one that would be
+/// all of it.
+fn repeatability_taken(
+    repeatability: Repeatability,
+    held: f64,
+    share: f64,
+) -> Result<(Repeatability, f64)> {
+    let repeatability_mm = repeatability.sigma_mm();
+    let (machine, variance) = match repeatability {
+        Repeatability::Known(_) => (repeatability, repeatability_mm.powi(2)),
+        Repeatability::Assumed(_) => {
+            let taken = repeatability_mm.powi(2).min(held / share);
+            (Repeatability::Assumed(taken.sqrt()), taken)
+        }
+    };
+    if variance * share > REPEATABILITY_EXCESS_REFUSED * held {
+        return Err(Error::RepeatabilityTooLarge {
+            repeatability_mm,
+            all_of_it_um: 1e3 * (held / share).sqrt(),
+        });
+    }
+    Ok((machine, variance))
+}
+
 /// The variances of residuals whose shape split them as `split` (where it could), on a machine
 /// of `repeatability`: `all_platform_mm2` is the platform's variance per leg that all of the
 /// residuals would be (`‖r‖² / tr((I − H) K Kᵀ (I − H))`), `unsplit_mm2` the instrument's that
@@ -220,88 +332,28 @@ impl Propagation {
         rows: &[MeasuredConfiguration],
         repeatability: Repeatability,
     ) -> Result<Self> {
-        let repeatability_mm = repeatability.sigma_mm();
-        if !(repeatability_mm.is_finite() && repeatability_mm >= 0.0) {
-            return Err(Error::InvalidSetting(format!(
-                "the machine's repeatability is {repeatability_mm} mm: a finite σ ≥ 0 is needed"
-            )));
-        }
-        options.validate()?;
-        if options.pitch_basis != model.pitch.basis() {
-            return Err(Error::InvalidSetting(format!(
-                "the model's lead-screw curves have {} coefficients, the identification's \
-                 options {}",
-                model.pitch.basis(),
-                options.pitch_basis
-            )));
-        }
+        check_propagation_inputs(model, options, repeatability)?;
         let mut poses: Vec<Pose> = rows.iter().map(MeasuredConfiguration::pose).collect();
         let (jacobian, residual) = linearise(model, options, rows, &mut poses)?;
         let moves = jacobian.columns(LEG_OFFSET_COLUMNS, LEGS).into_owned();
         let prior = SmoothnessPrior::at(model, options);
-        let ScaledSvd {
-            svd,
-            scales,
-            cutoff,
-            data_rows,
-        } = scaled_svd(jacobian, &prior.rows, options, true);
-        let kept: Vec<usize> = (0..svd.singular_values.len())
-            .filter(|k| svd.singular_values[*k] > cutoff)
-            .collect();
-        // The residuals' rows of U_r: the hat matrix is U_r U_rᵀ of them, a projection without
-        // a smoothness prior (then Uᵀ U = I), not with one.
-        let u = svd
-            .u
-            .expect("U was asked for")
-            .rows(0, data_rows)
-            .select_columns(&kept);
-        let v_t = svd.v_t.expect("V was asked for");
-        // F = D⁻¹ V_r S_r⁻¹.
-        let mut factor = DMatrix::zeros(scales.len(), kept.len());
-        for (column, &k) in kept.iter().enumerate() {
-            let inverse = 1.0 / svd.singular_values[k];
-            for j in 0..scales.len() {
-                factor[(j, column)] = v_t[(k, j)] * inverse / scales[j];
-            }
-        }
-        let mut blocks = Vec::with_capacity(rows.len());
-        let mut at = 0;
-        for row in rows {
-            let height = 3 * row.observed.points(&model.geometry).len();
-            blocks.push((at, height));
-            at += height;
-        }
+        let Factorised { u, factor, kept } = factorised(jacobian, &prior.rows, options);
+        let blocks = target_blocks(rows, &model.geometry);
         // The residuals' expected squares per unit of σ² (tr((I − H)²): m − r without a prior)
         // and of the repeatability's variance.
         let [freedom, share] = expected_squares(&u, &moves, &blocks);
         // (Half a degree: without a prior the count is whole, to rounding. With one, the prior
         // may see directions the residuals do not: as many residuals as directions are refused
         // all the same.)
-        if freedom < 0.5 || residual.len() <= kept.len() {
-            return Err(Error::InsufficientData(format!(
-                "{} residuals for {} identified parameter combinations leave {freedom:.2} \
-                 degrees of freedom: no residual is left to estimate the noise from",
-                residual.len(),
-                kept.len()
-            )));
+        if freedom < 0.5 || residual.len() <= kept {
+            return Err(Error::NoDegreesOfFreedom {
+                residuals: residual.len(),
+                kept,
+                freedom,
+            });
         }
         let held = residual.norm_squared();
-        // An assumed repeatability is not trusted over the residuals: at most all they hold.
-        let (machine, repeatability) = match repeatability {
-            Repeatability::Known(_) => (repeatability, repeatability_mm.powi(2)),
-            Repeatability::Assumed(_) => {
-                let taken = repeatability_mm.powi(2).min(held / share);
-                (Repeatability::Assumed(taken.sqrt()), taken)
-            }
-        };
-        if repeatability * share > REPEATABILITY_EXCESS_REFUSED * held {
-            return Err(Error::InvalidSetting(format!(
-                "the machine's repeatability of {repeatability_mm} mm would give the \
-                 identification's residuals more than twice the variance they hold (all of it \
-                 is a repeatability of {:.3} µm with a noiseless instrument)",
-                1e3 * (held / share).sqrt()
-            )));
-        }
+        let (machine, repeatability) = repeatability_taken(repeatability, held, share)?;
         // What the residuals hold beyond the repeatability's share, all taken as the
         // instrument's where their shape cannot tell more.
         let unsplit = ((held - repeatability * share) / freedom).max(0.0);
@@ -356,17 +408,18 @@ impl Propagation {
             || unpenalised.options != self.options.smoothed(0.0)
             || unpenalised.residuals() != self.residuals()
         {
-            return Err(Error::InvalidSetting(format!(
-                "a prior's bias is measured against the same identification without it, from \
-                 the same rows: this model has {} coefficients, a prior of {} and {} residuals, \
-                 the other {} coefficients, a prior of {} and {} residuals",
-                self.options.pitch_basis,
-                self.options.smoothness,
-                self.residuals(),
-                unpenalised.options.pitch_basis,
-                unpenalised.options.smoothness,
-                unpenalised.residuals()
-            )));
+            return Err(Error::PriorReferenceMismatch {
+                model: (
+                    self.options.pitch_basis,
+                    self.options.smoothness,
+                    self.residuals(),
+                ),
+                reference: (
+                    unpenalised.options.pitch_basis,
+                    unpenalised.options.smoothness,
+                    unpenalised.residuals(),
+                ),
+            });
         }
         Ok(Self {
             unpenalised: Some(Box::new(unpenalised)),
@@ -554,6 +607,53 @@ pub struct UncertaintySource {
     poses: usize,
 }
 
+/// `propagation` with the smoothness prior's bias bounded by `without_prior`, the same
+/// resolution identified from `rows` without the prior ([`Propagation::with_prior_bias`]):
+/// refused missing beside `options` with a prior, and given beside options without one.
+fn with_prior_bounded(
+    propagation: Propagation,
+    without_prior: Option<&PhysicalModel>,
+    options: &IdentifyOptions,
+    rows: &[MeasuredConfiguration],
+    repeatability: Repeatability,
+) -> Result<Propagation> {
+    match without_prior {
+        // `with_prior_bias` refuses it beside a model without a prior.
+        Some(unpenalised) => {
+            let of = Propagation::of(unpenalised, &options.smoothed(0.0), rows, repeatability)
+                .map_err(|e| {
+                    e.of("the model without its smoothness prior, which bounds the prior's bias")
+                })?;
+            propagation.with_prior_bias(of)
+        }
+        None if options.smoothness > 0.0 => Err(Error::PriorReferenceMissing {
+            smoothness: options.smoothness,
+        }),
+        None => Ok(propagation),
+    }
+}
+
+/// The propagation of each of `alternatives`, identified from `rows` at its own resolution
+/// ([`IdentifyOptions::physical`]); an error names the alternative.
+fn alternatives_propagated(
+    alternatives: &[PhysicalModel],
+    rows: &[MeasuredConfiguration],
+    repeatability: Repeatability,
+) -> Result<Vec<Propagation>> {
+    alternatives
+        .iter()
+        .map(|alternative| {
+            let options = IdentifyOptions::physical(alternative.pitch.basis());
+            Propagation::of(alternative, &options, rows, repeatability).map_err(|e| {
+                e.of(format!(
+                    "the alternative of {} lead-screw coefficients per leg",
+                    options.pitch_basis
+                ))
+            })
+        })
+        .collect()
+}
+
 impl UncertaintySource {
     /// The source of `model`, identified from `rows` with `options` on `nominal` whose legs
     /// repeat within `repeatability` ([`Propagation::of`]), beside `alternatives` identified
@@ -578,48 +678,16 @@ impl UncertaintySource {
         repeatability: Repeatability,
         seed: u64,
     ) -> Result<Self> {
-        let mut propagation = Propagation::of(model, options, rows, repeatability)?;
-        match without_prior {
-            // `with_prior_bias` refuses it beside a model without a prior.
-            Some(unpenalised) => {
-                let of = Propagation::of(unpenalised, &options.smoothed(0.0), rows, repeatability)
-                    .map_err(|e| {
-                        naming(
-                            e,
-                            "the model without its smoothness prior, which bounds the prior's bias",
-                        )
-                    })?;
-                propagation = propagation.with_prior_bias(of)?;
-            }
-            None if options.smoothness > 0.0 => {
-                return Err(Error::InvalidSetting(format!(
-                    "the uncertainty of a model with a smoothness prior of {} needs the same \
-                     resolution identified without the prior, which bounds the prior's bias; \
-                     none was given",
-                    options.smoothness
-                )));
-            }
-            None => {}
-        }
-        let alternatives = alternatives
-            .iter()
-            .map(|alternative| {
-                let options = IdentifyOptions::physical(alternative.pitch.basis());
-                let of =
-                    Propagation::of(alternative, &options, rows, repeatability).map_err(|e| {
-                        naming(
-                            e,
-                            &format!(
-                                "the alternative of {} lead-screw coefficients per leg",
-                                options.pitch_basis
-                            ),
-                        )
-                    })?;
-                // The same rows, each with as many targets whatever the geometry.
-                debug_assert_eq!(of.residuals(), propagation.residuals());
-                Ok(of)
-            })
-            .collect::<Result<Vec<_>>>()?;
+        let propagation = Propagation::of(model, options, rows, repeatability)?;
+        let propagation =
+            with_prior_bounded(propagation, without_prior, options, rows, repeatability)?;
+        let alternatives = alternatives_propagated(alternatives, rows, repeatability)?;
+        // The same rows, each with as many targets whatever the geometry.
+        debug_assert!(
+            alternatives
+                .iter()
+                .all(|of| of.residuals() == propagation.residuals())
+        );
         let measured: Vec<Pose> = rows.iter().map(MeasuredConfiguration::pose).collect();
         let nominal_legs = |pose: &Pose| hexacomp_core::inverse_kinematics(nominal, pose).lengths;
         let configurations: Vec<[f64; LEGS]> = measured.iter().map(nominal_legs).collect();
@@ -700,12 +768,10 @@ impl UncertaintySource {
             .map(|(h, s)| (h, s * s))
             .collect();
         if samples.len() < 2 {
-            return Err(Error::InsufficientData(format!(
-                "the uncertainty is fitted at poses over the measured range; {} of {} could be \
-                 used",
-                samples.len(),
-                self.poses
-            )));
+            return Err(Error::TooFewUncertaintyPoses {
+                usable: samples.len(),
+                drawn: self.poses,
+            });
         }
         let [constant, leverage] = relative_fit(&samples);
         let uncertainty = PositionUncertainty {
@@ -715,15 +781,6 @@ impl UncertaintySource {
         };
         uncertainty.validate()?;
         Ok(uncertainty)
-    }
-}
-
-/// `e`, an error of the identification or propagation of `what`, its message naming it.
-fn naming(e: Error, what: &str) -> Error {
-    match e {
-        Error::InvalidSetting(why) => Error::InvalidSetting(format!("{what}: {why}")),
-        Error::InsufficientData(why) => Error::InsufficientData(format!("{what}: {why}")),
-        other => other,
     }
 }
 
@@ -822,10 +879,11 @@ fn weighted_least_squares(samples: &[(f64, f64)], scale: impl Fn(f64, f64) -> f6
 /// variances zero.
 fn leverage_of(configurations: &[[f64; LEGS]]) -> Result<PositionUncertainty> {
     if configurations.len() < FEATURES {
-        return Err(Error::InsufficientData(format!(
-            "the uncertainty's leverage needs {FEATURES} configurations or more, got {}",
-            configurations.len()
-        )));
+        return Err(Error::TooFewConfigurations {
+            task: "the uncertainty's leverage",
+            needed: FEATURES,
+            got: configurations.len(),
+        });
     }
     let mut centre_mm = [0.0; LEGS];
     let mut half_span_mm = [0.0; LEGS];
@@ -834,11 +892,7 @@ fn leverage_of(configurations: &[[f64; LEGS]]) -> Result<PositionUncertainty> {
         centre_mm[leg] = 0.5 * (lo + hi);
         half_span_mm[leg] = 0.5 * (hi - lo);
         if half_span_mm[leg].is_nan() || half_span_mm[leg] <= 0.0 {
-            return Err(Error::InsufficientData(format!(
-                "leg {} has the same length in every configuration: no range to place the \
-                 uncertainty in",
-                leg + 1
-            )));
+            return Err(Error::LegWithoutRange { leg: leg + 1 });
         }
     }
     let mut uncertainty = PositionUncertainty {
@@ -861,15 +915,11 @@ fn leverage_of(configurations: &[[f64; LEGS]]) -> Result<PositionUncertainty> {
     for k in 0..FEATURES {
         moments[(k, k)] += ridge;
     }
-    let cholesky = moments.cholesky().ok_or_else(|| {
-        Error::InsufficientData("the configurations' leg moments are not positive definite".into())
-    })?;
+    let cholesky = moments.cholesky().ok_or(Error::LegMomentsSingular)?;
     let inverse = cholesky
         .l()
         .solve_lower_triangular(&DMatrix::identity(FEATURES, FEATURES))
-        .ok_or_else(|| {
-            Error::InsufficientData("the configurations' leg moments cannot be inverted".into())
-        })?;
+        .ok_or(Error::LegMomentsSingular)?;
     let norm = 1.0 / (FEATURES as f64).sqrt();
     let mut at = 0;
     for r in 0..FEATURES {
@@ -1640,7 +1690,7 @@ mod tests {
             assert!(
                 matches!(
                     model.clone().with_prior_bias(reference.clone()),
-                    Err(Error::InvalidSetting(_))
+                    Err(Error::PriorReferenceMismatch { .. })
                 ),
                 "{:?} with {} residuals taken as {:?}'s without its prior",
                 reference.options,
@@ -1685,6 +1735,8 @@ mod tests {
             unpenalised.leg_variance_mm2
         );
         // The fit without the prior is given exactly where the model has one.
+        // Missing beside a prior: refused as missing; given beside none: refused by
+        // `with_prior_bias` as another identification than the model's without its prior.
         for (options, without_prior) in [(&smoothed, None), (&physical, Some(&without))] {
             let model = if options.smoothness > 0.0 {
                 &model
@@ -1701,7 +1753,7 @@ mod tests {
                     repeatability,
                     1
                 ),
-                Err(Error::InvalidSetting(_))
+                Err(Error::PriorReferenceMissing { .. } | Error::PriorReferenceMismatch { .. })
             ));
         }
     }

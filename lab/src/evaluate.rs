@@ -18,9 +18,10 @@ use hexacomp_core::{Geometry, Pose, inverse_kinematics};
 use hexacomp_virtual::{ErrorModel, VirtualPlatform};
 
 use crate::error::{Error, Result};
-use hexacomp_calibration::corrections::{Checks, SolverOptions};
+use hexacomp_calibration::corrections::{Checks, Outcome, SolverOptions};
 use hexacomp_calibration::distill::DistillOptions;
 use hexacomp_calibration::identify::{IdentifyOptions, PHYSICAL, identify};
+use hexacomp_calibration::physical::PhysicalModel;
 use hexacomp_calibration::physical_candidate::carried_into_networks;
 use hexacomp_calibration::pipeline::Pipeline;
 use hexacomp_calibration::pitch_resolution::{ResolutionChoice, chosen_if_cross_validated};
@@ -227,7 +228,35 @@ pub fn evaluate(
         .iter()
         .max()
         .ok_or_else(|| Error::InvalidSetting("at least one training size is needed".into()))?;
-    let robust_pipeline = Pipeline {
+    progress(&format!(
+        "measuring {largest} configurations on the virtual machine"
+    ));
+    let campaign = Campaign::measured(geometry, options, largest)?;
+    let mut sizes = Vec::new();
+    let mut inputs = Vec::new();
+    for &n in &options.training_sizes {
+        progress(&format!(
+            "{n} configurations: identifying the geometry and the physical model, carrying it \
+             into networks, training five more"
+        ));
+        let models = campaign.models_at(n)?;
+        let errors = campaign.drive_every_method(&models)?;
+        if n == largest {
+            inputs = campaign.input_comparison(&errors)?;
+        }
+        sizes.push(campaign.size_result(n, models, errors));
+    }
+    Ok(Evaluation {
+        sizes,
+        above_threshold: campaign.above_threshold(),
+        inputs,
+    })
+}
+
+/// The robust pipeline of the comparison: `options`' plan of `largest` configurations and
+/// training, every solved correction trained on.
+fn robust_pipeline(options: &EvaluationOptions, largest: usize) -> Pipeline {
+    Pipeline {
         plan: PlanOptions {
             count: largest,
             seed: options.plan_seed,
@@ -244,30 +273,106 @@ pub fn evaluate(
         },
         screening: ScreeningOptions::keep_all(),
         ..Default::default()
-    };
-    // The paper's ordinary compensator: the same pipeline with λ = 0.
-    let ordinary_pipeline = Pipeline {
-        solver: SolverOptions {
-            robust: false,
-            ..robust_pipeline.solver
-        },
-        ..robust_pipeline.clone()
-    };
-    let mut platform = VirtualPlatform::new(
-        geometry,
-        &options.error_model,
-        options.machine_seed,
-        options.noise_seed,
-    )?;
-    progress(&format!(
-        "measuring {largest} configurations on the virtual machine"
-    ));
-    let (_, measurements) = crate::measure_virtual(&robust_pipeline.plan, &mut platform)?;
-    let truth = platform.machine().clone();
-    // The machine commanded with the exact legs of a configuration's pose reaches it: those
-    // legs are the row's commanded ones, and its equivalent legs the pose's nominal ones.
-    let exact_rows = |n: usize| -> Vec<JointCorrection> {
-        measurements[..n]
+    }
+}
+
+/// The measured plan every size trains on, the machine and instrument every method meets, and
+/// the validation poses.
+struct Campaign<'a> {
+    geometry: &'a Geometry,
+    options: &'a EvaluationOptions,
+    robust_pipeline: Pipeline,
+    measurements: Vec<MeasuredConfiguration>,
+    /// The machine after the plan was measured: each method drives a copy of it.
+    platform: VirtualPlatform,
+    /// The instrument measuring the validation poses, with noise drawn apart from the
+    /// machine's moves (the reached errors do not depend on whether they are also measured).
+    instrument: VirtualPlatform,
+    /// Every configuration's robust (Fig. 2) and ordinary (λ = 0) outcome, in plan order.
+    robust: Vec<Outcome>,
+    ordinary: Vec<Outcome>,
+    validation: Vec<Pose>,
+}
+
+/// Every method's model at one training size.
+struct Models {
+    identified: Geometry,
+    physical: PhysicalModel,
+    resolution: Option<ResolutionChoice>,
+    distilled: Trained,
+    residual: Trained,
+    ordinary_coupled: Trained,
+    coupled: Trained,
+    decoupled: Trained,
+    exact_decoupled: Trained,
+}
+
+impl<'a> Campaign<'a> {
+    /// Measures `largest` configurations of the plan on the virtual machine and solves them by
+    /// the robust and the ordinary iteration.
+    fn measured(
+        geometry: &'a Geometry,
+        options: &'a EvaluationOptions,
+        largest: usize,
+    ) -> Result<Self> {
+        let robust_pipeline = robust_pipeline(options, largest);
+        // The paper's ordinary compensator: the same pipeline with λ = 0.
+        let ordinary_pipeline = Pipeline {
+            solver: SolverOptions {
+                robust: false,
+                ..robust_pipeline.solver
+            },
+            ..robust_pipeline.clone()
+        };
+        let mut platform = VirtualPlatform::new(
+            geometry,
+            &options.error_model,
+            options.machine_seed,
+            options.noise_seed,
+        )?;
+        let (_, measurements) = crate::measure_virtual(&robust_pipeline.plan, &mut platform)?;
+        let instrument = platform.reseeded(options.instrument_seed);
+        let robust = robust_pipeline.solve(geometry, &measurements)?.outcomes;
+        let ordinary = ordinary_pipeline.solve(geometry, &measurements)?.outcomes;
+        let validation =
+            WorkspaceSampler::new(geometry, options.validation_seed, SamplerOptions::default())?
+                .samples(options.validation_count)?;
+        Ok(Self {
+            geometry,
+            options,
+            robust_pipeline,
+            measurements,
+            platform,
+            instrument,
+            robust,
+            ordinary,
+            validation,
+        })
+    }
+
+    /// Configurations whose cond(PT) exceeded the threshold in the robust solve.
+    fn above_threshold(&self) -> usize {
+        self.robust
+            .iter()
+            .filter_map(|o| o.solution.as_ref().ok())
+            .filter(|s| s.max_cond_pt > self.robust_pipeline.solver.cond_threshold)
+            .count()
+    }
+
+    /// The correction rows of the first `n` configurations' solved `outcomes`.
+    fn rows(outcomes: &[Outcome], n: usize) -> Vec<JointCorrection> {
+        outcomes[..n]
+            .iter()
+            .filter_map(|o| o.joint_correction())
+            .collect()
+    }
+
+    /// The exact corrections of the first `n` configurations: the machine commanded with the
+    /// exact legs of a configuration's pose reaches it, so those legs are the row's commanded
+    /// ones, and its equivalent legs the pose's nominal ones.
+    fn exact_rows(&self, n: usize) -> Vec<JointCorrection> {
+        let truth = self.platform.machine();
+        self.measurements[..n]
             .iter()
             .map(|m| {
                 let exact = truth.exact_command(&Pose::from_mm_deg(m.pose_mm_deg));
@@ -278,58 +383,75 @@ pub fn evaluate(
                 }
             })
             .collect()
-    };
-    // The instrument that measures the validation poses draws its noise apart from the machine's
-    // moves, so the reached errors do not depend on whether they are also measured.
-    let instrument = platform.reseeded(options.instrument_seed);
-    let robust = robust_pipeline.solve(geometry, &measurements)?.outcomes;
-    let ordinary = ordinary_pipeline.solve(geometry, &measurements)?.outcomes;
-    let above_threshold = robust
-        .iter()
-        .filter_map(|o| o.solution.as_ref().ok())
-        .filter(|s| s.max_cond_pt > robust_pipeline.solver.cond_threshold)
-        .count();
-    let rows = |outcomes: &[hexacomp_calibration::corrections::Outcome],
-                n: usize|
-     -> Vec<JointCorrection> {
-        outcomes[..n]
-            .iter()
-            .filter_map(|o| o.joint_correction())
-            .collect()
-    };
-    let validation =
-        WorkspaceSampler::new(geometry, options.validation_seed, SamplerOptions::default())?
-            .samples(options.validation_count)?;
+    }
 
-    let fit = |corrections: &[JointCorrection], architecture, input| {
+    /// Networks of `architecture` on `corrections`, with `input`, trained as the options say.
+    fn fit(
+        &self,
+        corrections: &[JointCorrection],
+        architecture: Architecture,
+        input: NetworkInput,
+    ) -> Result<Trained> {
         let pipeline = Pipeline {
             train: TrainOptions {
                 input,
-                ..options.train.clone()
+                ..self.options.train.clone()
             },
-            ..robust_pipeline.clone()
+            ..self.robust_pipeline.clone()
         };
-        pipeline.train(geometry, corrections, architecture, &|_| {})
-    };
-    let mut sizes = Vec::new();
-    let mut inputs = Vec::new();
-    for &n in &options.training_sizes {
-        progress(&format!(
-            "{n} configurations: identifying the geometry and the physical model, carrying it \
-             into networks, training five more"
-        ));
-        let identified =
-            identify(geometry, &measurements[..n], &IdentifyOptions::default())?.geometry;
-        // The physical model as `calibrate` makes it: its lead-screw resolution chosen by
-        // cross-validation on the configurations whose robust corrections were solved (eight
-        // with too few to cross-validate), on the folds of the training seed (the command's
-        // default, 1: `calibrate --seed 1`'s folds). No resolution scored at a size ends the
-        // evaluation, naming the size.
-        let robust_rows = rows(&robust, n);
+        Ok(pipeline.train(self.geometry, corrections, architecture, &|_| {})?)
+    }
+
+    /// Every method's model from the first `n` configurations.
+    fn models_at(&self, n: usize) -> Result<Models> {
+        let geometry = self.geometry;
+        let identified = identify(
+            geometry,
+            &self.measurements[..n],
+            &IdentifyOptions::default(),
+        )?
+        .geometry;
+        let robust_rows = Self::rows(&self.robust, n);
+        let (physical, resolution, distilled, solved) = self.physical_at(n, &robust_rows)?;
+        let left_by_physical = left_by(&physical, &robust_rows, &solved);
+        let input = self.options.train.input;
+        Ok(Models {
+            identified,
+            residual: self.fit(&left_by_physical, Architecture::Decoupled, input)?,
+            ordinary_coupled: self.fit(
+                &Self::rows(&self.ordinary, n),
+                Architecture::Coupled,
+                input,
+            )?,
+            coupled: self.fit(&robust_rows, Architecture::Coupled, input)?,
+            decoupled: self.fit(&robust_rows, Architecture::Decoupled, input)?,
+            exact_decoupled: self.fit(&self.exact_rows(n), Architecture::Decoupled, input)?,
+            physical,
+            resolution,
+            distilled,
+        })
+    }
+
+    /// The physical model as `calibrate` makes it from the first `n` configurations: its
+    /// lead-screw resolution chosen by cross-validation on the configurations whose robust
+    /// corrections were solved (eight with too few to cross-validate), on the folds of the
+    /// training seed (the command's default, 1: `calibrate --seed 1`'s folds), carried into
+    /// networks. No resolution scored at a size ends the evaluation, naming the size. Also the
+    /// solved configurations' measurements, in `robust_rows`' order.
+    fn physical_at(
+        &self,
+        n: usize,
+        robust_rows: &[JointCorrection],
+    ) -> Result<(
+        PhysicalModel,
+        Option<ResolutionChoice>,
+        Trained,
+        Vec<MeasuredConfiguration>,
+    )> {
         let solved: Vec<MeasuredConfiguration> = robust_rows
             .iter()
             .map(|row| {
-                measurements
+                self.measurements
                     .iter()
                     .find(|m| m.id == row.id)
                     .expect("a correction of a measured configuration")
@@ -337,139 +459,148 @@ pub fn evaluate(
             })
             .collect();
         let resolution = chosen_if_cross_validated(
-            geometry,
+            self.geometry,
             &solved,
-            &robust_rows,
-            options.train.seed,
+            robust_rows,
+            self.options.train.seed,
             CROSS_VALIDATION_FOLDS,
             &|_| {},
         )
         .map_err(|e| Error::InsufficientData(format!("at {n} configurations: {e}")))?;
         let identification = resolution.as_ref().map_or(PHYSICAL, |r| r.options);
-        let physical = identify(geometry, &solved, &identification)?.model;
-        let left_by_physical: Vec<JointCorrection> = robust_rows
-            .iter()
-            .zip(&solved)
-            .map(|(row, measured)| {
-                let modelled = physical.command(&measured.pose());
-                JointCorrection {
-                    corrections: std::array::from_fn(|i| {
-                        row.corrections[i] - (modelled[i] - row.legs[i])
-                    }),
-                    ..row.clone()
-                }
-            })
-            .collect();
+        let physical = identify(self.geometry, &solved, &identification)?.model;
         let alternative_bases = resolution
             .as_ref()
             .map_or_else(Vec::new, ResolutionChoice::indistinguishable);
         let distilled = carried_into_networks(
-            geometry,
+            self.geometry,
             (&physical, &identification),
             &alternative_bases,
             &solved,
-            &options.distill,
-            Repeatability::Known(options.error_model.repeatability_sigma_mm),
+            &self.options.distill,
+            Repeatability::Known(self.options.error_model.repeatability_sigma_mm),
             &|_| {},
         )?
         .distilled;
-        let residual = fit(
-            &left_by_physical,
-            Architecture::Decoupled,
-            options.train.input,
+        Ok((physical, resolution, distilled, solved))
+    }
+
+    /// The legs `method` commands for `pose` with `models`.
+    fn command(&self, method: Method, models: &Models, pose: &Pose) -> [f64; 6] {
+        let geometry = self.geometry;
+        let networks =
+            |trained: &Trained| compensate_pose(geometry, Some(&trained.model), pose).legs;
+        match method {
+            Method::Uncompensated => inverse_kinematics(geometry, pose).lengths,
+            Method::ModelBased => inverse_kinematics(&models.identified, pose).lengths,
+            Method::Physical => models.physical.command(pose),
+            Method::PhysicalResidual => {
+                let left = compensate_pose(geometry, Some(&models.residual.model), pose);
+                let modelled = models.physical.command(pose);
+                std::array::from_fn(|i| modelled[i] + left.corrections[i])
+            }
+            Method::PhysicalNetworks => networks(&models.distilled),
+            Method::OrdinaryCoupled => networks(&models.ordinary_coupled),
+            Method::RobustCoupled => networks(&models.coupled),
+            Method::RobustDecoupled => networks(&models.decoupled),
+            Method::ExactDecoupled => networks(&models.exact_decoupled),
+            Method::Floor => self.platform.machine().exact_command(pose),
+        }
+    }
+
+    /// Every method's errors on the validation poses. Every method meets the same
+    /// repeatability and instrument noise: each drives a copy of the machine in the same state,
+    /// measured by a copy of the instrument in the same state.
+    fn drive_every_method(&self, models: &Models) -> Result<Vec<(Method, ValidationErrors)>> {
+        Method::ALL
+            .into_iter()
+            .map(|method| {
+                let errors = drive(
+                    &mut self.platform.clone(),
+                    &mut self.instrument.clone(),
+                    &self.validation,
+                    |pose| self.command(method, models, pose),
+                )?;
+                Ok((method, errors))
+            })
+            .collect()
+    }
+
+    /// The decoupled networks with each input (the one trained on, then the other), reached.
+    fn input_comparison(
+        &self,
+        errors: &[(Method, ValidationErrors)],
+    ) -> Result<Vec<(NetworkInput, PoseErrorStats)>> {
+        let input = self.options.train.input;
+        let other = match input {
+            NetworkInput::Equivalent => NetworkInput::Commanded,
+            NetworkInput::Commanded => NetworkInput::Equivalent,
+        };
+        let n = self.measurements.len();
+        let alternative = self.fit(&Self::rows(&self.robust, n), Architecture::Decoupled, other)?;
+        let own = errors
+            .iter()
+            .find(|(m, _)| *m == Method::RobustDecoupled)
+            .expect("decoupled");
+        let alt = drive(
+            &mut self.platform.clone(),
+            &mut self.instrument.clone(),
+            &self.validation,
+            |pose| compensate_pose(self.geometry, Some(&alternative.model), pose).legs,
         )?;
-        let input = options.train.input;
-        let ordinary_coupled = fit(&rows(&ordinary, n), Architecture::Coupled, input)?;
-        let coupled = fit(&rows(&robust, n), Architecture::Coupled, input)?;
-        let decoupled = fit(&rows(&robust, n), Architecture::Decoupled, input)?;
-        let exact_decoupled = fit(&exact_rows(n), Architecture::Decoupled, input)?;
-        // Every method meets the same repeatability and instrument noise: each drives a copy of
-        // the machine in the same state, measured by a copy of the instrument in the same state.
-        let machine = platform.clone();
-        let mut errors = Vec::new();
-        for method in Method::ALL {
-            let mut platform = machine.clone();
-            let mut instrument = instrument.clone();
-            let command = |pose: &Pose| -> [f64; 6] {
-                match method {
-                    Method::Uncompensated => inverse_kinematics(geometry, pose).lengths,
-                    Method::ModelBased => inverse_kinematics(&identified, pose).lengths,
-                    Method::Physical => physical.command(pose),
-                    Method::PhysicalResidual => {
-                        let left = compensate_pose(geometry, Some(&residual.model), pose);
-                        let modelled = physical.command(pose);
-                        std::array::from_fn(|i| modelled[i] + left.corrections[i])
-                    }
-                    Method::PhysicalNetworks => {
-                        compensate_pose(geometry, Some(&distilled.model), pose).legs
-                    }
-                    Method::OrdinaryCoupled => {
-                        compensate_pose(geometry, Some(&ordinary_coupled.model), pose).legs
-                    }
-                    Method::RobustCoupled => {
-                        compensate_pose(geometry, Some(&coupled.model), pose).legs
-                    }
-                    Method::RobustDecoupled => {
-                        compensate_pose(geometry, Some(&decoupled.model), pose).legs
-                    }
-                    Method::ExactDecoupled => {
-                        compensate_pose(geometry, Some(&exact_decoupled.model), pose).legs
-                    }
-                    Method::Floor => truth.exact_command(pose),
-                }
-            };
-            errors.push((
-                method,
-                drive(&mut platform, &mut instrument, &validation, command)?,
-            ));
-        }
-        if n == largest {
-            let other = match input {
-                NetworkInput::Equivalent => NetworkInput::Commanded,
-                NetworkInput::Commanded => NetworkInput::Equivalent,
-            };
-            let alternative = fit(&rows(&robust, n), Architecture::Decoupled, other)?;
-            let own = PoseErrorStats::of(
-                &errors
-                    .iter()
-                    .find(|(m, _)| *m == Method::RobustDecoupled)
-                    .expect("decoupled")
-                    .1
-                    .reached,
-            );
-            let alt = drive(
-                &mut machine.clone(),
-                &mut instrument.clone(),
-                &validation,
-                |pose| compensate_pose(geometry, Some(&alternative.model), pose).legs,
-            )?;
-            let alt = PoseErrorStats::of(&alt.reached);
-            inputs = vec![(input, own), (other, alt)];
-        }
-        platform = machine;
+        Ok(vec![
+            (input, PoseErrorStats::of(&own.1.reached)),
+            (other, PoseErrorStats::of(&alt.reached)),
+        ])
+    }
+
+    /// One size's result, with the coverage of the distilled model's uncertainty where it
+    /// carries one.
+    fn size_result(
+        &self,
+        n: usize,
+        models: Models,
+        errors: Vec<(Method, ValidationErrors)>,
+    ) -> SizeResult {
         let mut size = SizeResult {
             configurations: n,
             errors,
-            coupled,
-            decoupled,
-            resolution,
+            coupled: models.coupled,
+            decoupled: models.decoupled,
+            resolution: models.resolution,
             uncertainty: None,
         };
-        if distilled.model.uncertainty.is_some() {
+        if models.distilled.model.uncertainty.is_some() {
             size.uncertainty = Some(uncertainty_coverage(
-                geometry,
-                &distilled.model,
-                &validation,
+                self.geometry,
+                &models.distilled.model,
+                &self.validation,
                 &size.errors_of(Method::PhysicalNetworks).reached,
             ));
         }
-        sizes.push(size);
+        size
     }
-    Ok(Evaluation {
-        sizes,
-        above_threshold,
-        inputs,
-    })
+}
+
+/// The robust corrections `rows` less what `physical` models of them, at the configurations
+/// `solved` (in `rows`' order), mm.
+fn left_by(
+    physical: &PhysicalModel,
+    rows: &[JointCorrection],
+    solved: &[MeasuredConfiguration],
+) -> Vec<JointCorrection> {
+    rows.iter()
+        .zip(solved)
+        .map(|(row, measured)| {
+            let modelled = physical.command(&measured.pose());
+            JointCorrection {
+                corrections: std::array::from_fn(|i| {
+                    row.corrections[i] - (modelled[i] - row.legs[i])
+                }),
+                ..row.clone()
+            }
+        })
+        .collect()
 }
 
 /// Drives the machine to every pose with the legs `command` gives, and measures each reached

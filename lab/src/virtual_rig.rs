@@ -52,10 +52,9 @@ impl Machine for VirtualMachine {
         let geometry = self.platform.nominal().clone();
         let nominal = inverse_kinematics(&geometry, pose);
         if !nominal.all_in_stroke() {
-            return Err(Error::InvalidSetting(format!(
-                "configuration {id}: the pose needs legs outside the stroke (a pose outside the \
-                 workspace?)"
-            )));
+            return Err(Error::OutsideStroke {
+                configuration: id.to_string(),
+            });
         }
         let drives = match &self.compensation {
             None => nominal.lengths,
@@ -66,10 +65,10 @@ impl Machine for VirtualMachine {
                         compensated.legs
                     }
                     status => {
-                        return Err(Error::InvalidSetting(format!(
-                            "configuration {id}: the model does not compensate the pose ({})",
-                            status.name()
-                        )));
+                        return Err(Error::NotCompensated {
+                            configuration: id.to_string(),
+                            status: status.name(),
+                        });
                     }
                 }
             }

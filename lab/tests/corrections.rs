@@ -141,7 +141,10 @@ fn a_knocked_target_and_a_pose_outside_the_stroke_are_excluded_not_hidden() {
         reasons[2]
     );
     let failure = solved.outcomes[5].solution.as_ref().unwrap_err();
-    assert!(failure.contains("leg 1 length 440"), "{failure}");
+    assert!(
+        failure.to_string().contains("leg 1 length 440"),
+        "{failure}"
+    );
     assert!(matches!(reasons[5].as_slice(), [Reason::Unsolvable(_)]));
     assert!(matches!(
         solved.outcomes[5].flags.as_slice(),

@@ -55,7 +55,11 @@ fn too_few_configurations_are_refused() {
     let (_, measurements) = common::measure(&g, &ErrorModel::default(), 1, 1, &rows);
     assert!(matches!(
         identify(&g, &measurements, &IdentifyOptions::default()),
-        Err(Error::InsufficientData(_))
+        Err(Error::TooFewConfigurations {
+            needed: 5,
+            got: 4,
+            ..
+        })
     ));
 }
 
@@ -67,9 +71,12 @@ fn a_configuration_the_model_cannot_place_is_a_clear_error_naming_it() {
         common::measure(&g, &ErrorModel::default(), DEFAULT_MACHINE_SEED, 1, &rows);
     measurements[3].legs[2] = 440.0;
     match identify(&g, &measurements, &IdentifyOptions::default()) {
-        Err(Error::InsufficientData(message)) => {
-            assert!(message.contains("configuration 4:"), "{message}");
-            assert!(message.contains("leg 3 length 440"), "{message}");
+        Err(Error::Unreachable {
+            configuration,
+            cause,
+        }) => {
+            assert_eq!(configuration, "4");
+            assert!(cause.to_string().contains("leg 3 length 440"), "{cause}");
         }
         other => panic!("expected a clear error, got {other:?}"),
     }
@@ -282,10 +289,12 @@ fn the_lead_screw_resolution_is_chosen_by_held_out_error_and_follows_a_short_per
     // Rows out of step with their corrections, or too few folds, are refused.
     let mut shuffled = solved.corrections.clone();
     shuffled.swap(0, 1);
-    for (rows, folds) in [(&shuffled, 5), (&solved.corrections, 1)] {
-        assert!(matches!(
-            chosen_resolution(&g, &kept, rows, 1, folds, &|_| {}),
-            Err(Error::InvalidSetting(_))
-        ));
-    }
+    assert!(matches!(
+        chosen_resolution(&g, &kept, &shuffled, 1, 5, &|_| {}),
+        Err(Error::CorrectionsMismatch { .. })
+    ));
+    assert!(matches!(
+        chosen_resolution(&g, &kept, &solved.corrections, 1, 1, &|_| {}),
+        Err(Error::CrossValidationImpossible { folds: 1, .. })
+    ));
 }

@@ -102,7 +102,7 @@ fn too_few_corrections_are_refused() {
             &|_| {},
         );
         assert!(
-            matches!(result, Err(Error::InsufficientData(_))),
+            matches!(result, Err(Error::TooFewConfigurations { needed: 6, .. })),
             "{} rows",
             rows.len()
         );

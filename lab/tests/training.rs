@@ -448,14 +448,18 @@ fn six_configurations_are_enough_to_train_and_five_are_refused() {
     assert!(
         matches!(
             refused,
-            Err(hexacomp_calibration::Error::InsufficientData(_))
+            Err(hexacomp_calibration::Error::TooFewConfigurations {
+                needed: 6,
+                got: 5,
+                ..
+            })
         ),
         "{refused:?}"
     );
 }
 
 #[test]
-fn an_empty_sweep_or_no_restart_is_refused_as_an_invalid_setting() {
+fn an_empty_sweep_or_no_restart_is_refused_as_nothing_to_train() {
     let data = rows(12, 9, 0.002);
     for options in [
         small(vec![], NetworkInput::Commanded, true),
@@ -472,7 +476,7 @@ fn an_empty_sweep_or_no_restart_is_refused_as_an_invalid_setting() {
             &|_| {},
         );
         assert!(
-            matches!(result, Err(hexacomp_calibration::Error::InvalidSetting(_))),
+            matches!(result, Err(hexacomp_calibration::Error::NothingToTrain)),
             "{options:?}: {result:?}"
         );
     }

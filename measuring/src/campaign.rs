@@ -224,75 +224,14 @@ pub fn combine_points(points: &[DVec3], outlier_factor: f64) -> (DVec3, f64, Vec
 pub fn combine(readings: &[Observation], outlier_factor: f64) -> Combined {
     let count = readings.len();
     let mut rejected_reading = vec![false; count];
-    let mut spread_mm: f64 = 0.0;
-    let observed = match readings.first() {
+    let (observed, spread_mm) = match readings.first() {
         Some(Observation::Targets(first)) => {
-            let targets = (0..first.len())
-                .map(|j| {
-                    let seen: Vec<(usize, DVec3)> = readings
-                        .iter()
-                        .enumerate()
-                        .filter_map(|(k, r)| match r {
-                            Observation::Targets(t) => t.get(j).copied().flatten().map(|p| (k, p)),
-                            _ => None,
-                        })
-                        .collect();
-                    if 2 * seen.len() < count || seen.is_empty() {
-                        return None;
-                    }
-                    let points: Vec<DVec3> = seen.iter().map(|(_, p)| *p).collect();
-                    let (mean, spread, kept) = combine_points(&points, outlier_factor);
-                    for ((k, _), keep) in seen.iter().zip(kept) {
-                        rejected_reading[*k] |= !keep;
-                    }
-                    spread_mm = spread_mm.max(spread);
-                    Some(mean)
-                })
-                .collect();
-            Observation::Targets(targets)
+            combine_targets(readings, first.len(), outlier_factor, &mut rejected_reading)
         }
         Some(Observation::Pose(first)) => {
-            let poses: Vec<(usize, Pose)> = readings
-                .iter()
-                .enumerate()
-                .filter_map(|(k, r)| match r {
-                    Observation::Pose(values) => Some((k, Pose::from_mm_deg(*values))),
-                    _ => None,
-                })
-                .collect();
-            // Rotations as rotation vectors relative to the first reading: averaged and judged
-            // without the ±180° wrap of the angles.
-            let reference = Pose::from_mm_deg(*first).rotation();
-            let turns: Vec<DVec3> = poses
-                .iter()
-                .map(|(_, p)| rotation_vector(&(p.rotation() * reference.transpose())))
-                .collect();
-            let positions: Vec<DVec3> = poses.iter().map(|(_, p)| p.position).collect();
-            let (_, spread, kept_position) = combine_points(&positions, outlier_factor);
-            let odd_turn = outliers(&turns, outlier_factor, 1e-5);
-            let kept: Vec<bool> = kept_position
-                .iter()
-                .zip(&odd_turn)
-                .map(|(k, odd)| *k && !odd)
-                .collect();
-            spread_mm = spread;
-            for ((k, _), keep) in poses.iter().zip(&kept) {
-                rejected_reading[*k] |= !keep;
-            }
-            let count = kept.iter().filter(|k| **k).count() as f64;
-            let mean_of = |values: &[DVec3]| {
-                values
-                    .iter()
-                    .zip(&kept)
-                    .filter(|(_, k)| **k)
-                    .map(|(v, _)| *v)
-                    .sum::<DVec3>()
-                    / count
-            };
-            let rotation = rotation_from_vector(mean_of(&turns)) * reference;
-            Observation::Pose(Pose::from_rotation(mean_of(&positions), &rotation).to_mm_deg())
+            combine_poses(readings, first, outlier_factor, &mut rejected_reading)
         }
-        Some(Observation::PoseMissed) | None => Observation::PoseMissed,
+        Some(Observation::PoseMissed) | None => (Observation::PoseMissed, 0.0),
     };
     let rejected = rejected_reading.iter().filter(|r| **r).count();
     Combined {
@@ -304,6 +243,90 @@ pub fn combine(readings: &[Observation], outlier_factor: f64) -> Combined {
         kept_readings: rejected_reading.iter().map(|r| !r).collect(),
         attempts: Vec::new(),
     }
+}
+
+/// Each of `targets` targets combined over the readings that saw it (none where fewer than
+/// half did), marking in `rejected_reading` every reading rejected for a point; and the largest
+/// spread of a point, mm.
+fn combine_targets(
+    readings: &[Observation],
+    targets: usize,
+    outlier_factor: f64,
+    rejected_reading: &mut [bool],
+) -> (Observation, f64) {
+    let mut spread_mm: f64 = 0.0;
+    let targets = (0..targets)
+        .map(|j| {
+            let seen: Vec<(usize, DVec3)> = readings
+                .iter()
+                .enumerate()
+                .filter_map(|(k, r)| match r {
+                    Observation::Targets(t) => t.get(j).copied().flatten().map(|p| (k, p)),
+                    _ => None,
+                })
+                .collect();
+            if 2 * seen.len() < readings.len() || seen.is_empty() {
+                return None;
+            }
+            let points: Vec<DVec3> = seen.iter().map(|(_, p)| *p).collect();
+            let (mean, spread, kept) = combine_points(&points, outlier_factor);
+            for ((k, _), keep) in seen.iter().zip(kept) {
+                rejected_reading[*k] |= !keep;
+            }
+            spread_mm = spread_mm.max(spread);
+            Some(mean)
+        })
+        .collect();
+    (Observation::Targets(targets), spread_mm)
+}
+
+/// The poses of `readings` combined: positions and rotations judged for outliers apart (the
+/// rotations as rotation vectors relative to `first`, averaged and judged without the ±180°
+/// wrap of the angles), marking in `rejected_reading` every reading rejected; and the
+/// positions' spread, mm.
+fn combine_poses(
+    readings: &[Observation],
+    first: &[f64; 6],
+    outlier_factor: f64,
+    rejected_reading: &mut [bool],
+) -> (Observation, f64) {
+    let poses: Vec<(usize, Pose)> = readings
+        .iter()
+        .enumerate()
+        .filter_map(|(k, r)| match r {
+            Observation::Pose(values) => Some((k, Pose::from_mm_deg(*values))),
+            _ => None,
+        })
+        .collect();
+    let reference = Pose::from_mm_deg(*first).rotation();
+    let turns: Vec<DVec3> = poses
+        .iter()
+        .map(|(_, p)| rotation_vector(&(p.rotation() * reference.transpose())))
+        .collect();
+    let positions: Vec<DVec3> = poses.iter().map(|(_, p)| p.position).collect();
+    let (_, spread, kept_position) = combine_points(&positions, outlier_factor);
+    let odd_turn = outliers(&turns, outlier_factor, 1e-5);
+    let kept: Vec<bool> = kept_position
+        .iter()
+        .zip(&odd_turn)
+        .map(|(k, odd)| *k && !odd)
+        .collect();
+    for ((k, _), keep) in poses.iter().zip(&kept) {
+        rejected_reading[*k] |= !keep;
+    }
+    let count = kept.iter().filter(|k| **k).count() as f64;
+    let mean_of = |values: &[DVec3]| {
+        values
+            .iter()
+            .zip(&kept)
+            .filter(|(_, k)| **k)
+            .map(|(v, _)| *v)
+            .sum::<DVec3>()
+            / count
+    };
+    let rotation = rotation_from_vector(mean_of(&turns)) * reference;
+    let mean = Pose::from_rotation(mean_of(&positions), &rotation).to_mm_deg();
+    (Observation::Pose(mean), spread)
 }
 
 /// The order to visit `plan` in (the indices into `plan`; each once): first the configurations
@@ -384,20 +407,34 @@ struct Watch {
     note: Option<String>,
 }
 
+impl Watch {
+    /// The watch as a campaign starts: the drift check's baseline, numbering, suspects and
+    /// note (none without a check), with `recorded` configurations already in the record.
+    fn at_start(drift: Option<&DriftCheck>, recorded: usize) -> Self {
+        Self {
+            baseline: drift.and_then(|d| d.baseline.clone()),
+            number: drift.map_or(1, |d| d.first_number),
+            recorded,
+            since_reference: drift.map(|d| d.suspects.clone()).unwrap_or_default(),
+            note: drift.and_then(|d| d.note.clone()),
+        }
+    }
+}
+
 impl Campaign<'_> {
     /// Runs the campaign: each configuration not yet recorded is driven to, read
     /// `options.readings` times (each reading retried up to `options.retries` times), combined,
     /// brought into the record's frame and passed to `record` with its [`Combined`] figures
     /// before the next move; `progress()` is called after each. A configuration whose readings
     /// all fail is recorded as a gap (`nothing_seen`) and listed in the summary; after
-    /// `options.max_consecutive_gaps` gaps in a row the campaign stops ([`Error::Instrument`]).
+    /// `options.max_consecutive_gaps` gaps in a row the campaign stops ([`Error::GapsInARow`]).
     /// An instrument that cannot work ([`ReadError::Broken`]), an error of the machine or of
     /// `record` stop it at once; what was recorded stays.
     ///
     /// With `drift`, the reference configuration is measured (each measurement passed to
     /// `log` before the campaign goes on): until it settles (the warm-up gate), at the start,
     /// after every `every` configurations and after the last; a movement from its baseline
-    /// beyond the limit stops the campaign ([`Error::Drift`], naming what moved and the
+    /// beyond the limit stops the campaign ([`Error::Drifted`], naming what moved and the
     /// configurations recorded since the last good measurement) unless accepted at the start.
     pub fn run(
         &self,
@@ -409,19 +446,13 @@ impl Campaign<'_> {
     ) -> Result<CampaignSummary> {
         let options = &self.options;
         if options.readings == 0 {
-            return Err(Error::InvalidSetting("readings must be ≥ 1".into()));
+            return Err(Error::OutOfRange {
+                setting: "readings",
+                value: 0.0,
+                valid: "must be ≥ 1",
+            });
         }
-        let mut watch = Watch {
-            baseline: self.drift.as_ref().and_then(|d| d.baseline.clone()),
-            number: self.drift.as_ref().map_or(1, |d| d.first_number),
-            recorded: self.done.len(),
-            since_reference: self
-                .drift
-                .as_ref()
-                .map(|d| d.suspects.clone())
-                .unwrap_or_default(),
-            note: self.drift.as_ref().and_then(|d| d.note.clone()),
-        };
+        let mut watch = Watch::at_start(self.drift.as_ref(), self.done.len());
         let left = self
             .order
             .iter()
@@ -440,41 +471,17 @@ impl Campaign<'_> {
                 summary.already += 1;
                 continue;
             }
-            let (arrival, mut combined) =
-                self.measure(machine, instrument, &row.id, &row.pose_mm_deg)?;
-            gaps_in_a_row = if combined.kept == 0 {
-                gaps_in_a_row + 1
-            } else {
-                0
-            };
-            if combined.kept == 0 {
-                let why = combined
-                    .lost
-                    .1
-                    .clone()
-                    .unwrap_or_else(|| "no reading".into());
-                summary.gaps.push((row.id.clone(), why));
-                combined.observed = self.nothing_seen.clone();
-            }
-            record(
-                MeasuredConfiguration {
-                    id: row.id.clone(),
-                    pose_mm_deg: row.pose_mm_deg,
-                    legs: arrival.legs,
-                    observed: combined.observed.clone(),
-                },
-                &combined,
-            )?;
-            summary.measured += 1;
+            let gap = self.record_one(row, machine, instrument, record, &mut summary)?;
+            gaps_in_a_row = if gap { gaps_in_a_row + 1 } else { 0 };
             watch.recorded += 1;
             watch.since_reference.push(row.id.clone());
             progress();
             if gaps_in_a_row >= options.max_consecutive_gaps {
-                let (_, why) = summary.gaps.last().cloned().unwrap_or_default();
-                return Err(Error::Instrument(format!(
-                    "{gaps_in_a_row} configurations in a row gave no reading (the last: {why}); \
-                     the campaign stops: check the instrument and run again to continue"
-                )));
+                let (_, last_reason) = summary.gaps.last().cloned().unwrap_or_default();
+                return Err(Error::GapsInARow {
+                    count: gaps_in_a_row,
+                    last_reason,
+                });
             }
             let every = self.drift.as_ref().map_or(0, |d| d.every);
             let last = summary.measured == left;
@@ -495,6 +502,41 @@ impl Campaign<'_> {
         Ok(summary)
     }
 
+    /// Measures the configuration `row` and passes it to `record` (every reading failed: as a
+    /// gap, `nothing_seen`, listed in `summary` with the reason); whether it was a gap.
+    fn record_one(
+        &self,
+        row: &NamedPose,
+        machine: &mut dyn Machine,
+        instrument: &mut dyn Instrument,
+        record: &mut dyn FnMut(MeasuredConfiguration, &Combined) -> Result<()>,
+        summary: &mut CampaignSummary,
+    ) -> Result<bool> {
+        let (arrival, mut combined) =
+            self.measure(machine, instrument, &row.id, &row.pose_mm_deg)?;
+        let gap = combined.kept == 0;
+        if gap {
+            let why = combined
+                .lost
+                .1
+                .clone()
+                .unwrap_or_else(|| "no reading".into());
+            summary.gaps.push((row.id.clone(), why));
+            combined.observed = self.nothing_seen.clone();
+        }
+        record(
+            MeasuredConfiguration {
+                id: row.id.clone(),
+                pose_mm_deg: row.pose_mm_deg,
+                legs: arrival.legs,
+                observed: combined.observed.clone(),
+            },
+            &combined,
+        )?;
+        summary.measured += 1;
+        Ok(gap)
+    }
+
     /// Drives to `pose_mm_deg` (the configuration `id`), settles, reads and combines the
     /// readings in the record's frame; `kept` is 0 when every reading failed (`lost` says why).
     fn measure(
@@ -509,11 +551,10 @@ impl Campaign<'_> {
             .map(|i| (arrival.drives[i] - arrival.legs[i]).abs())
             .fold(0.0, f64::max);
         if compensated > COMPENSATION_OFF_MM {
-            return Err(Error::Machine(format!(
-                "configuration {id}: the drives are commanded {compensated:.4} mm away from the \
-                 nominal legs: compensation is active. A calibration measures the machine as it \
-                 is: switch it off (halcmd setp hexacomp.0.enable 0) and run again"
-            )));
+            return Err(Error::CompensationActive {
+                configuration: id.to_string(),
+                offset_mm: compensated,
+            });
         }
         if !self.options.settle.is_zero() {
             std::thread::sleep(self.options.settle);
@@ -554,11 +595,10 @@ impl Campaign<'_> {
         watch.number += 1;
         let (arrival, combined) = self.measure(machine, instrument, &id, &check.pose_mm_deg)?;
         if combined.kept == 0 {
-            return Err(Error::Instrument(format!(
-                "the reference configuration ({id}) could not be measured ({}); the campaign \
-                 stops: check the instrument and run again to continue",
-                combined.lost.1.unwrap_or_else(|| "no reading".into())
-            )));
+            return Err(Error::ReferenceUnmeasured {
+                reference: id,
+                reason: combined.lost.1.unwrap_or_else(|| "no reading".into()),
+            });
         }
         Ok((id, arrival, combined.observed))
     }
@@ -606,16 +646,11 @@ impl Campaign<'_> {
             last_change = change;
             previous = Some(observed);
         }
-        Err(Error::Drift(format!(
-            "the reference configuration did not settle in {} measurements{}: the machine or \
-             the instrument is still warming up; run again to go on waiting (nothing was \
-             recorded)",
-            gate.max_measurements,
-            last_change.map_or(String::new(), |d| format!(
-                " (the last two {:.4} mm apart, limit {} mm)",
-                d.largest_mm, gate.limit_mm
-            ))
-        )))
+        Err(Error::NotWarmedUp {
+            measurements: gate.max_measurements,
+            last_change_mm: last_change.map(|d| d.largest_mm),
+            limit_mm: gate.limit_mm,
+        })
     }
 
     /// Measures the reference and compares it with the baseline: the first becomes the
@@ -678,21 +713,11 @@ impl Campaign<'_> {
                 || "the reference shares no target with its baseline".to_string(),
                 |d| d.explain(check.limit_mm),
             );
-            let suspect = if watch.since_reference.is_empty() {
-                String::new()
-            } else {
-                format!(
-                    " The configurations recorded since the last good measurement of the \
-                     reference ({}) may hold the drift: delete their lines from the record to \
-                     measure them again.",
-                    watch.since_reference.join(", ")
-                )
-            };
-            return Err(Error::Drift(format!(
-                "{id}: {what}. The campaign stops (logged). If the tracker moved, register it \
-                 again (hexacomp-trainer register) and run again with --registration NEW; if \
-                 the drift is real and acceptable, run again with --accept-drift.{suspect}"
-            )));
+            return Err(Error::Drifted {
+                reference: id,
+                what,
+                suspects: watch.since_reference.clone(),
+            });
         }
         if matches!(decision, Decision::Baseline | Decision::Accepted) {
             watch.baseline = Some(observed);
@@ -744,9 +769,10 @@ pub fn read_repeatedly<T: Clone>(
                     Err(why)
                 }
                 Err(ReadError::Broken(why)) => {
-                    return Err(Error::Instrument(format!(
-                        "{why}; measuring stops before {what}"
-                    )));
+                    return Err(Error::InstrumentBroken {
+                        cause: why,
+                        before: what.to_string(),
+                    });
                 }
             };
             readings.attempts.push(Attempt {

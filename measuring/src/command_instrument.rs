@@ -38,6 +38,83 @@ pub struct CommandInstrument {
     pub timeout: Duration,
 }
 
+/// Why an instrument's line is not a reading.
+#[derive(Debug, Clone, PartialEq)]
+pub enum LineError {
+    /// Another number of cells than the reading has.
+    Width {
+        /// The line.
+        line: String,
+        /// Its cells.
+        cells: usize,
+        /// The cells expected.
+        expected: usize,
+        /// What they hold ("a pose x,y,z,a,b,c", "3 targets × x,y,z").
+        holding: String,
+    },
+    /// A cell that is not a finite number of at most [`MAX_COORDINATE_MM`] in size.
+    NotANumber {
+        /// The cell.
+        cell: String,
+        /// The line.
+        line: String,
+    },
+    /// A probe's pose with empty cells.
+    PoseCellsEmpty {
+        /// The line.
+        line: String,
+    },
+    /// A target measured in part: a target is measured whole or left empty.
+    TargetPartlyEmpty {
+        /// The target, from 1.
+        target: usize,
+        /// The line.
+        line: String,
+    },
+    /// A fiducial's line that is empty: the fiducial was not seen.
+    FiducialNotSeen {
+        /// The line.
+        line: String,
+    },
+}
+
+impl std::fmt::Display for LineError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Width {
+                line,
+                cells,
+                expected,
+                holding,
+            } => write!(
+                f,
+                "the line {line:?} has {cells} cells, expected {expected} ({holding})"
+            ),
+            Self::NotANumber { cell, line } => write!(
+                f,
+                "{cell:?} in the line {line:?} is not a number of at most {MAX_COORDINATE_MM:e} \
+                 in size"
+            ),
+            Self::PoseCellsEmpty { line } => write!(f, "the pose line {line:?} has empty cells"),
+            Self::TargetPartlyEmpty { target, line } => write!(
+                f,
+                "target {target} of the line {line:?} is partly empty: a target is measured \
+                 whole or left empty"
+            ),
+            Self::FiducialNotSeen { line } => {
+                write!(f, "the line {line:?} is empty: the fiducial was not seen")
+            }
+        }
+    }
+}
+
+impl From<LineError> for ReadError {
+    /// A line that is not a reading is a failed reading: retried.
+    fn from(e: LineError) -> Self {
+        ReadError::Failed(e.to_string())
+    }
+}
+
 /// Parses an instrument's line (a program's or an operator's): `targets` points `p1x..pNz` in the
 /// instrument's frame (three empty cells for a target not seen), or with `probe` a pose
 /// `x,y,z,a,b,c` (mm, degrees); numbers beyond [`MAX_COORDINATE_MM`] are refused.
@@ -45,21 +122,22 @@ pub(crate) fn parse_reading(
     line: &str,
     targets: usize,
     probe: bool,
-) -> Result<Observation, String> {
+) -> Result<Observation, LineError> {
     let cells: Vec<&str> = line.split(',').map(str::trim).collect();
     let expected = if probe { 6 } else { 3 * targets };
     if cells.len() != expected {
-        return Err(format!(
-            "the line {line:?} has {} cells, expected {expected} ({})",
-            cells.len(),
-            if probe {
+        return Err(LineError::Width {
+            line: line.to_string(),
+            cells: cells.len(),
+            expected,
+            holding: if probe {
                 "a pose x,y,z,a,b,c".to_string()
             } else {
                 format!("{targets} targets × x,y,z")
-            }
-        ));
+            },
+        });
     }
-    let number = |text: &str| -> Result<Option<f64>, String> {
+    let number = |text: &str| -> Result<Option<f64>, LineError> {
         if text.is_empty() {
             return Ok(None);
         }
@@ -67,17 +145,17 @@ pub(crate) fn parse_reading(
             .ok()
             .filter(|v| v.is_finite() && v.abs() <= MAX_COORDINATE_MM)
             .map(Some)
-            .ok_or_else(|| {
-                format!(
-                    "{text:?} in the line {line:?} is not a number of at most \
-                         {MAX_COORDINATE_MM:e} in size"
-                )
+            .ok_or_else(|| LineError::NotANumber {
+                cell: text.to_string(),
+                line: line.to_string(),
             })
     };
     let values: Vec<Option<f64>> = cells.iter().map(|c| number(c)).collect::<Result<_, _>>()?;
     if probe {
         let pose: Option<Vec<f64>> = values.into_iter().collect();
-        let pose = pose.ok_or_else(|| format!("the pose line {line:?} has empty cells"))?;
+        let pose = pose.ok_or_else(|| LineError::PoseCellsEmpty {
+            line: line.to_string(),
+        })?;
         return Ok(Observation::Pose(std::array::from_fn(|k| pose[k])));
     }
     let targets = values
@@ -86,11 +164,10 @@ pub(crate) fn parse_reading(
         .map(|(j, xyz)| match (xyz[0], xyz[1], xyz[2]) {
             (Some(x), Some(y), Some(z)) => Ok(Some(DVec3::new(x, y, z))),
             (None, None, None) => Ok(None),
-            _ => Err(format!(
-                "target {} of the line {line:?} is partly empty: a target is measured whole \
-                     or left empty",
-                j + 1
-            )),
+            _ => Err(LineError::TargetPartlyEmpty {
+                target: j + 1,
+                line: line.to_string(),
+            }),
         })
         .collect::<Result<Vec<_>, _>>()?;
     Ok(Observation::Targets(targets))
@@ -150,7 +227,7 @@ impl Instrument for CommandInstrument {
             .chain([(reading + 1).to_string()])
             .collect();
         let line = first_line(&self.program, &arguments, self.timeout)?;
-        parse_reading(&line, self.targets, self.probe).map_err(ReadError::Failed)
+        parse_reading(&line, self.targets, self.probe).map_err(ReadError::from)
     }
 
     fn read_fiducial(
@@ -165,20 +242,21 @@ impl Instrument for CommandInstrument {
             .chain([(reading + 1).to_string()])
             .collect();
         let line = first_line(&self.program, &arguments, self.timeout)?;
-        parse_point(&line).map_err(ReadError::Failed)
+        parse_point(&line).map_err(ReadError::from)
     }
 }
 
 /// Parses a fiducial's reading `x,y,z` (mm, the instrument's frame).
-pub(crate) fn parse_point(line: &str) -> Result<DVec3, String> {
+pub(crate) fn parse_point(line: &str) -> Result<DVec3, LineError> {
     match parse_reading(line, 1, false)? {
         Observation::Targets(points) => match points.as_slice() {
             [Some(point)] => Ok(*point),
-            _ => Err(format!(
-                "the line {line:?} is empty: the fiducial was not seen"
-            )),
+            _ => Err(LineError::FiducialNotSeen {
+                line: line.to_string(),
+            }),
         },
-        _ => Err(format!("the line {line:?} holds no point x,y,z")),
+        // A reading of one target without the probe is targets.
+        _ => unreachable!("parse_reading without the probe gives targets"),
     }
 }
 

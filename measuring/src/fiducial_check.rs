@@ -92,11 +92,8 @@ pub fn compare(registration: &RegistrationFile, points: &[NamedPoint]) -> Result
                 .fiducials
                 .iter()
                 .find(|f| f.name == point.name)
-                .ok_or_else(|| {
-                    Error::InvalidSetting(format!(
-                        "fiducial {} is not one of the registration's",
-                        point.name
-                    ))
+                .ok_or_else(|| Error::UnknownFiducial {
+                    fiducial: point.name.clone(),
                 })?;
             Ok(RemeasuredFiducial {
                 point: NamedPoint {

@@ -18,7 +18,7 @@ use hexacomp_core::observation::Observation;
 use hexacomp_formats::file_identity;
 
 use crate::campaign::{Arrival, Instrument, ReadError};
-use crate::command_instrument::{parse_point, parse_reading};
+use crate::command_instrument::{LineError, parse_point, parse_reading};
 
 /// How often the file is looked at while waiting for a line.
 const POLL: Duration = Duration::from_millis(50);
@@ -226,7 +226,7 @@ impl FollowedFile {
         subject: &str,
         reading: usize,
         what: &str,
-        parse: impl Fn(&str) -> Result<T, String>,
+        parse: impl Fn(&str) -> Result<T, LineError>,
     ) -> Result<T, ReadError> {
         self.begin(subject)?;
         eprintln!(

@@ -52,53 +52,22 @@ impl LinuxCncHexapod {
         let mut parameters = BTreeMap::new();
         for path in hal_files_of(ini_path, &ini) {
             let text = read_text(&path)?;
-            collect_setp(&text, &ini, &mut parameters).map_err(|m| config_error(&path, &m))?;
+            collect_setp(&text, &ini, &mut parameters).map_err(|p| config_error(&path, p))?;
         }
         Self::from_parts(ini_path, &ini, &parameters)
     }
 
+    /// The configuration of `ini` (read from `path`) and the `setp` values of its HAL files.
     fn from_parts(path: &Path, ini: &Ini, hal: &BTreeMap<String, f64>) -> Result<Self> {
-        let fail = |m: String| config_error(path, &m);
-        let mm_per_unit =
-            linear_units(ini.first("TRAJ", "LINEAR_UNITS").unwrap_or("mm")).map_err(fail)?;
-        match ini.first("TRAJ", "ANGULAR_UNITS").unwrap_or("degree") {
-            "degree" | "deg" | "degrees" => {}
-            other => return Err(fail(format!("[TRAJ]ANGULAR_UNITS = {other}: only degrees"))),
-        }
-        let coordinates: String = ini
-            .first("TRAJ", "COORDINATES")
-            .unwrap_or("XYZABC")
-            .split_whitespace()
-            .collect();
-        if !coordinates.eq_ignore_ascii_case("XYZABC") {
-            return Err(fail(format!(
-                "[TRAJ]COORDINATES = {coordinates}: a hexapod needs X Y Z A B C"
-            )));
-        }
-        if let Some(kinematics) = ini.first("KINS", "KINEMATICS")
-            && !kinematics.starts_with("genhexkins")
-        {
-            return Err(fail(format!(
-                "[KINS]KINEMATICS = {kinematics}: only genhexkins configurations are hexapods"
-            )));
-        }
-        if hal
-            .get("genhexkins.screw-lead")
-            .is_some_and(|&lead| lead != 0.0)
-        {
-            return Err(fail(
-                "genhexkins.screw-lead is not 0: leg lengths then depend on the leg rotation, \
-                 which hexacomp's kinematics do not model"
-                    .into(),
-            ));
-        }
+        let fail = |problem: ConfigProblem| config_error(path, problem);
+        let mm_per_unit = check_hexapod_units(ini, hal).map_err(fail)?;
         let joint = |part: &str, leg: usize| -> Result<DVec3> {
             let mut xyz = [0.0; 3];
             for (value, axis) in xyz.iter_mut().zip(["x", "y", "z"]) {
                 let name = format!("genhexkins.{part}.{leg}.{axis}");
-                *value = *hal.get(&name).ok_or_else(|| {
-                    fail(format!("no `setp {name}` in the HAL files the ini names"))
-                })?;
+                *value = *hal
+                    .get(&name)
+                    .ok_or_else(|| fail(ConfigProblem::MissingSetp { name: name.clone() }))?;
             }
             Ok(DVec3::from_array(xyz))
         };
@@ -108,23 +77,15 @@ impl LinuxCncHexapod {
             base_joints[leg] = joint("base", leg)?;
             platform_joints[leg] = joint("platform", leg)?;
         }
-        let home = parse_numbers::<6>(ini.first("TRAJ", "HOME").unwrap_or("0 0 0 0 0 0"))
-            .map_err(|m| fail(format!("[TRAJ]HOME: {m}")))?;
-        let limit = |leg: usize, key: &str| -> Result<f64> {
-            let section = format!("JOINT_{leg}");
-            let text = ini
-                .first(&section, key)
-                .ok_or_else(|| fail(format!("no [{section}]{key}: the leg travel is needed")))?;
-            let [value] =
-                parse_numbers::<1>(text).map_err(|m| fail(format!("[{section}]{key}: {m}")))?;
-            Ok(value)
-        };
-        // The travel every leg allows.
-        let mut joint_limits = [f64::NEG_INFINITY, f64::INFINITY];
-        for leg in 0..LEGS {
-            joint_limits[0] = joint_limits[0].max(limit(leg, "MIN_LIMIT")?);
-            joint_limits[1] = joint_limits[1].min(limit(leg, "MAX_LIMIT")?);
-        }
+        let home = parse_numbers::<6>(ini.first("TRAJ", "HOME").unwrap_or("0 0 0 0 0 0")).map_err(
+            |problem| {
+                fail(ConfigProblem::Numbers {
+                    at: "[TRAJ]HOME".into(),
+                    problem,
+                })
+            },
+        )?;
+        let joint_limits = common_travel(ini).map_err(fail)?;
         let machine = ini
             .first("EMC", "MACHINE")
             .map(str::to_string)
@@ -164,11 +125,10 @@ impl LinuxCncHexapod {
             .leg_range
             .unwrap_or([self.joint_limits[0] * mm, self.joint_limits[1] * mm]);
         if leg_range[0].is_nan() || leg_range[0] <= 0.0 {
-            return Err(Error::InvalidSetting(format!(
-                "the joint limits [{}, {}] mm are no leg stroke (set MIN_LIMIT/MAX_LIMIT of the \
-                 joints to the actuators' travel, or give the stroke: --leg-range MIN,MAX)",
-                leg_range[0], leg_range[1]
-            )));
+            return Err(Error::NoLegStroke {
+                min_mm: leg_range[0],
+                max_mm: leg_range[1],
+            });
         }
         let targets: Vec<DVec3> = (0..3)
             .map(|t| (platform_joints[2 * t] + platform_joints[2 * t + 1]) / 2.0)
@@ -243,10 +203,11 @@ pub fn genhexkins_hal(ini_path: &Path, geometry: &Geometry, source: &str) -> Res
             if shift > MAX_EXPORT_SHIFT_MM {
                 return Err(config_error(
                     ini_path,
-                    &format!(
-                        "{source}: its {part} joint {leg} lies {shift:.1} mm from this \
-                         configuration's: it is another machine's geometry"
-                    ),
+                    ConfigProblem::AnotherMachine {
+                        source: source.to_string(),
+                        joint: format!("{part} joint {leg}"),
+                        shift_mm: shift,
+                    },
                 ));
             }
         }
@@ -316,8 +277,71 @@ pub fn default_workspace(base_joints: &[DVec3; LEGS], home: [f64; 6]) -> Workspa
     }
 }
 
+/// Refuses what is not a genhexkins hexapod in degrees with X Y Z A B C coordinates and no
+/// screw lead; the millimetres per linear unit of `[TRAJ]LINEAR_UNITS`.
+fn check_hexapod_units(
+    ini: &Ini,
+    hal: &BTreeMap<String, f64>,
+) -> std::result::Result<f64, ConfigProblem> {
+    let mm_per_unit = linear_units(ini.first("TRAJ", "LINEAR_UNITS").unwrap_or("mm"))?;
+    match ini.first("TRAJ", "ANGULAR_UNITS").unwrap_or("degree") {
+        "degree" | "deg" | "degrees" => {}
+        other => {
+            return Err(ConfigProblem::AngularUnits {
+                value: other.to_string(),
+            });
+        }
+    }
+    let coordinates: String = ini
+        .first("TRAJ", "COORDINATES")
+        .unwrap_or("XYZABC")
+        .split_whitespace()
+        .collect();
+    if !coordinates.eq_ignore_ascii_case("XYZABC") {
+        return Err(ConfigProblem::Coordinates { value: coordinates });
+    }
+    if let Some(kinematics) = ini.first("KINS", "KINEMATICS")
+        && !kinematics.starts_with("genhexkins")
+    {
+        return Err(ConfigProblem::Kinematics {
+            value: kinematics.to_string(),
+        });
+    }
+    if hal
+        .get("genhexkins.screw-lead")
+        .is_some_and(|&lead| lead != 0.0)
+    {
+        return Err(ConfigProblem::ScrewLead);
+    }
+    Ok(mm_per_unit)
+}
+
+/// The travel every leg allows, `[min, max]` in the configuration's units: the largest
+/// `[JOINT_n]MIN_LIMIT` and the smallest `MAX_LIMIT`.
+fn common_travel(ini: &Ini) -> std::result::Result<[f64; 2], ConfigProblem> {
+    let limit = |leg: usize, key: &str| -> std::result::Result<f64, ConfigProblem> {
+        let section = format!("JOINT_{leg}");
+        let text = ini
+            .first(&section, key)
+            .ok_or_else(|| ConfigProblem::MissingTravel {
+                entry: format!("[{section}]{key}"),
+            })?;
+        let [value] = parse_numbers::<1>(text).map_err(|problem| ConfigProblem::Numbers {
+            at: format!("[{section}]{key}"),
+            problem,
+        })?;
+        Ok(value)
+    };
+    let mut joint_limits = [f64::NEG_INFINITY, f64::INFINITY];
+    for leg in 0..LEGS {
+        joint_limits[0] = joint_limits[0].max(limit(leg, "MIN_LIMIT")?);
+        joint_limits[1] = joint_limits[1].min(limit(leg, "MAX_LIMIT")?);
+    }
+    Ok(joint_limits)
+}
+
 /// Millimetres per unit of a `[TRAJ]LINEAR_UNITS` value (a name, or units per mm as a number).
-fn linear_units(text: &str) -> std::result::Result<f64, String> {
+fn linear_units(text: &str) -> std::result::Result<f64, ConfigProblem> {
     match text.to_ascii_lowercase().as_str() {
         "mm" | "metric" => Ok(1.0),
         "in" | "inch" | "imperial" => Ok(25.4),
@@ -325,27 +349,32 @@ fn linear_units(text: &str) -> std::result::Result<f64, String> {
             Ok(units_per_mm) if units_per_mm.is_finite() && units_per_mm > 0.0 => {
                 Ok(1.0 / units_per_mm)
             }
-            _ => Err(format!(
-                "[TRAJ]LINEAR_UNITS = {text}: not mm, inch or a number"
-            )),
+            _ => Err(ConfigProblem::LinearUnits {
+                value: text.to_string(),
+            }),
         },
     }
 }
 
 /// `N` whitespace-separated finite numbers.
-fn parse_numbers<const N: usize>(text: &str) -> std::result::Result<[f64; N], String> {
+fn parse_numbers<const N: usize>(text: &str) -> std::result::Result<[f64; N], NumbersProblem> {
     let values: Vec<f64> = text
         .split_whitespace()
         .map(|word| {
             word.parse::<f64>()
                 .ok()
                 .filter(|v| v.is_finite())
-                .ok_or_else(|| format!("`{word}` is not a finite number"))
+                .ok_or_else(|| NumbersProblem::NotFinite {
+                    word: word.to_string(),
+                })
         })
         .collect::<std::result::Result<_, _>>()?;
     values
         .try_into()
-        .map_err(|v: Vec<f64>| format!("{} numbers where {N} belong", v.len()))
+        .map_err(|v: Vec<f64>| NumbersProblem::Count {
+            got: v.len(),
+            expected: N,
+        })
 }
 
 /// Collects the numeric `setp NAME VALUE` and `NAME = VALUE` lines of a HAL file; `[SECTION]KEY`
@@ -354,7 +383,7 @@ fn collect_setp(
     text: &str,
     ini: &Ini,
     parameters: &mut BTreeMap<String, f64>,
-) -> std::result::Result<(), String> {
+) -> std::result::Result<(), ConfigProblem> {
     for (number, line) in text.lines().enumerate() {
         let line = line.split('#').next().unwrap_or_default();
         let words: Vec<&str> = line.split_whitespace().collect();
@@ -366,12 +395,19 @@ fn collect_setp(
             continue;
         }
         let value = match value.strip_prefix('[').and_then(|v| v.split_once(']')) {
-            Some((section, key)) => ini.first(section, key).ok_or_else(|| {
-                format!("line {}: [{section}]{key} is not in the ini", number + 1)
-            })?,
+            Some((section, key)) => {
+                ini.first(section, key)
+                    .ok_or_else(|| ConfigProblem::IniReference {
+                        line: number + 1,
+                        entry: format!("[{section}]{key}"),
+                    })?
+            }
             None => value,
         };
-        let [value] = parse_numbers::<1>(value).map_err(|m| format!("line {}: {m}", number + 1))?;
+        let [value] = parse_numbers::<1>(value).map_err(|problem| ConfigProblem::Numbers {
+            at: format!("line {}", number + 1),
+            problem,
+        })?;
         parameters.insert(name.to_string(), value);
     }
     Ok(())
@@ -415,13 +451,156 @@ impl Ini {
 }
 
 fn read_text(path: &Path) -> Result<String> {
-    std::fs::read_to_string(path).map_err(|e| config_error(path, &e.to_string()))
+    std::fs::read_to_string(path).map_err(|e| {
+        config_error(
+            path,
+            ConfigProblem::Unreadable {
+                cause: e.to_string(),
+            },
+        )
+    })
 }
 
-fn config_error(path: &Path, message: &str) -> Error {
+fn config_error(path: &Path, problem: ConfigProblem) -> Error {
     Error::LinuxCncConfig {
         path: PathBuf::from(path),
-        message: message.to_string(),
+        problem,
+    }
+}
+
+/// What is wrong with a LinuxCNC configuration's ini or HAL file.
+#[derive(Debug, Clone, PartialEq)]
+pub enum ConfigProblem {
+    /// The file cannot be read.
+    Unreadable {
+        /// Why.
+        cause: String,
+    },
+    /// `[TRAJ]LINEAR_UNITS` is not mm, inch or a number.
+    LinearUnits {
+        /// Its value.
+        value: String,
+    },
+    /// `[TRAJ]ANGULAR_UNITS` is not degrees.
+    AngularUnits {
+        /// Its value.
+        value: String,
+    },
+    /// `[TRAJ]COORDINATES` is not X Y Z A B C.
+    Coordinates {
+        /// Its value.
+        value: String,
+    },
+    /// `[KINS]KINEMATICS` is not genhexkins.
+    Kinematics {
+        /// Its value.
+        value: String,
+    },
+    /// `genhexkins.screw-lead` is not 0: leg lengths then depend on the leg rotation.
+    ScrewLead,
+    /// A genhexkins joint coordinate is not set in the HAL files.
+    MissingSetp {
+        /// The parameter (`genhexkins.base.0.x`).
+        name: String,
+    },
+    /// A joint's travel limit is missing.
+    MissingTravel {
+        /// The entry (`[JOINT_0]MIN_LIMIT`).
+        entry: String,
+    },
+    /// A HAL line refers to an ini entry that is not there.
+    IniReference {
+        /// The HAL file's line, from 1.
+        line: usize,
+        /// The entry referred to.
+        entry: String,
+    },
+    /// An entry's numbers are not what it needs.
+    Numbers {
+        /// Where (`[TRAJ]HOME`, `line 12`).
+        at: String,
+        /// What is wrong.
+        problem: NumbersProblem,
+    },
+    /// An export's geometry is another machine's than the configuration's.
+    AnotherMachine {
+        /// The geometry's source.
+        source: String,
+        /// The joint that lies far ("base joint 0").
+        joint: String,
+        /// How far, mm.
+        shift_mm: f64,
+    },
+}
+
+/// What is wrong with a list of numbers.
+#[derive(Debug, Clone, PartialEq)]
+pub enum NumbersProblem {
+    /// A word that is not a finite number.
+    NotFinite {
+        /// The word.
+        word: String,
+    },
+    /// Another count of numbers than belong.
+    Count {
+        /// The numbers given.
+        got: usize,
+        /// The numbers that belong.
+        expected: usize,
+    },
+}
+
+impl std::fmt::Display for NumbersProblem {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::NotFinite { word } => write!(f, "`{word}` is not a finite number"),
+            Self::Count { got, expected } => write!(f, "{got} numbers where {expected} belong"),
+        }
+    }
+}
+
+impl std::fmt::Display for ConfigProblem {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Unreadable { cause } => f.write_str(cause),
+            Self::LinearUnits { value } => {
+                write!(f, "[TRAJ]LINEAR_UNITS = {value}: not mm, inch or a number")
+            }
+            Self::AngularUnits { value } => {
+                write!(f, "[TRAJ]ANGULAR_UNITS = {value}: only degrees")
+            }
+            Self::Coordinates { value } => {
+                write!(
+                    f,
+                    "[TRAJ]COORDINATES = {value}: a hexapod needs X Y Z A B C"
+                )
+            }
+            Self::Kinematics { value } => write!(
+                f,
+                "[KINS]KINEMATICS = {value}: only genhexkins configurations are hexapods"
+            ),
+            Self::ScrewLead => f.write_str(
+                "genhexkins.screw-lead is not 0: leg lengths then depend on the leg rotation, \
+                 which hexacomp's kinematics do not model",
+            ),
+            Self::MissingSetp { name } => {
+                write!(f, "no `setp {name}` in the HAL files the ini names")
+            }
+            Self::MissingTravel { entry } => write!(f, "no {entry}: the leg travel is needed"),
+            Self::IniReference { line, entry } => {
+                write!(f, "line {line}: {entry} is not in the ini")
+            }
+            Self::Numbers { at, problem } => write!(f, "{at}: {problem}"),
+            Self::AnotherMachine {
+                source,
+                joint,
+                shift_mm,
+            } => write!(
+                f,
+                "{source}: its {joint} lies {shift_mm:.1} mm from this configuration's: it is \
+                 another machine's geometry"
+            ),
+        }
     }
 }
 

@@ -50,10 +50,14 @@ pub struct LinuxCncMachine {
 
 /// The bridge's answer to one request, parsed: its fields, or the error it reported.
 fn parse(line: &str) -> Result<serde_json::Value> {
-    let value: serde_json::Value = serde_json::from_str(line)
-        .map_err(|e| Error::Machine(format!("the LinuxCNC bridge answered {line:?} ({e})")))?;
+    let value: serde_json::Value = serde_json::from_str(line).map_err(|e| Error::BridgeAnswer {
+        answer: line.to_string(),
+        problem: e.to_string(),
+    })?;
     match value.get("error").and_then(|e| e.as_str()) {
-        Some(error) => Err(Error::Machine(error.to_string())),
+        Some(error) => Err(Error::LinuxCncRefused {
+            message: error.to_string(),
+        }),
         None => Ok(value),
     }
 }
@@ -65,10 +69,9 @@ fn six(answer: &serde_json::Value, name: &str) -> Result<[f64; LEGS]> {
         .and_then(|v| v.as_array())
         .map(|a| a.iter().filter_map(|v| v.as_f64()).collect())
         .unwrap_or_default();
-    <[f64; LEGS]>::try_from(values.as_slice()).map_err(|_| {
-        Error::Machine(format!(
-            "the LinuxCNC bridge answered without six numbers in {name:?}: {answer}"
-        ))
+    <[f64; LEGS]>::try_from(values.as_slice()).map_err(|_| Error::BridgeAnswer {
+        answer: answer.to_string(),
+        problem: format!("not six numbers in {name:?}"),
     })
 }
 
@@ -93,11 +96,9 @@ impl LinuxCncMachine {
             .stderr(Stdio::inherit());
         // SIGTERM: the bridge gives LinuxCNC's modes back and leaves HAL before it ends.
         die_with_parent(&mut command, libc::SIGTERM);
-        let mut child = command.spawn().map_err(|e| {
-            Error::Machine(format!(
-                "cannot run {} for LinuxCNC's Python interface: {e} (give --linuxcnc-python)",
-                options.python
-            ))
+        let mut child = command.spawn().map_err(|e| Error::BridgeNotStarted {
+            python: options.python.clone(),
+            cause: e.to_string(),
         })?;
         let stdout = child.stdout.take().expect("stdout piped");
         let stdin = child.stdin.take();
@@ -126,15 +127,14 @@ impl LinuxCncMachine {
     fn answer(&mut self, timeout: Duration) -> Result<serde_json::Value> {
         match self.answers.recv_timeout(timeout) {
             Ok(Ok(line)) => parse(&line),
-            Ok(Err(e)) => Err(Error::Machine(format!("reading the LinuxCNC bridge: {e}"))),
-            Err(RecvTimeoutError::Timeout) => Err(Error::Machine(format!(
-                "LinuxCNC did not answer within {timeout:?}"
-            ))),
+            Ok(Err(e)) => Err(Error::BridgeIo {
+                what: "reading",
+                cause: e.to_string(),
+            }),
+            Err(RecvTimeoutError::Timeout) => Err(Error::MachineTimeout { timeout }),
             Err(RecvTimeoutError::Disconnected) => {
                 let status = self.child.wait().map(|s| s.to_string()).unwrap_or_default();
-                Err(Error::Machine(format!(
-                    "the LinuxCNC bridge ended ({status}); its messages are above"
-                )))
+                Err(Error::BridgeEnded { status })
             }
         }
     }
@@ -143,28 +143,32 @@ impl LinuxCncMachine {
 impl Machine for LinuxCncMachine {
     fn go_to(&mut self, id: &str, pose: &Pose) -> Result<Arrival> {
         let request = serde_json::json!({ "move": pose.to_mm_deg() }).to_string() + "\n";
-        let stdin = self
-            .stdin
-            .as_mut()
-            .ok_or_else(|| Error::Machine("the LinuxCNC bridge is closed".into()))?;
+        let stdin = self.stdin.as_mut().ok_or_else(|| Error::BridgeIo {
+            what: "writing to",
+            cause: "it is closed".into(),
+        })?;
         stdin
             .write_all(request.as_bytes())
             .and_then(|()| stdin.flush())
-            .map_err(|e| Error::Machine(format!("writing to the LinuxCNC bridge: {e}")))?;
+            .map_err(|e| Error::BridgeIo {
+                what: "writing to",
+                cause: e.to_string(),
+            })?;
         let answer = self
             .answer(self.timeout)
-            .map_err(|e| Error::Machine(format!("configuration {id}: {e}")))?;
+            .map_err(|e| Error::AtConfiguration {
+                configuration: id.to_string(),
+                cause: Box::new(e),
+            })?;
         let legs = six(&answer, "legs")?;
         let nominal = inverse_kinematics(&self.geometry, pose).lengths;
         if let Some(leg) = (0..LEGS).find(|&i| (legs[i] - nominal[i]).abs() > LEGS_AGREE_MM) {
-            return Err(Error::Machine(format!(
-                "configuration {id}: LinuxCNC commands leg {} at {} mm where the geometry's \
-                 inverse kinematics gives {} mm: --geometry is not this machine's (convert it \
-                 with hexacomp-trainer geometry --from-linuxcnc)",
-                leg + 1,
-                legs[leg],
-                nominal[leg]
-            )));
+            return Err(Error::GeometryNotThisMachine {
+                configuration: id.to_string(),
+                leg: leg + 1,
+                linuxcnc_mm: legs[leg],
+                geometry_mm: nominal[leg],
+            });
         }
         Ok(Arrival {
             legs,

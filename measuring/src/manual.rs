@@ -12,7 +12,7 @@ use hexacomp_core::observation::Observation;
 use hexacomp_core::{Geometry, Pose, inverse_kinematics};
 
 use crate::campaign::{Arrival, Instrument, Machine, ReadError};
-use crate::command_instrument::{parse_point, parse_reading};
+use crate::command_instrument::{LineError, parse_point, parse_reading};
 use crate::error::{Error, Result};
 
 /// One line of standard input without its line end; `None` at the end of the input.
@@ -49,9 +49,7 @@ impl Machine for ManualMachine {
                     });
                 }
                 Ok(Some(line)) if line.trim() == "stop" => {
-                    return Err(Error::Machine(
-                        "stopped by the operator; run again to continue".into(),
-                    ));
+                    return Err(Error::StoppedByOperator);
                 }
                 // Asked again: a line typed here (a reading pasted too early) confirms nothing.
                 Ok(Some(line)) => eprintln!(
@@ -59,11 +57,17 @@ impl Machine for ManualMachine {
                      configuration {id} (stop: end the campaign)"
                 ),
                 Ok(None) => {
-                    return Err(Error::Machine(format!(
-                        "configuration {id}: the input ended before the move was confirmed"
-                    )));
+                    return Err(Error::ConfirmationMissing {
+                        configuration: id.to_string(),
+                        problem: "the input ended".into(),
+                    });
                 }
-                Err(e) => return Err(Error::Machine(format!("reading the confirmation: {e}"))),
+                Err(e) => {
+                    return Err(Error::ConfirmationMissing {
+                        configuration: id.to_string(),
+                        problem: format!("reading the confirmation failed ({e})"),
+                    });
+                }
             }
         }
     }
@@ -74,7 +78,7 @@ impl Machine for ManualMachine {
 /// `stop` or the end of the input stops the campaign.
 fn ask_reading<T>(
     prompt: &str,
-    parse: impl Fn(&str) -> std::result::Result<T, String>,
+    parse: impl Fn(&str) -> std::result::Result<T, LineError>,
 ) -> std::result::Result<T, ReadError> {
     loop {
         eprintln!("{prompt}");

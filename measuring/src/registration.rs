@@ -122,10 +122,7 @@ fn pair_by_name<'a>(
     if problems.is_empty() {
         Ok(pairs)
     } else {
-        Err(Error::RegistrationRefused(format!(
-            "{} (every fiducial must be named the same in both files)",
-            problems.join("; ")
-        )))
+        Err(Error::FiducialNamesUnmatched { problems })
     }
 }
 
@@ -169,7 +166,8 @@ fn worst(residuals: &[DVec3], weights: &[f64]) -> (usize, f64) {
 /// Locates the instrument from `nominal` fiducials (base frame, mm) and the same fiducials
 /// `measured` in its frame (mm, weights from the measured file), matched by name.
 ///
-/// Refused ([`Error::RegistrationRefused`]), with the cause: names on one side only, fewer than
+/// Refused, with the cause ([`Error::FiducialNamesUnmatched`], [`Error::FiducialsDoNotLocate`],
+/// [`Error::FiducialBeyondTolerance`]): names on one side only, fewer than
 /// three common names or of positive weight, nearly collinear fiducials, a residual above the
 /// tolerance (naming the worst fiducial and, where the data shows it, two swapped names, inches,
 /// or the one fiducial whose removal makes the rest fit).
@@ -179,10 +177,11 @@ pub fn register(
     options: &RegistrationOptions,
 ) -> Result<Registration> {
     if !(options.tolerance_mm.is_finite() && options.tolerance_mm > 0.0) {
-        return Err(Error::InvalidSetting(format!(
-            "registration tolerance {} mm: a positive number is needed",
-            options.tolerance_mm
-        )));
+        return Err(Error::OutOfRange {
+            setting: "registration tolerance (mm)",
+            value: options.tolerance_mm,
+            valid: "must be a positive number",
+        });
     }
     let pairs = pair_by_name(nominal, measured)?;
     let names: Vec<&str> = pairs.iter().map(|(n, _)| n.name.as_str()).collect();
@@ -191,17 +190,17 @@ pub fn register(
     let weights: Vec<f64> = pairs.iter().map(|(_, m)| m.weight).collect();
     let (instrument, residuals) = fit(&nominal_points, &measured_points, &weights, options.locked)
         .map_err(|e| match e {
-            Error::Core(core) => Error::RegistrationRefused(format!("the fiducials: {core}")),
+            Error::Core(cause) => Error::FiducialsDoNotLocate { cause },
             other => other,
         })?;
     let (worst_index, max_mm) = worst(&residuals, &weights);
     if max_mm > options.tolerance_mm {
-        let diagnosis = diagnose(&names, &nominal_points, &measured_points, &weights, options);
-        return Err(Error::RegistrationRefused(format!(
-            "fiducial {} is {max_mm:.4} mm from its nominal position after the best fit, more \
-             than the tolerance of {} mm. {diagnosis}",
-            names[worst_index], options.tolerance_mm
-        )));
+        return Err(Error::FiducialBeyondTolerance {
+            fiducial: names[worst_index].to_string(),
+            distance_mm: max_mm,
+            tolerance_mm: options.tolerance_mm,
+            diagnosis: diagnose(&names, &nominal_points, &measured_points, &weights, options),
+        });
     }
     let used: Vec<f64> = residuals
         .iter()
@@ -230,104 +229,229 @@ pub fn register(
     })
 }
 
-/// What the data says about a registration that does not fit: inches, two swapped names, one
-/// fiducial off; otherwise the typical causes.
+/// What the data says about a registration that does not fit.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Diagnosis {
+    /// With nothing locked every fiducial fits within `max_mm`: the instrument does not meet
+    /// the `locked` parameters.
+    LockedParametersMissed {
+        /// The largest residual with nothing locked, mm.
+        max_mm: f64,
+        /// The locked parameters' names.
+        locked: Vec<&'static str>,
+    },
+    /// One file's coordinates look like inches: the nominal fiducials are spread `ratio` times
+    /// as wide as the measured ones (25.4 or 1/25.4).
+    Inches {
+        /// Which file: "measured" or "nominal".
+        file: &'static str,
+        /// The nominal spread over the measured one.
+        ratio: f64,
+    },
+    /// Two names look swapped in the measured file: exchanged, every fiducial fits within
+    /// `max_mm`.
+    SwappedNames {
+        /// The two names.
+        names: [String; 2],
+        /// The largest residual with them exchanged, mm.
+        max_mm: f64,
+    },
+    /// Without `fiducial` the others fit within `max_mm`.
+    OneFiducialOff {
+        /// The fiducial that probably moved.
+        fiducial: String,
+        /// The largest residual of the others, mm.
+        max_mm: f64,
+    },
+    /// Without any one of `candidates` the others fit: the layout cannot tell which moved.
+    OneOfSeveralOff {
+        /// The fiducials any of which may have moved.
+        candidates: Vec<String>,
+    },
+    /// The nominal fiducials are spread `ratio` times as wide as the measured ones.
+    Scale {
+        /// The nominal spread over the measured one.
+        ratio: f64,
+    },
+    /// Nothing in the data points to one cause.
+    Unknown,
+}
+
+/// The typical causes of a registration that does not fit.
+const TYPICAL: &str = "Typical causes: two fiducial names swapped, inches instead of \
+                       millimetres, a fiducial knocked or its nest moved, a reflector not \
+                       seated.";
+
+impl std::fmt::Display for Diagnosis {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::LockedParametersMissed { max_mm, locked } => write!(
+                f,
+                "With nothing locked every fiducial fits within {max_mm:.4} mm: the instrument \
+                 does not meet the locked parameters ({}); level it again, or register without \
+                 locking them.",
+                locked.join(", ")
+            ),
+            Self::Inches { file, ratio } => write!(
+                f,
+                "the {file} coordinates look like inches: the nominal fiducials are spread \
+                 {ratio:.3} times as wide as the measured ones (25.4 mm to the inch); give both \
+                 files in millimetres."
+            ),
+            Self::SwappedNames { names, max_mm } => write!(
+                f,
+                "The names {} and {} look swapped in the measured file: exchanged, every \
+                 fiducial fits within {max_mm:.4} mm.",
+                names[0], names[1]
+            ),
+            Self::OneFiducialOff { fiducial, max_mm } => write!(
+                f,
+                "Without {fiducial} the others fit within {max_mm:.4} mm: it was probably \
+                 knocked, mis-measured or its nominal position is wrong (measure it again, or \
+                 give it weight 0 in the measured file to register without it)."
+            ),
+            Self::OneOfSeveralOff { candidates } => write!(
+                f,
+                "Without any one of {} the others fit: these fiducials cannot tell which of \
+                 them moved; measure them again, or add fiducials.",
+                candidates.join(", ")
+            ),
+            Self::Scale { ratio } => write!(
+                f,
+                "The nominal fiducials are spread {ratio:.4} times as wide as the measured ones: \
+                 a scale or unit error? {TYPICAL}"
+            ),
+            Self::Unknown => f.write_str(TYPICAL),
+        }
+    }
+}
+
+/// A registration's fiducials, as the diagnosis refits them.
+struct Fiducials<'a> {
+    names: &'a [&'a str],
+    nominal: &'a [DVec3],
+    measured: &'a [DVec3],
+    weights: &'a [f64],
+    options: &'a RegistrationOptions,
+}
+
+impl Fiducials<'_> {
+    /// The largest residual of the fit of `measured` with `weights` (the options' locks), when
+    /// it is within the tolerance.
+    fn fits(&self, measured: &[DVec3], weights: &[f64]) -> Option<f64> {
+        fit(self.nominal, measured, weights, self.options.locked)
+            .ok()
+            .map(|(_, residuals)| worst(&residuals, weights).1)
+            .filter(|max| *max <= self.options.tolerance_mm)
+    }
+
+    /// Every fiducial fits with nothing locked, where something is.
+    fn locked_parameters_missed(&self) -> Option<Diagnosis> {
+        let options = self.options;
+        if options.locked == Locked::default() {
+            return None;
+        }
+        let (_, residuals) =
+            fit(self.nominal, self.measured, self.weights, Locked::default()).ok()?;
+        let max_mm = worst(&residuals, self.weights).1;
+        (max_mm <= options.tolerance_mm).then(|| Diagnosis::LockedParametersMissed {
+            max_mm,
+            locked: options.locked.names(),
+        })
+    }
+
+    /// One file's coordinates 25.4 times the other's, within 2 %.
+    fn inches(&self, ratio: f64) -> Option<Diagnosis> {
+        [(25.4, "measured"), (1.0 / 25.4, "nominal")]
+            .into_iter()
+            .find(|(factor, _)| (ratio / factor - 1.0).abs() < 0.02)
+            .map(|(_, file)| Diagnosis::Inches { file, ratio })
+    }
+
+    /// Two names whose measured points, exchanged, make every fiducial fit (tried up to 64
+    /// fiducials).
+    fn swapped_names(&self) -> Option<Diagnosis> {
+        const MAX_PAIRS_TRIED: usize = 64;
+        let names = self.names;
+        if names.len() > MAX_PAIRS_TRIED {
+            return None;
+        }
+        for i in 0..names.len() {
+            for j in i + 1..names.len() {
+                let mut swapped = self.measured.to_vec();
+                swapped.swap(i, j);
+                let mut swapped_weights = self.weights.to_vec();
+                swapped_weights.swap(i, j);
+                if let Some(max_mm) = self.fits(&swapped, &swapped_weights) {
+                    return Some(Diagnosis::SwappedNames {
+                        names: [names[i].to_string(), names[j].to_string()],
+                        max_mm,
+                    });
+                }
+            }
+        }
+        None
+    }
+
+    /// One fiducial off: the others fit without it. When several removals fit, the layout
+    /// cannot tell which one moved (with four nearly coplanar fiducials any three fit).
+    fn one_fiducial_off(&self) -> Option<Diagnosis> {
+        let weights = self.weights;
+        if weights.iter().filter(|w| **w > 0.0).count() <= 3 {
+            return None;
+        }
+        let fitting: Vec<(usize, f64)> = (0..self.names.len())
+            .filter(|&k| weights[k] > 0.0)
+            .filter_map(|k| {
+                let mut without = weights.to_vec();
+                without[k] = 0.0;
+                self.fits(self.measured, &without).map(|max| (k, max))
+            })
+            .collect();
+        match fitting.as_slice() {
+            [(k, max_mm)] => Some(Diagnosis::OneFiducialOff {
+                fiducial: self.names[*k].to_string(),
+                max_mm: *max_mm,
+            }),
+            [_, _, ..] => Some(Diagnosis::OneOfSeveralOff {
+                candidates: fitting
+                    .iter()
+                    .map(|(k, _)| self.names[*k].to_string())
+                    .collect(),
+            }),
+            [] => None,
+        }
+    }
+}
+
+/// What the data says about a registration that does not fit: locked parameters the
+/// instrument does not meet, inches, two swapped names, one fiducial off, a scale; otherwise
+/// the typical causes.
 fn diagnose(
     names: &[&str],
     nominal: &[DVec3],
     measured: &[DVec3],
     weights: &[f64],
     options: &RegistrationOptions,
-) -> String {
-    const TYPICAL: &str = "Typical causes: two fiducial names swapped, inches instead of \
-                           millimetres, a fiducial knocked or its nest moved, a reflector not \
-                           seated.";
-    let fits = |measured: &[DVec3], weights: &[f64]| {
-        let nominal: Vec<DVec3> = nominal.to_vec();
-        fit(&nominal, measured, weights, options.locked)
-            .ok()
-            .map(|(_, residuals)| worst(&residuals, weights).1)
-            .filter(|max| *max <= options.tolerance_mm)
+) -> Diagnosis {
+    let fiducials = Fiducials {
+        names,
+        nominal,
+        measured,
+        weights,
+        options,
     };
-    if options.locked != Locked::default()
-        && let Ok((_, residuals)) = fit(nominal, measured, weights, Locked::default())
-        && worst(&residuals, weights).1 <= options.tolerance_mm
-    {
-        return format!(
-            "With nothing locked every fiducial fits within {:.4} mm: the instrument does not \
-             meet the locked parameters ({}); level it again, or register without locking them.",
-            worst(&residuals, weights).1,
-            options.locked.names().join(", ")
-        );
-    }
     let ratio = spread(nominal, weights) / spread(measured, weights);
-    for (factor, what) in [
-        (25.4, "the measured coordinates look like inches"),
-        (1.0 / 25.4, "the nominal coordinates look like inches"),
-    ] {
-        if (ratio / factor - 1.0).abs() < 0.02 {
-            return format!(
-                "{what}: the nominal fiducials are spread {ratio:.3} times as wide as the \
-                 measured ones (25.4 mm to the inch); give both files in millimetres."
-            );
-        }
-    }
-    const MAX_PAIRS_TRIED: usize = 64;
-    if names.len() <= MAX_PAIRS_TRIED {
-        for i in 0..names.len() {
-            for j in i + 1..names.len() {
-                let mut swapped = measured.to_vec();
-                swapped.swap(i, j);
-                let mut swapped_weights = weights.to_vec();
-                swapped_weights.swap(i, j);
-                if let Some(max) = fits(&swapped, &swapped_weights) {
-                    return format!(
-                        "The names {} and {} look swapped in the measured file: exchanged, \
-                         every fiducial fits within {max:.4} mm.",
-                        names[i], names[j]
-                    );
-                }
-            }
-        }
-    }
-    if weights.iter().filter(|w| **w > 0.0).count() > 3 {
-        // One fiducial off: the others fit without it. When several removals fit, the layout
-        // cannot tell which one moved (with four nearly coplanar fiducials any three fit).
-        let fitting: Vec<(usize, f64)> = (0..names.len())
-            .filter(|&k| weights[k] > 0.0)
-            .filter_map(|k| {
-                let mut without = weights.to_vec();
-                without[k] = 0.0;
-                fits(measured, &without).map(|max| (k, max))
-            })
-            .collect();
-        match fitting.as_slice() {
-            [(k, max)] => {
-                return format!(
-                    "Without {} the others fit within {max:.4} mm: it was probably knocked, \
-                     mis-measured or its nominal position is wrong (measure it again, or give it \
-                     weight 0 in the measured file to register without it).",
-                    names[*k]
-                );
-            }
-            [_, _, ..] => {
-                let candidates: Vec<&str> = fitting.iter().map(|(k, _)| names[*k]).collect();
-                return format!(
-                    "Without any one of {} the others fit: these fiducials cannot tell which of \
-                     them moved; measure them again, or add fiducials.",
-                    candidates.join(", ")
-                );
-            }
-            [] => {}
-        }
-    }
-    if (ratio - 1.0).abs() > 0.001 {
-        return format!(
-            "The nominal fiducials are spread {ratio:.4} times as wide as the measured ones: a \
-             scale or unit error? {TYPICAL}"
-        );
-    }
-    TYPICAL.to_string()
+    fiducials
+        .locked_parameters_missed()
+        .or_else(|| fiducials.inches(ratio))
+        .or_else(|| fiducials.swapped_names())
+        .or_else(|| fiducials.one_fiducial_off())
+        .unwrap_or(if (ratio - 1.0).abs() > 0.001 {
+            Diagnosis::Scale { ratio }
+        } else {
+            Diagnosis::Unknown
+        })
 }
 
 /// The weighted RMS distance of `points` from their weighted centroid, mm.
