@@ -31,25 +31,29 @@ struct Cli {
     command: Option<Command>,
 }
 
+// The subcommands in the order a calibration uses them, then the single stages and inspection,
+// then the lab's: `--help` lists them in this order.
 #[derive(Debug, Subcommand)]
 enum Command {
-    Calibrate(commands::calibrate::CalibrateArgs),
+    Geometry(commands::geometry::GeometryArgs),
     Plan(commands::plan::PlanArgs),
-    Simulate(commands::simulate::SimulateArgs),
+    Register(commands::register::RegisterArgs),
     Campaign(commands::campaign::CampaignArgs),
+    Calibrate(commands::calibrate::CalibrateArgs),
+    Deploy(commands::deploy::DeployArgs),
     Verify(commands::verify::VerifyArgs),
     Check(commands::check::CheckArgs),
     Export(commands::export::ExportArgs),
+    // The single stages of `calibrate`, and inspection.
+    Simulate(commands::simulate::SimulateArgs),
     Solve(commands::solve::SolveArgs),
     Identify(commands::identify::IdentifyArgs),
-    Register(commands::register::RegisterArgs),
     Train(commands::train::TrainArgs),
     Inspect(commands::inspect::InspectArgs),
     Predict(commands::predict::PredictArgs),
+    // The lab: the virtual platform.
     Evaluate(commands::evaluate::EvaluateArgs),
-    Deploy(commands::deploy::DeployArgs),
     Survey(commands::survey::SurveyArgs),
-    Geometry(commands::geometry::GeometryArgs),
 }
 
 impl Command {

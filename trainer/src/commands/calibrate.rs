@@ -7,16 +7,19 @@ use anyhow::Context;
 use hexacomp_calibration::distill::DistillOptions;
 use hexacomp_calibration::identify::{IdentifyOptions, identify};
 use hexacomp_calibration::physical_candidate::{
-    CandidateOptions, NetworksUncertainty, physical_candidate,
+    CandidateOptions, NetworksUncertainty, PhysicalCandidate, physical_candidate,
 };
 use hexacomp_calibration::pipeline::{Pipeline, Solved};
-use hexacomp_calibration::pitch_resolution::{chosen_resolution, identifications};
+use hexacomp_calibration::pitch_resolution::{
+    ResolutionChoice, ResolutionScore, chosen_resolution, identifications,
+};
 use hexacomp_calibration::plan::PlanOptions;
+use hexacomp_calibration::residual_noise::ShapeSplit;
 use hexacomp_calibration::train::{
     Architecture, CROSS_VALIDATION_FOLDS, TrainOptions, Trained, can_cross_validate,
     commanded_legs, cross_validated_rmse, training_work,
 };
-use hexacomp_calibration::uncertainty::Repeatability;
+use hexacomp_calibration::uncertainty::{Coverage, Repeatability};
 use hexacomp_core::compensator::compensate_pose;
 use hexacomp_core::records::MeasuredConfiguration;
 use hexacomp_core::sampling::{SamplerOptions, WorkspaceSampler};
@@ -38,6 +41,8 @@ use super::measurements_input::MeasurementsInput;
 use super::{ResultsFolder, write_bytes};
 use hexacomp_report::table::Table;
 
+/// Calibrate in one command: measure, solve, train and identify, evaluate, write the models.
+///
 /// Calibrate in one command: plan → measure (the virtual platform, or --measurements from a real
 /// device) → solve the robust joint corrections → train coupled and decoupled networks with
 /// hidden-node selection, and identify the physical model (geometry, a lead-screw curve per
@@ -63,30 +68,43 @@ pub struct CalibrateArgs {
     #[arg(long, default_value_t = 1)]
     seed: u64,
     /// Seed that draws the virtual machine.
-    #[arg(long, default_value_t = DEFAULT_MACHINE_SEED, conflicts_with = "measurements")]
+    #[arg(help_heading = "Virtual machine", long, default_value_t = DEFAULT_MACHINE_SEED, conflicts_with = "measurements")]
     machine_seed: u64,
     /// Error variant of the virtual machine.
-    #[arg(long, default_value_t = ErrorVariant::Paper, conflicts_with = "measurements")]
+    #[arg(help_heading = "Virtual machine", long, default_value_t = ErrorVariant::Paper, value_parser = super::named::<ErrorVariant>(ErrorVariant::ALL.map(ErrorVariant::name)), conflicts_with = "measurements")]
     error_variant: ErrorVariant,
     /// Fresh poses for the final check on the virtual platform.
-    #[arg(long, default_value_t = 100, conflicts_with = "measurements")]
+    #[arg(
+        help_heading = "Virtual machine",
+        long,
+        default_value_t = 100,
+        conflicts_with = "measurements"
+    )]
     validation: usize,
-    /// Network input of the coupled and decoupled networks (see `train --help`); the physical
-    /// model's networks always take the equivalent legs, where they are trained exactly.
-    #[arg(long, value_enum, default_value_t = InputArg::Equivalent)]
+    /// Network input of the coupled and decoupled networks (see `train --help`).
+    ///
+    /// The physical model's networks always take the equivalent legs, where they are
+    /// trained exactly.
+    #[arg(help_heading = "Advanced", long, value_enum, default_value_t = InputArg::Equivalent)]
     input: InputArg,
-    /// The machine's repeatability, mm: σ (one standard deviation) of one leg's length error at
-    /// every move. It enters each point's position uncertainty, and decides how much of the
-    /// measurements' scatter is the instrument's (the rest the legs', shared by the targets of
-    /// a configuration); one that would give the scatter more than twice the variance it has is
-    /// refused, and the models are written without an uncertainty. Not ISO 9283's RP, which is a
-    /// position figure of the mean plus three standard deviations: a leg's σ is of the order of
-    /// RP / 3 divided by the leg-to-tool gain of the pose. Default: the virtual machine's
-    /// (0.004 mm for the built-in variants with noise); with --measurements 0.004 mm is
-    /// assumed, which calibrate says: where the residuals' shape shows the legs moving by more
-    /// (three targets or more a configuration), that is taken as the machine's instead, and
-    /// where the residuals hold less than its share, no more than all they hold (a repeatability
-    /// given is refused there; beyond one given, the excess is what the model's form misses).
+    /// The machine's repeatability, mm: σ of one leg's length error at every move.
+    ///
+    /// σ is one standard deviation. It enters each point's position uncertainty, and
+    /// decides how much of the measurements' scatter is the instrument's (the rest the
+    /// legs', shared by the targets of a configuration); one that would give the scatter
+    /// more than twice the variance it has is refused, and the models are written without
+    /// an uncertainty.
+    ///
+    /// Not ISO 9283's RP, which is a position figure of the mean plus three standard
+    /// deviations: a leg's σ is of the order of RP / 3 divided by the leg-to-tool gain of
+    /// the pose.
+    ///
+    /// Default: the virtual machine's (0.004 mm for the built-in variants with noise); with
+    /// --measurements 0.004 mm is assumed, which calibrate says: where the residuals' shape
+    /// shows the legs moving by more (three targets or more a configuration), that is taken
+    /// as the machine's instead, and where the residuals hold less than its share, no more
+    /// than all they hold (a repeatability given is refused there; beyond one given, the
+    /// excess is what the model's form misses).
     #[arg(long, value_name = "MM", value_parser = repeatability)]
     repeatability_mm: Option<f64>,
     /// Output folder, replaced as a whole when the calibration succeeds (a failed one leaves it
@@ -129,8 +147,23 @@ fn repeatability(text: &str) -> Result<f64, String> {
 struct Stages(Vec<(&'static str, f64)>);
 
 impl Stages {
+    /// Records that the stage `name` begun at `start` has ended.
     fn record(&mut self, name: &'static str, start: Instant) {
         self.0.push((name, start.elapsed().as_secs_f64()));
+    }
+
+    /// Prints the time in all since `total` and each stage's, seconds.
+    fn print(&self, total: Instant) {
+        let breakdown: Vec<String> = self
+            .0
+            .iter()
+            .map(|(n, s)| format!("{n} {s:.2} s"))
+            .collect();
+        println!(
+            "time: {:.2} s in all ({})",
+            total.elapsed().as_secs_f64(),
+            breakdown.join(", ")
+        );
     }
 }
 
@@ -156,35 +189,9 @@ pub fn run(geometry: &Geometry, args: &CalibrateArgs) -> anyhow::Result<()> {
     let folder = ResultsFolder::create(&args.out_dir, "calibrate", &CALIBRATION_FILES)?;
     let dir = folder.path();
     let error_model = ErrorModel::variant(args.error_variant);
-    let repeatability = match (args.repeatability_mm, &args.measurements) {
-        (Some(given), _) => Repeatability::Known(given),
-        (None, None) => Repeatability::Known(error_model.repeatability_sigma_mm),
-        (None, Some(_)) => {
-            let assumed = ErrorModel::default().repeatability_sigma_mm;
-            println!(
-                "uncertainty: the machine's repeatability is taken as {assumed} mm per leg and \
-                 move (the virtual platform's), or as what the residuals' shape shows where it \
-                 shows more; give --repeatability-mm for this machine's"
-            );
-            Repeatability::Assumed(assumed)
-        }
-    };
+    let repeatability = machine_repeatability(args, &error_model);
     let mut platform = VirtualPlatform::new(geometry, &error_model, args.machine_seed, args.seed)?;
-    let pipeline = Pipeline {
-        plan: PlanOptions {
-            count: args.count,
-            seed: args.seed,
-            ..Default::default()
-        },
-        train: TrainOptions {
-            input: args.input.into(),
-            seed: args.seed,
-            ..Default::default()
-        },
-        checks: args.screening.checks(),
-        screening: args.screening.options(),
-        ..Default::default()
-    };
+    let pipeline = pipeline(args);
 
     let start = Instant::now();
     let measurements = acquire(args, &pipeline, &mut platform, dir)?;
@@ -211,59 +218,23 @@ pub fn run(geometry: &Geometry, args: &CalibrateArgs) -> anyhow::Result<()> {
         dir,
         &mut stages,
     )?;
-    // σ of each leg's length at a fresh move the uncertainty takes (mm), and whether it holds
-    // more than the repeatability.
-    let mut fresh_move = None;
-    if cross_validated(&solved) {
+    let fresh_move = if cross_validated(&solved) {
         let start = Instant::now();
-        // A physical model that cannot be identified or carried into networks leaves the
-        // choice to the networks, and says why.
-        match physical(geometry, &pipeline, &solved, &measurements, repeatability) {
-            Ok((candidate, Ok(uncertainty))) => {
-                let source = &uncertainty.source;
-                fresh_move = Some((
-                    source.leg_variance_mm2().sqrt(),
-                    source.beyond_repeatability().at_fresh_moves,
-                ));
-                for network in &mut candidates {
-                    match uncertainty.of_networks(network.score_mm) {
-                        Ok(u) => network.trained.model.uncertainty = Some(u),
-                        Err(e) => {
-                            println!("the {} networks carry no uncertainty: {e}", network.name)
-                        }
-                    }
-                }
-                candidates.push(candidate);
-            }
-            Ok((candidate, Err(e))) => {
-                println!("no model carries an uncertainty: {e}");
-                candidates.push(candidate);
-            }
-            Err(e) => println!(
-                "physical model left out: {e:#}; without it the models carry no uncertainty"
-            ),
-        }
-        stages.record("physical model", start);
-    } else {
-        println!(
-            "physical model left out: {} configurations are too few to cross-validate it on \
-             {CROSS_VALIDATION_FOLDS} folds (two per fold to hold out besides those holding a \
-             leg's shortest or longest length, never held out); the networks are compared by \
-             their holdout validation RMSE",
-            solved.corrections.len()
+        let fresh_move = add_physical(
+            geometry,
+            &pipeline,
+            &solved,
+            &measurements,
+            repeatability,
+            &mut candidates,
         );
-    }
-    for candidate in &candidates {
-        candidate
-            .trained
-            .model
-            .save(&dir.join(format!("model-{}.hxm", candidate.name)))?;
-    }
-    let best = candidates
-        .iter()
-        .min_by(|a, b| a.score_mm.total_cmp(&b.score_mm))
-        .expect("the networks are candidates");
-    best.trained.model.save(&dir.join("model.hxm"))?;
+        stages.record("physical model", start);
+        fresh_move
+    } else {
+        say_too_few_for_physical(&solved);
+        None
+    };
+    let best = save_models(&candidates, dir)?;
 
     let check = if args.measurements.is_none() {
         let start = Instant::now();
@@ -274,17 +245,145 @@ pub fn run(geometry: &Geometry, args: &CalibrateArgs) -> anyhow::Result<()> {
     } else {
         None
     };
-
+    print_summary(args, measurements.len(), &candidates, check);
+    folder.commit()?;
     println!(
-        "\nCalibration summary ({} configurations, {})",
-        measurements.len(),
+        "model.hxm = the {} model (lowest error on configurations it was not fitted on); files \
+         in {}",
+        best.name,
+        args.out_dir.display()
+    );
+    if let Some(u) = &best.trained.model.uncertainty {
+        print_uncertainty(u, repeatability, fresh_move);
+    }
+    stages.print(total);
+    Ok(())
+}
+
+/// The machine's repeatability (σ of a leg's length at every move, mm): --repeatability-mm,
+/// the virtual machine's, or with --measurements an assumed one (which is said).
+fn machine_repeatability(args: &CalibrateArgs, error_model: &ErrorModel) -> Repeatability {
+    match (args.repeatability_mm, &args.measurements) {
+        (Some(given), _) => Repeatability::Known(given),
+        (None, None) => Repeatability::Known(error_model.repeatability_sigma_mm),
+        (None, Some(_)) => {
+            let assumed = ErrorModel::default().repeatability_sigma_mm;
+            println!(
+                "uncertainty: the machine's repeatability is taken as {assumed} mm per leg and \
+                 move (the virtual platform's), or as what the residuals' shape shows where it \
+                 shows more; give --repeatability-mm for this machine's"
+            );
+            Repeatability::Assumed(assumed)
+        }
+    }
+}
+
+/// The pipeline's settings from the options: the plan, the training and the screening.
+fn pipeline(args: &CalibrateArgs) -> Pipeline {
+    Pipeline {
+        plan: PlanOptions {
+            count: args.count,
+            seed: args.seed,
+            ..Default::default()
+        },
+        train: TrainOptions {
+            input: args.input.into(),
+            seed: args.seed,
+            ..Default::default()
+        },
+        checks: args.screening.checks(),
+        screening: args.screening.options(),
+        ..Default::default()
+    }
+}
+
+/// Adds the physical model to the `candidates` and gives the networks its uncertainty; a
+/// physical model that cannot be identified or carried into networks leaves the choice to the
+/// networks, and says why. Returns σ of each leg's length at a fresh move the uncertainty takes
+/// (mm), and whether it holds more than the repeatability.
+fn add_physical(
+    geometry: &Geometry,
+    pipeline: &Pipeline,
+    solved: &Solved,
+    measurements: &[MeasuredConfiguration],
+    repeatability: Repeatability,
+    candidates: &mut Vec<Candidate>,
+) -> Option<(f64, bool)> {
+    match physical(geometry, pipeline, solved, measurements, repeatability) {
+        Ok((candidate, Ok(uncertainty))) => {
+            let source = &uncertainty.source;
+            let fresh_move = (
+                source.leg_variance_mm2().sqrt(),
+                source.beyond_repeatability().at_fresh_moves,
+            );
+            for network in candidates.iter_mut() {
+                match uncertainty.of_networks(network.score_mm) {
+                    Ok(u) => network.trained.model.uncertainty = Some(u),
+                    Err(e) => {
+                        println!("the {} networks carry no uncertainty: {e}", network.name)
+                    }
+                }
+            }
+            candidates.push(candidate);
+            Some(fresh_move)
+        }
+        Ok((candidate, Err(e))) => {
+            println!("no model carries an uncertainty: {e}");
+            candidates.push(candidate);
+            None
+        }
+        Err(e) => {
+            println!("physical model left out: {e:#}; without it the models carry no uncertainty");
+            None
+        }
+    }
+}
+
+/// Says that the physical model is left out: too few configurations to cross-validate it.
+fn say_too_few_for_physical(solved: &Solved) {
+    println!(
+        "physical model left out: {} configurations are too few to cross-validate it on \
+         {CROSS_VALIDATION_FOLDS} folds (two per fold to hold out besides those holding a leg's \
+         shortest or longest length, never held out); the networks are compared by their \
+         holdout validation RMSE",
+        solved.corrections.len()
+    );
+}
+
+/// Saves every candidate as model-NAME.hxm and the best (lowest score) as model.hxm into
+/// `dir`; returns the best.
+fn save_models<'a>(candidates: &'a [Candidate], dir: &Path) -> anyhow::Result<&'a Candidate> {
+    for candidate in candidates {
+        candidate
+            .trained
+            .model
+            .save(&dir.join(format!("model-{}.hxm", candidate.name)))?;
+    }
+    let best = candidates
+        .iter()
+        .min_by(|a, b| a.score_mm.total_cmp(&b.score_mm))
+        .expect("the networks are candidates");
+    best.trained.model.save(&dir.join("model.hxm"))?;
+    Ok(best)
+}
+
+/// Prints the calibration's summary (a line per candidate) and the check on fresh poses, if
+/// made.
+fn print_summary(
+    args: &CalibrateArgs,
+    configurations: usize,
+    candidates: &[Candidate],
+    check: Option<Table<8>>,
+) {
+    println!(
+        "\nCalibration summary ({configurations} configurations, {})",
         if args.measurements.is_some() {
             "measured"
         } else {
             "virtual platform"
         }
     );
-    for candidate in &candidates {
+    for candidate in candidates {
         println!("  {:<9} {}", candidate.name, candidate.summary);
     }
     if let Some(table) = check {
@@ -295,50 +394,40 @@ pub fn run(geometry: &Geometry, args: &CalibrateArgs) -> anyhow::Result<()> {
             args.validation.max(1)
         );
     }
-    folder.commit()?;
+}
+
+/// Prints the best model's 1-σ position uncertainty (mm RMS over the measured configurations)
+/// and the legs' repeatability it takes: `fresh_move`, σ of a leg at a fresh move (mm) and
+/// whether it holds more than the repeatability, when the physical model gave it.
+fn print_uncertainty(
+    u: &hexacomp_core::uncertainty::PositionUncertainty,
+    repeatability: Repeatability,
+    fresh_move: Option<(f64, bool)>,
+) {
+    let mm = repeatability.sigma_mm();
+    let assumed = matches!(repeatability, Repeatability::Assumed(_));
+    let legs = match fresh_move {
+        Some((fresh_mm, beyond)) => format!(
+            "legs moving by {:.1} µm at a fresh move: the repeatability {}{}",
+            1e3 * fresh_mm,
+            if assumed {
+                format!("assumed, {mm} mm,")
+            } else {
+                format!("of {mm} mm")
+            },
+            match (beyond, assumed) {
+                (true, _) => " and what the residuals show beyond it",
+                (false, true) => " no more than all the residuals hold",
+                (false, false) => "",
+            }
+        ),
+        None => format!("legs repeating within {mm} mm"),
+    };
     println!(
-        "model.hxm = the {} model (lowest error on configurations it was not fitted on); files \
-         in {}",
-        best.name,
-        args.out_dir.display()
+        "its 1-σ position uncertainty: {:.4} mm RMS over the measured configurations, growing \
+         outside them ({legs}; `predict` and the service give it per point)",
+        (u.constant_variance_mm2 + u.leverage_variance_mm2).sqrt()
     );
-    if let Some(u) = &best.trained.model.uncertainty {
-        let mm = repeatability.sigma_mm();
-        let assumed = matches!(repeatability, Repeatability::Assumed(_));
-        let legs = match fresh_move {
-            Some((fresh_mm, beyond)) => format!(
-                "legs moving by {:.1} µm at a fresh move: the repeatability {}{}",
-                1e3 * fresh_mm,
-                if assumed {
-                    format!("assumed, {mm} mm,")
-                } else {
-                    format!("of {mm} mm")
-                },
-                match (beyond, assumed) {
-                    (true, _) => " and what the residuals show beyond it",
-                    (false, true) => " no more than all the residuals hold",
-                    (false, false) => "",
-                }
-            ),
-            None => format!("legs repeating within {mm} mm"),
-        };
-        println!(
-            "its 1-σ position uncertainty: {:.4} mm RMS over the measured configurations, \
-             growing outside them ({legs}; `predict` and the service give it per point)",
-            (u.constant_variance_mm2 + u.leverage_variance_mm2).sqrt()
-        );
-    }
-    let breakdown: Vec<String> = stages
-        .0
-        .iter()
-        .map(|(n, s)| format!("{n} {s:.2} s"))
-        .collect();
-    println!(
-        "time: {:.2} s in all ({})",
-        total.elapsed().as_secs_f64(),
-        breakdown.join(", ")
-    );
-    Ok(())
 }
 
 /// The measurements: read from --measurements (and copied byte for byte into `dir`, as is the
@@ -505,20 +594,7 @@ fn physical(
     };
     let kept = solved.kept_of(measurements);
     let choosing = Instant::now();
-    let bar = work_bar(
-        identifications(CROSS_VALIDATION_FOLDS),
-        "choosing the physical model's lead-screw resolution (each without each fold)".into(),
-    );
-    let resolution = chosen_resolution(
-        geometry,
-        &kept,
-        &solved.corrections,
-        pipeline.train.seed,
-        CROSS_VALIDATION_FOLDS,
-        &|n| bar.inc(n),
-    );
-    bar.finish_and_clear();
-    let resolution = resolution?;
+    let resolution = choose_resolution(geometry, pipeline, solved, &kept)?;
     let choosing = choosing.elapsed().as_secs_f64();
     // The drawn poses and the measured configurations' own.
     let poses = options.distill.samples + solved.corrections.len();
@@ -539,16 +615,87 @@ fn physical(
         poses,
         candidate.score_mm
     );
+    print_resolution(&candidate);
+    if let Ok(uncertainty) = &candidate.networks_uncertainty
+        && let Some(split) = uncertainty.source.shape_split()
+    {
+        print_residual_split(uncertainty, split, repeatability);
+    }
+    let f = candidate.fidelity;
+    // The departure's RMS enters the score; its largest value is where the networks follow the
+    // model least, at the edge of the measured range.
+    println!(
+        "physical model: {:.4} mm cross-validated (each configuration predicted by the model \
+         identified without its fold); its networks (hidden nodes {:?}) command it within \
+         {:.4} mm RMS, {:.4} mm at most, on {} fresh poses",
+        candidate.cross_validated_rmse_mm,
+        candidate.distilled.model.hidden_nodes(),
+        f.rms_mm,
+        f.max_mm,
+        f.poses
+    );
+    let candidate_of_physical = Candidate {
+        name: "physical",
+        label: "physical model (as networks)",
+        summary: format!(
+            "hidden nodes {:?}, cross-validated {:.4} mm with the networks' departure from the \
+             model ({:.4} mm RMS per leg) added; identified, cross-validated and carried into \
+             networks in {:.2} s; {}",
+            candidate.distilled.model.hidden_nodes(),
+            candidate.score_mm,
+            f.rms_mm,
+            choosing + candidate.seconds,
+            candidate.distilled.stops
+        ),
+        score_mm: candidate.score_mm,
+        trained: candidate.distilled,
+    };
+    Ok((candidate_of_physical, candidate.networks_uncertainty))
+}
+
+/// Chooses the physical model's lead-screw resolution and smoothness prior on the kept
+/// configurations `kept` by cross-validation (each identified without each fold), with a
+/// progress bar.
+fn choose_resolution(
+    geometry: &Geometry,
+    pipeline: &Pipeline,
+    solved: &Solved,
+    kept: &[MeasuredConfiguration],
+) -> hexacomp_calibration::Result<ResolutionChoice> {
+    let bar = work_bar(
+        identifications(CROSS_VALIDATION_FOLDS),
+        "choosing the physical model's lead-screw resolution (each without each fold)".into(),
+    );
+    let resolution = chosen_resolution(
+        geometry,
+        kept,
+        &solved.corrections,
+        pipeline.train.seed,
+        CROSS_VALIDATION_FOLDS,
+        &|n| bar.inc(n),
+    );
+    bar.finish_and_clear();
+    resolution
+}
+
+/// A resolution's score as `calibrate` prints it: its label (the coefficients per leg, or the
+/// prior's weight), its cross-validated error ± standard error, mm.
+fn score_text(label: impl std::fmt::Display, score: &ResolutionScore) -> String {
+    format!(
+        "{label}: {:.4} ± {:.4} mm",
+        score.cross_validated_rmse_mm, score.standard_error_mm
+    )
+}
+
+/// Prints the physical model's resolution chosen (coefficients per leg and smoothness prior),
+/// every one tried with its cross-validated error, those left out, and what its uncertainty
+/// holds of the choice.
+fn print_resolution(candidate: &PhysicalCandidate) {
     let resolution = &candidate.resolution;
     let tried: Vec<String> = resolution
         .scores
         .iter()
-        .map(|s| {
-            format!(
-                "{}: {:.4} ± {:.4} mm",
-                s.pitch_basis, s.cross_validated_rmse_mm, s.standard_error_mm
-            )
-        })
+        .map(|s| score_text(s.pitch_basis, s))
         .collect();
     println!(
         "physical model: lead-screw curves of {} B-spline coefficients per leg, the fewest \
@@ -561,12 +708,7 @@ fn physical(
     }
     let smoothed: Vec<String> = std::iter::once(resolution.chosen_without_prior())
         .chain(&resolution.smoothed)
-        .map(|s| {
-            format!(
-                "{}: {:.4} ± {:.4} mm",
-                s.smoothness, s.cross_validated_rmse_mm, s.standard_error_mm
-            )
-        })
+        .map(|s| score_text(s.smoothness, s))
         .collect();
     println!(
         "physical model: the curves' smoothness prior of weight {}, the lowest cross-validated \
@@ -595,86 +737,67 @@ fn physical(
              same resolution identified without the prior beyond the two fits' noise"
         );
     }
+}
 
-    if let Ok(uncertainty) = &candidate.networks_uncertainty
-        && let Some(split) = uncertainty.source.shape_split()
-    {
-        let repeatability_mm = repeatability.sigma_mm();
-        // A variance the split finds negative is printed as it is, not as its root.
-        let deviation = |variance: f64| {
-            if variance >= 0.0 {
-                format!("{:.1} µm", 1e3 * variance.sqrt())
-            } else {
-                "nothing".to_string()
-            }
-        };
-        let legs = uncertainty.source.leg_variance_mm2();
-        let beyond = uncertainty.source.beyond_repeatability();
-        let why = match (beyond.at_fresh_moves, repeatability) {
-            (false, Repeatability::Known(_)) => {
-                format!("the repeatability of {repeatability_mm} mm")
-            }
-            (false, Repeatability::Assumed(_)) => format!(
-                "the repeatability assumed, {repeatability_mm} mm, no more than all the \
-                 residuals hold"
-            ),
-            (true, Repeatability::Known(_)) => format!(
-                "the repeatability of {repeatability_mm} mm and what the model's form misses \
-                 beyond it, over the resolutions kept"
-            ),
-            (true, Repeatability::Assumed(_)) => format!(
-                "more than the repeatability assumed, {repeatability_mm} mm: the machine's own \
-                 repeatability or what the model's form misses, over the resolutions kept"
-            ),
-        };
-        let why = if beyond.moving_parameters {
-            format!("{why}; the model's excess moves its identified parameters too")
+/// Prints how the physical model's residuals split between the instrument's noise and the
+/// platform's moves (µm, µm²), and the σ per leg at a fresh move every point's uncertainty
+/// takes, with why.
+fn print_residual_split(
+    uncertainty: &NetworksUncertainty,
+    split: ShapeSplit,
+    repeatability: Repeatability,
+) {
+    // A variance the split finds negative is printed as it is, not as its root.
+    let deviation = |variance: f64| {
+        if variance >= 0.0 {
+            format!("{:.1} µm", 1e3 * variance.sqrt())
         } else {
-            why
-        };
-        println!(
-            "physical model: its residuals hold {} per coordinate of the instrument's noise (a \
-             variance of {:.1} µm²), and move the platform by {} per leg and configuration (a \
-             variance of {:.1} ± {:.1} µm²); every point's uncertainty takes {:.1} µm per leg at \
-             a fresh move ({why})",
-            deviation(split.instrument_variance_mm2),
-            1e6 * split.instrument_variance_mm2,
-            deviation(split.platform_variance_mm2),
-            1e6 * split.platform_variance_mm2,
-            1e6 * split.platform_error_mm2,
-            1e3 * legs.sqrt(),
-        );
-    }
-    let f = candidate.fidelity;
-    // The departure's RMS enters the score; its largest value is where the networks follow the
-    // model least, at the edge of the measured range.
-    println!(
-        "physical model: {:.4} mm cross-validated (each configuration predicted by the model \
-         identified without its fold); its networks (hidden nodes {:?}) command it within \
-         {:.4} mm RMS, {:.4} mm at most, on {} fresh poses",
-        candidate.cross_validated_rmse_mm,
-        model.hidden_nodes(),
-        f.rms_mm,
-        f.max_mm,
-        f.poses
-    );
-    let candidate_of_physical = Candidate {
-        name: "physical",
-        label: "physical model (as networks)",
-        summary: format!(
-            "hidden nodes {:?}, cross-validated {:.4} mm with the networks' departure from the \
-             model ({:.4} mm RMS per leg) added; identified, cross-validated and carried into \
-             networks in {:.2} s; {}",
-            model.hidden_nodes(),
-            candidate.score_mm,
-            f.rms_mm,
-            choosing + candidate.seconds,
-            candidate.distilled.stops
-        ),
-        score_mm: candidate.score_mm,
-        trained: candidate.distilled,
+            "nothing".to_string()
+        }
     };
-    Ok((candidate_of_physical, candidate.networks_uncertainty))
+    let legs = uncertainty.source.leg_variance_mm2();
+    println!(
+        "physical model: its residuals hold {} per coordinate of the instrument's noise (a \
+         variance of {:.1} µm²), and move the platform by {} per leg and configuration (a \
+         variance of {:.1} ± {:.1} µm²); every point's uncertainty takes {:.1} µm per leg at \
+         a fresh move ({})",
+        deviation(split.instrument_variance_mm2),
+        1e6 * split.instrument_variance_mm2,
+        deviation(split.platform_variance_mm2),
+        1e6 * split.platform_variance_mm2,
+        1e6 * split.platform_error_mm2,
+        1e3 * legs.sqrt(),
+        fresh_move_source(uncertainty, repeatability),
+    );
+}
+
+/// What the σ per leg at a fresh move stands for: the repeatability, and what the model's form
+/// misses beyond it.
+fn fresh_move_source(uncertainty: &NetworksUncertainty, repeatability: Repeatability) -> String {
+    let repeatability_mm = repeatability.sigma_mm();
+    let beyond = uncertainty.source.beyond_repeatability();
+    let why = match (beyond.at_fresh_moves, repeatability) {
+        (false, Repeatability::Known(_)) => {
+            format!("the repeatability of {repeatability_mm} mm")
+        }
+        (false, Repeatability::Assumed(_)) => format!(
+            "the repeatability assumed, {repeatability_mm} mm, no more than all the residuals \
+             hold"
+        ),
+        (true, Repeatability::Known(_)) => format!(
+            "the repeatability of {repeatability_mm} mm and what the model's form misses beyond \
+             it, over the resolutions kept"
+        ),
+        (true, Repeatability::Assumed(_)) => format!(
+            "more than the repeatability assumed, {repeatability_mm} mm: the machine's own \
+             repeatability or what the model's form misses, over the resolutions kept"
+        ),
+    };
+    if beyond.moving_parameters {
+        format!("{why}; the model's excess moves its identified parameters too")
+    } else {
+        why
+    }
 }
 
 /// On fresh poses of the virtual machine: the pose errors uncompensated, with the identified
@@ -747,6 +870,15 @@ fn check_on_fresh_poses(
         "floor (exact legs, with the machine's repeatability)".to_string(),
         stats(&|p| truth.exact_command(p))?,
     ));
+    Ok(fresh_pose_table(rows))
+}
+
+/// One method's errors on the fresh poses: reached, measured, and how its uncertainty covers
+/// the errors reached (for a model that states one).
+type FreshPoseErrors = (PoseErrorStats, PoseErrorStats, Option<Coverage>);
+
+/// The table of the check on fresh poses: a row per method (mm, degrees).
+fn fresh_pose_table(rows: Vec<(String, FreshPoseErrors)>) -> Table<8> {
     let mut table = Table::new([
         "method",
         "reached mean ‖δ_A‖ (mm)",
@@ -771,5 +903,5 @@ fn check_on_fresh_poses(
             }),
         ]);
     }
-    Ok(table)
+    table
 }

@@ -2,11 +2,11 @@
 //! the calibration, measured once more with the compensation active, compared with what it
 //! proved.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use hexacomp_core::Geometry;
-use hexacomp_iso9283::check::{CheckResult, Verdict, promised, verified_poses};
+use hexacomp_iso9283::check::{Allowed, CheckResult, Verdict, promised, verified_poses};
 use hexacomp_iso9283::pose_test::approach_pose;
 use hexacomp_iso9283::verify::{PoseTest, TestRun};
 use hexacomp_iso9283::verify_report::{VerifyReport, raw_csv};
@@ -22,22 +22,22 @@ use hexacomp_iso9283::verify_report::{VerifyReport, raw_csv};
 /// figures, or "inconclusive" when a pose could not be measured (exit status 1).
 #[derive(Debug, clap::Args)]
 pub struct CheckArgs {
-    #[command(flatten)]
-    rig: super::rig::RigArgs,
     /// The JSON report of `verify` after the calibration: what it was proven to.
     #[arg(long, value_name = "FILE")]
     promise: PathBuf,
-    /// The error allowed, as a multiple of the promise.
-    #[arg(long, default_value_t = 1.0)]
-    tolerance: f64,
     /// With the virtual machine: the model its controller applies.
     #[arg(long, value_name = "FILE")]
     model: Option<PathBuf>,
     /// The registration that brings the instrument's measurements into the base frame.
     #[arg(long, value_name = "FILE")]
     registration: Option<PathBuf>,
+    /// The error allowed, as a multiple of the promise.
+    #[arg(long, default_value_t = 1.0)]
+    tolerance: f64,
+    #[command(flatten)]
+    rig: super::rig::RigArgs,
     /// Write the attained poses here (CSV `cycle,pose,x,y,z,a,b,c`, mm, degrees, base frame).
-    #[arg(long, value_name = "FILE")]
+    #[arg(help_heading = "Output", long, value_name = "FILE")]
     out: Option<PathBuf>,
 }
 
@@ -61,17 +61,7 @@ pub fn run(geometry: &Geometry, args: &CheckArgs) -> anyhow::Result<()> {
         "--tolerance {}: a factor > 0 is needed",
         args.tolerance
     );
-    let text = std::fs::read_to_string(&args.promise)
-        .with_context(|| format!("reading {}", args.promise.display()))?;
-    let promise = VerifyReport::from_json(&text, &args.promise.display().to_string())?;
-    anyhow::ensure!(
-        promise.conditions.geometry == geometry.fingerprint().to_string(),
-        "{}: it verified another geometry ({}; this one is {}): give the report of this \
-         machine's calibration",
-        args.promise.display(),
-        promise.conditions.geometry,
-        geometry.fingerprint()
-    );
+    let promise = read_promise(&args.promise, geometry)?;
     let (compensation, instrument_frame) = args.rig.compensation_and_frame(
         geometry,
         args.model.as_deref(),
@@ -106,6 +96,40 @@ pub fn run(geometry: &Geometry, args: &CheckArgs) -> anyhow::Result<()> {
     }
     let allowed = promised(&promise, args.tolerance);
     let result = CheckResult::new(&poses, &run.attained, &run.missed, allowed);
+    let figures = format!(
+        "{}; promised by {} (worst AP_P {:.4} + worst RP_l {:.4} mm{})",
+        errors_found(&result, &allowed),
+        args.promise.display(),
+        promise.worst_ap_p_mm(),
+        promise.worst_rp_l_mm(),
+        if args.tolerance == 1.0 {
+            String::new()
+        } else {
+            format!(", × {}", args.tolerance)
+        }
+    );
+    print_verdict(&result, &figures)
+}
+
+/// The JSON report of `verify` at `path`, refused when it verified another geometry.
+fn read_promise(path: &Path, geometry: &Geometry) -> anyhow::Result<VerifyReport> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let promise = VerifyReport::from_json(&text, &path.display().to_string())?;
+    anyhow::ensure!(
+        promise.conditions.geometry == geometry.fingerprint().to_string(),
+        "{}: it verified another geometry ({}; this one is {}): give the report of this \
+         machine's calibration",
+        path.display(),
+        promise.conditions.geometry,
+        geometry.fingerprint()
+    );
+    Ok(promise)
+}
+
+/// The largest position error found (mm, with the mean over the poses) against the `allowed`,
+/// and the largest angle error as a share of its allowed.
+fn errors_found(result: &CheckResult, allowed: &Allowed) -> String {
     let position = result
         .worst_position()
         .map_or("no pose measured".to_string(), |(pose, e)| {
@@ -125,17 +149,12 @@ pub fn run(geometry: &Geometry, args: &CheckArgs) -> anyhow::Result<()> {
                 100.0 * share
             )
         });
-    let figures = format!(
-        "{position}{angle}; promised by {} (worst AP_P {:.4} + worst RP_l {:.4} mm{})",
-        args.promise.display(),
-        promise.worst_ap_p_mm(),
-        promise.worst_rp_l_mm(),
-        if args.tolerance == 1.0 {
-            String::new()
-        } else {
-            format!(", × {}", args.tolerance)
-        }
-    );
+    format!("{position}{angle}")
+}
+
+/// Prints the verdict with its `figures`: "still good" (Ok), or "retrain" or "inconclusive"
+/// (an error saying what to do).
+fn print_verdict(result: &CheckResult, figures: &str) -> anyhow::Result<()> {
     match result.verdict() {
         Verdict::StillGood => {
             println!("still good: {figures}");

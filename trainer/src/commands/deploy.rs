@@ -6,10 +6,12 @@ use std::time::Duration;
 use anyhow::Context;
 use hexacomp_client::{Client, ClientOptions, DEFAULT_INSTANCE, DeployOutcome};
 
-/// Hand a model file to the running hexacomp-service of an instance. The service validates it
-/// off its serving thread (format, checksum, geometry fingerprint, finite weights, corrections
-/// within bounds over the training range), persists it and switches to it between two requests;
-/// a refused model leaves the old one serving. Prints "accepted as generation N" or the reason.
+/// Hand a model file to the running hexacomp-service of an instance.
+///
+/// The service validates it off its serving thread (format, checksum, geometry fingerprint,
+/// finite weights, corrections within bounds over the training range), persists it and switches
+/// to it between two requests; a refused model leaves the old one serving. Prints "accepted as
+/// generation N" or the reason.
 #[derive(Debug, clap::Args)]
 pub struct DeployArgs {
     /// The model file.

@@ -18,39 +18,59 @@ use super::{optional_cell, registration_cells};
 /// How the campaign watches for drift.
 #[derive(Debug, clap::Args)]
 pub struct DriftArgs {
-    /// The campaign's drift log: every measurement of the reference configuration (the
-    /// geometry's home pose) and what was decided (default: --out with `.drift.csv` in place of
-    /// its extension). Not read by solve.
-    #[arg(long, value_name = "FILE")]
+    /// The campaign's drift log (default: --out with `.drift.csv` in place of its
+    /// extension).
+    ///
+    /// Every measurement of the reference configuration (the geometry's home pose) and what
+    /// was decided. Not read by solve.
+    #[arg(help_heading = "Drift watch", long, value_name = "FILE")]
     drift_log: Option<PathBuf>,
-    /// Measure no reference configuration and keep no drift log (an instrument that can only
-    /// measure the plan's configurations, such as a replayed export).
-    #[arg(
+    /// Measure no reference configuration and keep no drift log.
+    ///
+    /// For an instrument that can only measure the plan's configurations, such as a
+    /// replayed export.
+    #[arg(help_heading = "Drift watch", 
         long,
         conflicts_with_all = ["registration", "drift_log", "accept_drift", "warm_up_limit"]
     )]
     pub no_reference: bool,
-    /// Configurations between two measurements of the reference, besides those at the start and
-    /// the end of every run (0: only those).
-    #[arg(long, default_value_t = 20)]
+    /// Configurations between two measurements of the reference (0: only at the start and
+    /// the end).
+    ///
+    /// Besides those at the start and the end of every run.
+    #[arg(help_heading = "Drift watch", long, default_value_t = 20)]
     reference_every: usize,
     /// Largest movement of a target of the reference from its baseline, mm, before the campaign
     /// stops and says what moved.
-    #[arg(long, default_value_t = 0.05, value_name = "MM")]
+    #[arg(
+        help_heading = "Drift watch",
+        long,
+        default_value_t = 0.05,
+        value_name = "MM"
+    )]
     drift_limit: f64,
     /// Accept the drift found at this run's start: the reference as measured now becomes the
     /// baseline (logged as `accepted`).
-    #[arg(long)]
+    #[arg(help_heading = "Drift watch", long)]
     accept_drift: bool,
-    /// The warm-up gate: before the first configuration of a run, measure the reference every
-    /// --warm-up-interval seconds until two measurements in a row agree within this many mm.
-    #[arg(long, value_name = "MM")]
+    /// The warm-up gate, mm: wait until two measurements of the reference agree within
+    /// this.
+    ///
+    /// Before the first configuration of a run, the reference is measured every
+    /// --warm-up-interval seconds until two measurements in a row agree within this many
+    /// mm.
+    #[arg(help_heading = "Drift watch", long, value_name = "MM")]
     warm_up_limit: Option<f64>,
     /// Seconds between two measurements of the warm-up gate.
-    #[arg(long, default_value_t = 60.0, value_name = "SECONDS")]
+    #[arg(
+        help_heading = "Drift watch",
+        long,
+        default_value_t = 60.0,
+        value_name = "SECONDS"
+    )]
     warm_up_interval: f64,
     /// Measurements of the warm-up gate before the campaign gives up.
-    #[arg(long, default_value_t = 120)]
+    #[arg(help_heading = "Drift watch", long, default_value_t = 120)]
     warm_up_max: usize,
 }
 
@@ -171,6 +191,139 @@ fn record_frame(
 /// The decisions after which the reference was within the limit of its baseline (or became it).
 const GOOD: [&str; 3] = ["baseline", "ok", "accepted"];
 
+/// What a drift log says of the runs before this one.
+struct History<'a> {
+    /// The log's entries, in the order measured.
+    entries: &'a Records<DriftEntry>,
+    /// Whether the campaign stopped on drift after the last good measurement of the reference
+    /// (even if a later run died in its warm-up).
+    stopped: bool,
+    /// The ids of the configurations recorded since the last good measurement of the reference.
+    suspects: Vec<String>,
+}
+
+impl<'a> History<'a> {
+    /// The history in `entries` of the log at `path` of the record `out` (holding the ids
+    /// `recorded`); refused as [`DriftLog::open`] says.
+    fn of(
+        entries: &'a Records<DriftEntry>,
+        args: &DriftArgs,
+        path: &Path,
+        out: &Path,
+        recorded: &[String],
+    ) -> anyhow::Result<Self> {
+        let last_good = entries
+            .iter()
+            .rev()
+            .find(|e| GOOD.contains(&e.decision.as_str()));
+        let checked_references = entries.iter().any(|e| e.event != "warm-up");
+        anyhow::ensure!(
+            last_good.is_some() || !checked_references,
+            "{}: it measured the reference but holds no baseline (decision baseline or \
+             accepted): it was edited; restore it, or start a new record",
+            path.display()
+        );
+        let good_count = last_good.map_or(0, |e| e.configurations);
+        anyhow::ensure!(
+            recorded.is_empty() || last_good.is_some(),
+            "{}: the record {} holds {} configurations but its drift log has no measurement of \
+             the reference: the frame and the baseline they were measured under are lost \
+             (restore the log, or start a new record)",
+            path.display(),
+            out.display(),
+            recorded.len()
+        );
+        let suspects: Vec<String> = recorded.get(good_count..).unwrap_or_default().to_vec();
+        let stopped = entries
+            .iter()
+            .rev()
+            .take_while(|e| !GOOD.contains(&e.decision.as_str()))
+            .any(|e| e.decision == "stopped");
+        if stopped && !suspects.is_empty() && !args.accept_drift {
+            anyhow::bail!(
+                "{}: the campaign stopped on drift; the configurations recorded since the last \
+                 good measurement of the reference ({}) may hold it: delete their lines from {} \
+                 to measure them again, or run with --accept-drift to keep them",
+                path.display(),
+                suspects.join(", "),
+                out.display()
+            );
+        }
+        Ok(History {
+            entries,
+            stopped,
+            suspects,
+        })
+    }
+
+    /// Whether configurations measured under the drift that stopped the campaign are kept
+    /// (--accept-drift): then the reference is measured again at this run's start.
+    fn kept_under_drift(&self) -> bool {
+        self.stopped && !self.suspects.is_empty()
+    }
+
+    /// Whether every row of the record (and of this run, brought in by `frame`) is in one frame,
+    /// the instrument's as it stood all along ([`DriftLog::one_frame`]).
+    fn one_frame(&self, frame: &[Pose], args: &DriftArgs, recorded: &[String]) -> bool {
+        let entries = self.entries;
+        frame.is_empty()
+            && entries
+                .iter()
+                .all(|e| e.instrument_pose == entries[0].instrument_pose)
+            && !entries
+                .iter()
+                .any(|e| e.decision == "accepted" && e.configurations > 0)
+            && (!args.accept_drift || recorded.is_empty())
+    }
+
+    /// This run's drift check: the baseline and numbering the log holds, the note for its next
+    /// entry (`frame_note`: the record frame's, after a re-registration) and what is owed
+    /// (`recorded`: the configurations the record holds).
+    fn drift_check(
+        self,
+        args: &DriftArgs,
+        geometry: &Geometry,
+        warm_up: Option<WarmUp>,
+        frame_note: Option<String>,
+        recorded: usize,
+    ) -> DriftCheck {
+        let mut note = frame_note;
+        if self.kept_under_drift() {
+            let kept = format!("kept {} measured under the drift", self.suspects.join(", "));
+            note = Some(note.map_or(kept.clone(), |n| format!("{n}; {kept}")));
+        }
+        let baseline = self
+            .entries
+            .iter()
+            .rev()
+            .find(|e| matches!(e.decision.as_str(), "baseline" | "accepted"))
+            .map(|e| e.reference.observed.clone());
+        // Rows recorded after the last measurement of the reference: a run killed after its
+        // last row, before its end measurement.
+        let end_pending = self
+            .entries
+            .last()
+            .is_some_and(|e| e.configurations < recorded);
+        DriftCheck {
+            pose_mm_deg: geometry.home,
+            every: args.reference_every,
+            limit_mm: args.drift_limit,
+            accept: args.accept_drift,
+            warm_up,
+            baseline,
+            first_number: self.entries.len() + 1,
+            note,
+            start_pending: self.kept_under_drift(),
+            suspects: if self.stopped {
+                Vec::new()
+            } else {
+                self.suspects
+            },
+            end_pending,
+        }
+    }
+}
+
 impl DriftLog {
     /// Opens the log of the record `out` (same kind, and `settings` with the record's name: a
     /// log belongs to one record), reads it, and sets up the drift check of this run and the
@@ -201,89 +354,19 @@ impl DriftLog {
             settings,
             &DRIFT_COLUMNS,
         )?;
+        let now = registration.map(|r| r.instrument_pose);
         // Refused after the log was opened: a log this run created is removed again.
         let state = (|| -> anyhow::Result<_> {
             let entries: Records<DriftEntry> = read_drift_log(&path)?;
-            let last_good = entries
-                .iter()
-                .rev()
-                .find(|e| GOOD.contains(&e.decision.as_str()));
-            let checked_references = entries.iter().any(|e| e.event != "warm-up");
-            anyhow::ensure!(
-                last_good.is_some() || !checked_references,
-                "{}: it measured the reference but holds no baseline (decision baseline or \
-                 accepted): it was edited; restore it, or start a new record",
-                path.display()
-            );
-            let good_count = last_good.map_or(0, |e| e.configurations);
-            anyhow::ensure!(
-                recorded.is_empty() || last_good.is_some(),
-                "{}: the record {} holds {} configurations but its drift log has no measurement of \
-                 the reference: the frame and the baseline they were measured under are lost \
-                 (restore the log, or start a new record)",
-                path.display(),
-                out.display(),
-                recorded.len()
-            );
-            let suspects: Vec<String> = recorded.get(good_count..).unwrap_or_default().to_vec();
-            // A stop after the last good measurement, even if a later run died in its warm-up.
-            let stopped = entries
-                .iter()
-                .rev()
-                .take_while(|e| !GOOD.contains(&e.decision.as_str()))
-                .any(|e| e.decision == "stopped");
-            if stopped && !suspects.is_empty() && !args.accept_drift {
-                anyhow::bail!(
-                    "{}: the campaign stopped on drift; the configurations recorded since the last \
-                     good measurement of the reference ({}) may hold it: delete their lines from {} \
-                     to measure them again, or run with --accept-drift to keep them",
-                    path.display(),
-                    suspects.join(", "),
-                    out.display()
-                );
-            }
-            let now = registration.map(|r| r.instrument_pose);
-            let (frame, mut note) = record_frame(
+            let history = History::of(&entries, args, &path, out, recorded)?;
+            let (frame, note) = record_frame(
                 entries.first().map(|e| e.instrument_pose).unwrap_or(now),
                 entries.last().and_then(|e| e.instrument_pose),
                 now,
                 &path,
             )?;
-            if stopped && !suspects.is_empty() {
-                let kept = format!("kept {} measured under the drift", suspects.join(", "));
-                note = Some(note.map_or(kept.clone(), |n| format!("{n}; {kept}")));
-            }
-            let baseline = entries
-                .iter()
-                .rev()
-                .find(|e| matches!(e.decision.as_str(), "baseline" | "accepted"))
-                .map(|e| e.reference.observed.clone());
-            // Rows recorded after the last measurement of the reference: a run killed after its last
-            // row, before its end measurement.
-            let end_pending = entries
-                .last()
-                .is_some_and(|e| e.configurations < recorded.len());
-            let check = DriftCheck {
-                pose_mm_deg: geometry.home,
-                every: args.reference_every,
-                limit_mm: args.drift_limit,
-                accept: args.accept_drift,
-                warm_up,
-                baseline,
-                first_number: entries.len() + 1,
-                note,
-                start_pending: stopped && !suspects.is_empty(),
-                suspects: if stopped { Vec::new() } else { suspects },
-                end_pending,
-            };
-            let one_frame = frame.is_empty()
-                && entries
-                    .iter()
-                    .all(|e| e.instrument_pose == entries[0].instrument_pose)
-                && !entries
-                    .iter()
-                    .any(|e| e.decision == "accepted" && e.configurations > 0)
-                && (!args.accept_drift || recorded.is_empty());
+            let one_frame = history.one_frame(&frame, args, recorded);
+            let check = history.drift_check(args, geometry, warm_up, note, recorded.len());
             Ok((check, frame, now, one_frame))
         })();
         let (check, frame, now, one_frame) = match state {

@@ -20,6 +20,9 @@ use super::ResultsFolder;
 use super::train::InputArg;
 use hexacomp_report::table::Table;
 
+/// Compare the compensation methods on fresh poses of the virtual platform (the paper's tables
+/// and figures).
+///
 /// Compare the compensation methods on the virtual platform, on fresh validation poses that no
 /// training used: uncompensated, the model-based baseline (identified geometry), the physical
 /// model (geometry, a lead-screw curve per leg, compliance under the weight) alone, with
@@ -48,8 +51,10 @@ pub struct EvaluateArgs {
     /// Seed of the measuring plan and of the machine's noise while it is measured.
     #[arg(long, default_value_t = 1)]
     seed: u64,
-    /// Plan without first taking each leg's shortest and longest reach (every configuration by
-    /// best-candidate sampling, as before), to compare with the default.
+    /// Plan without first taking each leg's shortest and longest reach.
+    ///
+    /// Every configuration by best-candidate sampling, as before, to compare with the
+    /// default.
     #[arg(long)]
     no_leg_extremes: bool,
     /// Seed of the validation poses.
@@ -61,8 +66,8 @@ pub struct EvaluateArgs {
     /// Seed that draws the virtual machine.
     #[arg(long, default_value_t = DEFAULT_MACHINE_SEED)]
     machine_seed: u64,
-    /// Error variant: paper, noise-free, geometric-only, strong-pitch, unseen.
-    #[arg(long, default_value_t = ErrorVariant::Paper)]
+    /// Error variant of the virtual machine.
+    #[arg(long, default_value_t = ErrorVariant::Paper, value_parser = super::named::<ErrorVariant>(ErrorVariant::ALL.map(ErrorVariant::name)))]
     error_variant: ErrorVariant,
     /// Network input of the compensators (the other one is compared at the largest size).
     #[arg(long, value_enum, default_value_t = InputArg::Equivalent)]
@@ -114,26 +119,43 @@ const FIGURES: [&str; 4] = [
 ];
 
 /// Prints Table 2 (largest size), Fig. 13's numbers, Table 1 and the input comparison.
-pub fn print_evaluation(evaluation: &Evaluation, validation: usize) {
+fn print_evaluation(evaluation: &Evaluation, validation: usize) {
     // The largest size, wherever it is in the list: the input comparison is made there.
     let last = evaluation
         .sizes
         .iter()
         .max_by_key(|s| s.configurations)
         .expect("at least one size");
+    print_table_2(last, validation);
+    print_fig_13(evaluation);
+    print_against_floor(evaluation);
+    print_resolutions(evaluation);
+    print_smoothness(evaluation);
+    print_uncertainty(evaluation);
+    print_table_1(evaluation, last);
+    print_inputs(evaluation, last);
+}
+
+/// Prints Table 2 at `size` (`validation` fresh poses) in both protocols, with the paper's
+/// figures between them.
+fn print_table_2(size: &SizeResult, validation: usize) {
     println!(
         "Table 2: pose errors at {validation} fresh validation poses, {} training configurations",
-        last.configurations
+        size.configurations
     );
     println!("{}", protocol_heading(Protocol::Measured));
-    print!("{}", table_2(last, Protocol::Measured));
+    print!("{}", table_2(size, Protocol::Measured));
     println!(
         "The paper's Table 2, in its protocol on its prototype: mean ‖δ_A‖ 0.642 mm before, \
          0.076 mm coupled, 0.052 mm decoupled; mean ‖ε‖ 0.184°, 0.024°, 0.018°.\n"
     );
     println!("{}", protocol_heading(Protocol::Reached));
-    println!("{}", table_2(last, Protocol::Reached));
+    println!("{}", table_2(size, Protocol::Reached));
+}
 
+/// Prints Fig. 13's numbers: every method's mean position error reached (mm) and mean
+/// orientation error reached (deg) at every training size.
+fn print_fig_13(evaluation: &Evaluation) {
     println!(
         "Fig. 13: mean position error (mm) / mean orientation error (deg) against training configurations, reached"
     );
@@ -150,7 +172,11 @@ pub fn print_evaluation(evaluation: &Evaluation, validation: usize) {
         table.row(row.try_into().expect("a cell per method"));
     }
     println!("{table}");
+}
 
+/// Prints every method's mean and max position error reached as multiples of the floor's, at
+/// every training size.
+fn print_against_floor(evaluation: &Evaluation) {
     println!(
         "Against the floor: mean / max position error reached, as multiples of the floor's mean \
          / max (the exact legs of each pose, driven with the machine's repeatability)"
@@ -178,7 +204,11 @@ pub fn print_evaluation(evaluation: &Evaluation, validation: usize) {
         table.row(row.try_into().expect("a cell per method"));
     }
     println!("{table}");
+}
 
+/// Prints the physical model's lead-screw resolution chosen at every training size, with each
+/// resolution's cross-validated error (mm), and the resolutions left out.
+fn print_resolutions(evaluation: &Evaluation) {
     println!(
         "The physical model's lead-screw resolution: B-spline coefficients per leg, the fewest \
          whose {CROSS_VALIDATION_FOLDS}-fold cross-validated error (Eq. 21, mm, ± its standard \
@@ -221,7 +251,11 @@ pub fn print_evaluation(evaluation: &Evaluation, validation: usize) {
             );
         }
     }
+}
 
+/// Prints the smoothness prior's weight chosen at every training size, with each weight's
+/// cross-validated error (mm), and the weights left out.
+fn print_smoothness(evaluation: &Evaluation) {
     println!(
         "The lead-screw curves' smoothness prior at the chosen resolution: the weight whose \
          cross-validated error (Eq. 21, mm, ± its standard error, on the same folds) is lowest"
@@ -263,7 +297,11 @@ pub fn print_evaluation(evaluation: &Evaluation, validation: usize) {
             );
         }
     }
+}
 
+/// Prints how well the physical model's networks state their uncertainty at every training
+/// size: the share within 2σ, the mean σ (mm) and the floor's mean error (mm).
+fn print_uncertainty(evaluation: &Evaluation) {
     println!(
         "Uncertainty of the physical model's networks: the share of validation poses whose \
          position error reached is within 2σ (95.45 % when calibrated), and the mean σ"
@@ -294,10 +332,14 @@ pub fn print_evaluation(evaluation: &Evaluation, validation: usize) {
         ]);
     }
     println!("{table}");
+}
 
+/// Prints Table 1 (the robust networks at `size`: hidden nodes, training time in s, validation
+/// RMSE in mm) and how many training configurations were ill-conditioned.
+fn print_table_1(evaluation: &Evaluation, size: &SizeResult) {
     println!(
         "Table 1: robust networks at {} configurations",
-        last.configurations
+        size.configurations
     );
     let mut table = Table::new([
         "architecture",
@@ -306,7 +348,7 @@ pub fn print_evaluation(evaluation: &Evaluation, validation: usize) {
         "training time (s)",
         "validation RMSE (mm)",
     ]);
-    for (name, trained) in [("coupled", &last.coupled), ("decoupled", &last.decoupled)] {
+    for (name, trained) in [("coupled", &size.coupled), ("decoupled", &size.decoupled)] {
         let nodes = trained.model.hidden_nodes();
         table.row([
             name.into(),
@@ -324,27 +366,33 @@ pub fn print_evaluation(evaluation: &Evaluation, validation: usize) {
         "{} of the training configurations had cond(PT) above c = 1e3 (where none does, robust and ordinary corrections coincide)",
         evaluation.above_threshold
     );
-    if !evaluation.inputs.is_empty() {
-        println!(
-            "\nNetwork input, robust decoupled at {} configurations, reached:",
-            last.configurations
-        );
-        let mut table = Table::new([
-            "input",
-            "mean ‖δ_A‖ (mm)",
-            "max ‖δ_A‖ (mm)",
-            "mean ‖ε‖ (deg)",
-        ]);
-        for (input, s) in &evaluation.inputs {
-            table.row([
-                format!("{} legs", input.name()),
-                format!("{:.4}", s.position_mm.mean),
-                format!("{:.4}", s.position_mm.max),
-                format!("{:.4}", s.orientation_deg.mean),
-            ]);
-        }
-        println!("{table}");
+}
+
+/// Prints the two network inputs compared (robust decoupled at `size`, errors reached), when
+/// they were.
+fn print_inputs(evaluation: &Evaluation, size: &SizeResult) {
+    if evaluation.inputs.is_empty() {
+        return;
     }
+    println!(
+        "\nNetwork input, robust decoupled at {} configurations, reached:",
+        size.configurations
+    );
+    let mut table = Table::new([
+        "input",
+        "mean ‖δ_A‖ (mm)",
+        "max ‖δ_A‖ (mm)",
+        "mean ‖ε‖ (deg)",
+    ]);
+    for (input, s) in &evaluation.inputs {
+        table.row([
+            format!("{} legs", input.name()),
+            format!("{:.4}", s.position_mm.mean),
+            format!("{:.4}", s.position_mm.max),
+            format!("{:.4}", s.orientation_deg.mean),
+        ]);
+    }
+    println!("{table}");
 }
 
 /// What a protocol's Table 2 shows, as its heading.
@@ -391,13 +439,8 @@ fn table_2(size: &SizeResult, protocol: Protocol) -> Table<{ METHODS + 2 }> {
 }
 
 /// Writes Fig. 12 and Fig. 13 (position and orientation each) as SVG into `dir`.
-pub fn write_figures(evaluation: &Evaluation, dir: &Path) -> anyhow::Result<()> {
+fn write_figures(evaluation: &Evaluation, dir: &Path) -> anyhow::Result<()> {
     let last = evaluation.sizes.last().expect("at least one size");
-    let shown = [
-        Method::Uncompensated,
-        Method::RobustCoupled,
-        Method::RobustDecoupled,
-    ];
     for (file, title, unit, position) in [
         (
             "fig12_position.svg",
@@ -412,36 +455,11 @@ pub fn write_figures(evaluation: &Evaluation, dir: &Path) -> anyhow::Result<()> 
             false,
         ),
     ] {
-        let series = last
-            .errors
-            .iter()
-            .filter(|(m, _)| shown.contains(m))
-            .map(|(m, errors)| {
-                Series::line(
-                    m.label(),
-                    errors
-                        .reached
-                        .iter()
-                        .enumerate()
-                        .map(|(i, e)| {
-                            (
-                                (i + 1) as f64,
-                                if position {
-                                    e.position_mm
-                                } else {
-                                    e.orientation_deg
-                                },
-                            )
-                        })
-                        .collect(),
-                )
-            })
-            .collect();
         let chart = Chart {
             title: format!("{title} ({} training configurations)", last.configurations),
             x: Axis::linear("validation pose"),
             y: Axis::linear(unit),
-            series,
+            series: fig_12_series(last, position),
         };
         write(dir, file, &chart)?;
     }
@@ -459,35 +477,6 @@ pub fn write_figures(evaluation: &Evaluation, dir: &Path) -> anyhow::Result<()> 
             false,
         ),
     ] {
-        let series = Method::ALL
-            .iter()
-            .filter(|m| **m != Method::Uncompensated)
-            .map(|m| {
-                let stats: Vec<ErrorStats> = evaluation
-                    .sizes
-                    .iter()
-                    .map(|s| {
-                        let stats = s.stats(*m, Protocol::Reached);
-                        if position {
-                            stats.position_mm
-                        } else {
-                            stats.orientation_deg
-                        }
-                    })
-                    .collect();
-                Series {
-                    label: m.label().into(),
-                    points: evaluation
-                        .sizes
-                        .iter()
-                        .zip(&stats)
-                        .map(|(s, e)| (s.configurations as f64, e.mean))
-                        .collect(),
-                    error_bars: Some(stats.iter().map(|e| e.std).collect()),
-                    markers_only: false,
-                }
-            })
-            .collect();
         write(
             dir,
             file,
@@ -495,13 +484,82 @@ pub fn write_figures(evaluation: &Evaluation, dir: &Path) -> anyhow::Result<()> 
                 title: title.into(),
                 x: Axis::linear("training configurations"),
                 y: Axis::linear(unit),
-                series,
+                series: fig_13_series(evaluation, position),
             },
         )?;
     }
     Ok(())
 }
 
+/// Fig. 12's lines at `size`: the error reached at each validation pose (position in mm, or
+/// orientation in degrees) uncompensated and with the robust compensators.
+fn fig_12_series(size: &SizeResult, position: bool) -> Vec<Series> {
+    let shown = [
+        Method::Uncompensated,
+        Method::RobustCoupled,
+        Method::RobustDecoupled,
+    ];
+    size.errors
+        .iter()
+        .filter(|(m, _)| shown.contains(m))
+        .map(|(m, errors)| {
+            Series::line(
+                m.label(),
+                errors
+                    .reached
+                    .iter()
+                    .enumerate()
+                    .map(|(i, e)| {
+                        (
+                            (i + 1) as f64,
+                            if position {
+                                e.position_mm
+                            } else {
+                                e.orientation_deg
+                            },
+                        )
+                    })
+                    .collect(),
+            )
+        })
+        .collect()
+}
+
+/// Fig. 13's lines: every compensated method's mean error reached (position in mm, or
+/// orientation in degrees) against the training size, with ±1 std bars.
+fn fig_13_series(evaluation: &Evaluation, position: bool) -> Vec<Series> {
+    Method::ALL
+        .iter()
+        .filter(|m| **m != Method::Uncompensated)
+        .map(|m| {
+            let stats: Vec<ErrorStats> = evaluation
+                .sizes
+                .iter()
+                .map(|s| {
+                    let stats = s.stats(*m, Protocol::Reached);
+                    if position {
+                        stats.position_mm
+                    } else {
+                        stats.orientation_deg
+                    }
+                })
+                .collect();
+            Series {
+                label: m.label().into(),
+                points: evaluation
+                    .sizes
+                    .iter()
+                    .zip(&stats)
+                    .map(|(s, e)| (s.configurations as f64, e.mean))
+                    .collect(),
+                error_bars: Some(stats.iter().map(|e| e.std).collect()),
+                markers_only: false,
+            }
+        })
+        .collect()
+}
+
+/// Writes `chart` as SVG into `dir` as `file`.
 fn write(dir: &Path, file: &str, chart: &Chart) -> anyhow::Result<()> {
     let path = dir.join(file);
     Ok(super::write_bytes(&path, chart.to_svg()?.as_bytes())?)

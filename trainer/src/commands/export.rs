@@ -5,6 +5,8 @@ use std::path::PathBuf;
 use hexacomp_core::Geometry;
 use hexacomp_measuring::linuxcnc::{genhexkins_hal, hal_files};
 
+/// Export the geometry in use for LinuxCNC's hexapod kinematics.
+///
 /// Export the geometry in use (--geometry: the one `identify` wrote) for LinuxCNC's hexapod
 /// kinematics, for users who want the geometric part of the calibration in the kinematics itself.
 ///

@@ -8,6 +8,8 @@ use hexacomp_core::Geometry;
 use hexacomp_core::error::Error;
 use hexacomp_core::model::{Model, Networks};
 
+/// Print a model file or a registration file.
+///
 /// Print a model file: architecture, hidden nodes, input, the geometry it is bound to, training
 /// joint ranges, correction bounds and provenance; or a registration file (`register`): the
 /// instrument's pose, every fiducial's residual, the inputs and the time. Refuses truncated,

@@ -15,15 +15,18 @@ use hexacomp_measuring::registration::into_base_frame;
 /// The options that say how a measurements file is to be read.
 #[derive(Debug, clap::Args)]
 pub struct MeasurementsInput {
-    /// Registration TOML (`hexacomp-trainer register`): the measured target points (or poses)
-    /// are in that instrument's frame and are brought into the base frame before solving.
-    /// Without it they are in the base frame.
+    /// Registration TOML (`hexacomp-trainer register`) of the instrument that measured.
+    ///
+    /// The measured target points (or poses) are in that instrument's frame and are brought
+    /// into the base frame before solving. Without it they are in the base frame.
     #[arg(long, value_name = "FILE", requires = "measurements")]
     registration: Option<PathBuf>,
-    /// Rotation convention of the measured poses of a 6-DoF probe (columns mx..mc): linuxcnc
-    /// (R = Rz(c)·Ry(b)·Rx(a), as every pose in hexacomp) or pi-uvw (R = Rx(U)·Ry(V)·Rz(W),
-    /// rotations about the moving axes, as PI's hexapod controllers write them).
-    #[arg(long, default_value_t = PoseConvention::Linuxcnc, value_name = "CONVENTION")]
+    /// Rotation convention of the measured poses of a 6-DoF probe (columns mx..mc).
+    ///
+    /// linuxcnc: R = Rz(c)·Ry(b)·Rx(a), as every pose in hexacomp; pi-uvw: R =
+    /// Rx(U)·Ry(V)·Rz(W), rotations about the moving axes, as PI's hexapod controllers
+    /// write them.
+    #[arg(help_heading = "Measurements", long, default_value_t = PoseConvention::Linuxcnc, value_parser = super::named::<PoseConvention>(PoseConvention::ALL.map(PoseConvention::name)), value_name = "CONVENTION")]
     pose_convention: PoseConvention,
 }
 

@@ -42,6 +42,20 @@ pub fn instrument_pose(values: Option<&[f64]>) -> anyhow::Result<hexacomp_core::
     Ok(hexacomp_core::Pose::from_mm_deg(values))
 }
 
+/// The value parser of an option that takes one of `names` (parsed by the type's `FromStr`):
+/// `--help` lists the names, and a value not among them is refused with the list.
+pub fn named<T>(
+    names: impl IntoIterator<Item = &'static str>,
+) -> impl clap::builder::TypedValueParser<Value = T>
+where
+    T: std::str::FromStr + Clone + Send + Sync + 'static,
+    T::Err: std::fmt::Debug,
+{
+    use clap::builder::TypedValueParser;
+    clap::builder::PossibleValuesParser::new(names)
+        .map(|name| name.parse().expect("a listed name parses"))
+}
+
 /// The first leg (1–6) whose commanded length at `pose` lies outside the geometry's stroke, and
 /// that length (mm); `None` when every leg is inside.
 pub fn leg_outside_stroke(

@@ -35,9 +35,10 @@ pub struct PlanArgs {
     /// Keep every leg at least this far from both stroke ends, mm.
     #[arg(long, default_value_t = 2.0)]
     stroke_margin: f64,
-    /// Do not start with each leg's shortest and longest reach: every configuration by
-    /// best-candidate sampling (with --candidates 1, plain uniform draws as in the paper's
-    /// Fig. 8).
+    /// Do not start with each leg's shortest and longest reach.
+    ///
+    /// Every configuration by best-candidate sampling (with --candidates 1, plain uniform
+    /// draws as in the paper's Fig. 8).
     #[arg(long)]
     no_leg_extremes: bool,
     /// Output poses CSV.

@@ -35,12 +35,16 @@ use super::write_bytes;
 /// measurements are in the instrument's frame and are brought into the base frame first.
 #[derive(Debug, clap::Args)]
 pub struct RegisterArgs {
-    /// Nominal fiducials on the machine base: CSV `name,x,y,z`, base frame, mm (from the
-    /// machine's drawing or an earlier CMM report). Default: the `fiducials` of the geometry.
+    /// Nominal fiducials on the machine base: CSV `name,x,y,z`, base frame, mm.
+    ///
+    /// From the machine's drawing or an earlier CMM report. Default: the `fiducials` of the
+    /// geometry.
     #[arg(long, value_name = "FILE")]
     nominal: Option<PathBuf>,
-    /// The same fiducials as the instrument measured them: CSV `name,x,y,z`, instrument frame,
-    /// mm, any row order; an optional `weight` column (default 1; 0 reports a fiducial without
+    /// The same fiducials as the instrument measured them: CSV `name,x,y,z`, instrument
+    /// frame, mm.
+    ///
+    /// Any row order; an optional `weight` column (default 1; 0 reports a fiducial without
     /// using it).
     #[arg(long, value_name = "FILE")]
     measured: PathBuf,
@@ -50,17 +54,23 @@ pub struct RegisterArgs {
     /// Refuse the registration when a fiducial's residual exceeds this, mm.
     #[arg(long, default_value_t = RegistrationOptions::default().tolerance_mm, value_name = "MM")]
     tolerance: f64,
-    /// Parameters of the instrument's pose held at zero, comma-separated from x, y, z, a, b, c:
-    /// `--lock a,b` keeps a levelled tracker's vertical (only a rotation about z is fitted).
+    /// Parameters of the instrument's pose held at zero, comma-separated from x, y, z, a,
+    /// b, c.
+    ///
+    /// `--lock a,b` keeps a levelled tracker's vertical (only a rotation about z is
+    /// fitted).
     #[arg(long, value_delimiter = ',', value_name = "PARAMETERS", value_parser = parameter_name)]
     lock: Vec<String>,
-    /// The instrument's stated accuracy, MPE = A µm + B µm/m of distance (e.g. 15+6): the
-    /// registration then states what accuracy its measurements can support at the platform,
-    /// and warns when the residuals or --tolerance disagree with it.
+    /// The instrument's stated accuracy, MPE = A µm + B µm/m of distance (e.g. 15+6).
+    ///
+    /// The registration then states what accuracy its measurements can support at the
+    /// platform, and warns when the residuals or --tolerance disagree with it.
     #[arg(long, value_name = "A+B")]
     instrument_mpe: Option<InstrumentMpe>,
-    /// The position accuracy (mm, 2σ) the calibration is to be proven to: with --instrument-mpe,
-    /// a warning when the instrument set up like this cannot verify it.
+    /// The position accuracy (mm, 2σ) the calibration is to be proven to.
+    ///
+    /// With --instrument-mpe, a warning when the instrument set up like this cannot verify
+    /// it.
     #[arg(long, value_name = "MM", requires = "instrument_mpe", value_parser = positive_mm)]
     goal: Option<f64>,
 }

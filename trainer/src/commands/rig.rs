@@ -20,66 +20,113 @@ pub struct RigArgs {
     /// The machine to drive.
     #[arg(long, value_enum, default_value_t = MachineArg::Virtual)]
     machine: MachineArg,
-    /// With --machine linuxcnc: the Python interpreter that has LinuxCNC's `linuxcnc` and `hal`
-    /// modules (Debian's packages install them for /usr/bin/python3).
-    #[arg(long, default_value = "/usr/bin/python3", value_name = "PROGRAM")]
+    /// With --machine linuxcnc: the Python interpreter that has LinuxCNC's modules.
+    ///
+    /// The modules are `linuxcnc` and `hal`; Debian's packages install them for
+    /// /usr/bin/python3.
+    #[arg(
+        help_heading = "Machine",
+        long,
+        default_value = "/usr/bin/python3",
+        value_name = "PROGRAM"
+    )]
     linuxcnc_python: String,
-    /// With --machine linuxcnc: the HAL pins of the drives' commands, # for the joint number
-    /// (default: the hexacomp component's outputs hexacomp.0.motor-out-#, or motion's motor
-    /// commands on a machine without the component).
-    #[arg(long, value_name = "PINS")]
+    /// With --machine linuxcnc: the HAL pins of the drives' commands, # for the joint
+    /// number.
+    ///
+    /// Default: the hexacomp component's outputs hexacomp.0.motor-out-#, or motion's motor
+    /// commands on a machine without the component.
+    #[arg(help_heading = "Machine", long, value_name = "PINS")]
     linuxcnc_drive_pins: Option<String>,
     /// Seconds a move may take before the machine counts as stuck.
-    #[arg(long, default_value_t = 600.0, value_name = "SECONDS")]
+    #[arg(
+        help_heading = "Machine",
+        long,
+        default_value_t = 600.0,
+        value_name = "SECONDS"
+    )]
     move_timeout: f64,
     /// The instrument that measures.
     #[arg(long, value_enum, default_value_t = InstrumentArg::Virtual)]
     instrument: InstrumentArg,
-    /// With --instrument command: the program and fixed arguments (split as a shell does: quote
-    /// a path with spaces) run for every reading as `PROGRAM ARGS… ID X Y Z A B C READING`; it
-    /// prints one CSV line, the targets p1x..pNz in the instrument's frame (empty cells: not
-    /// seen) or, with --probe, the pose x,y,z,a,b,c (docs/measuring.md). A program that cannot be
+    /// With --instrument command: the program run for every reading.
+    ///
+    /// The program and fixed arguments (split as a shell does: quote a path with spaces)
+    /// are run for every reading as `PROGRAM ARGS… ID X Y Z A B C READING`; it prints one
+    /// CSV line, the targets p1x..pNz in the instrument's frame (empty cells: not seen) or,
+    /// with --probe, the pose x,y,z,a,b,c (docs/measuring.md). A program that cannot be
     /// started stops the run.
-    #[arg(long, value_name = "PROGRAM", required_if_eq("instrument", "command"))]
+    #[arg(
+        help_heading = "Instrument",
+        long,
+        value_name = "PROGRAM",
+        required_if_eq("instrument", "command")
+    )]
     instrument_command: Option<String>,
-    /// With --instrument file: the file the tracker's software appends its readings to, one CSV
-    /// line each as --instrument-command prints them (a fiducial's: x,y,z); lines appended while
-    /// the machine moved are skipped (docs/measuring.md).
-    #[arg(long, value_name = "FILE", required_if_eq("instrument", "file"))]
+    /// With --instrument file: the file the tracker's software appends its readings to.
+    ///
+    /// One CSV line each as --instrument-command prints them (a fiducial's: x,y,z); lines
+    /// appended while the machine moved are skipped (docs/measuring.md).
+    #[arg(
+        help_heading = "Instrument",
+        long,
+        value_name = "FILE",
+        required_if_eq("instrument", "file")
+    )]
     instrument_file: Option<std::path::PathBuf>,
-    /// Seconds a reading may take: --instrument-command is then killed and retried; with
-    /// --instrument file, the wait for the next line.
-    #[arg(long, default_value_t = 60.0, value_name = "SECONDS")]
+    /// Seconds a reading may take.
+    ///
+    /// --instrument-command is then killed and retried; with --instrument file, the wait
+    /// for the next line.
+    #[arg(
+        help_heading = "Instrument",
+        long,
+        default_value_t = 60.0,
+        value_name = "SECONDS"
+    )]
     command_timeout: f64,
     /// The instrument reports the platform's pose (a 6-DoF probe) instead of the targets.
-    #[arg(long)]
+    #[arg(help_heading = "Instrument", long)]
     probe: bool,
     /// Readings per pose, 1 to 1000 (outliers are rejected among four or more).
     #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u16).range(1..=1000))]
     readings: u16,
     /// Seconds between two readings (trackers need about 2 s per point for their stated
     /// accuracy).
-    #[arg(long, default_value_t = 0.0, value_name = "SECONDS")]
+    #[arg(
+        help_heading = "Instrument",
+        long,
+        default_value_t = 0.0,
+        value_name = "SECONDS"
+    )]
     dwell: f64,
     /// Seconds to wait once the machine is in position, before the first reading (the structure
     /// and the drives settle).
-    #[arg(long, default_value_t = 0.0, value_name = "SECONDS")]
+    #[arg(
+        help_heading = "Instrument",
+        long,
+        default_value_t = 0.0,
+        value_name = "SECONDS"
+    )]
     settle: f64,
     /// Attempts after a failed reading before the pose is recorded as a gap.
-    #[arg(long, default_value_t = CampaignOptions::default().retries)]
+    #[arg(help_heading = "Instrument", long, default_value_t = CampaignOptions::default().retries)]
     retries: usize,
     /// Seed of the virtual machine's and instrument's noise.
-    #[arg(long, default_value_t = 1)]
+    #[arg(help_heading = "Virtual machine", long, default_value_t = 1)]
     pub seed: u64,
     /// Seed that draws the virtual machine (its errors).
-    #[arg(long, default_value_t = DEFAULT_MACHINE_SEED)]
+    #[arg(help_heading = "Virtual machine", long, default_value_t = DEFAULT_MACHINE_SEED)]
     machine_seed: u64,
     /// Error variant of the virtual machine.
-    #[arg(long, default_value_t = ErrorVariant::Paper)]
+    #[arg(help_heading = "Virtual machine", long, default_value_t = ErrorVariant::Paper, value_parser = super::named::<ErrorVariant>(ErrorVariant::ALL.map(ErrorVariant::name)))]
     error_variant: ErrorVariant,
-    /// Where the virtual instrument stands: its pose in the base frame `x,y,z,a,b,c` (mm,
-    /// degrees); default: the base frame itself.
+    /// Where the virtual instrument stands: its pose `x,y,z,a,b,c` in the base frame (mm,
+    /// degrees).
+    ///
+    /// Default: the base frame itself.
     #[arg(
+        help_heading = "Virtual machine",
         long,
         value_name = "X,Y,Z,A,B,C",
         value_delimiter = ',',
@@ -264,25 +311,9 @@ impl RigArgs {
     /// The machine and the instrument, every option checked; `compensation`: the model the
     /// virtual machine's controller applies (`verify --model`).
     pub fn build(&self, geometry: &Geometry, compensation: Option<Model>) -> anyhow::Result<Rig> {
-        let options = CampaignOptions {
-            readings: usize::from(self.readings),
-            dwell: Self::seconds("dwell", self.dwell)?,
-            retries: self.retries,
-            settle: Self::seconds("settle", self.settle)?,
-            ..CampaignOptions::default()
-        };
+        let options = self.campaign_options()?;
         let timeout = Self::seconds("command-timeout", self.command_timeout)?;
-        let program = match self.instrument {
-            InstrumentArg::Command => {
-                let text = self.instrument_command.as_deref().unwrap_or_default();
-                let words = shlex::split(text).ok_or_else(|| {
-                    anyhow::anyhow!("--instrument-command {text:?}: unbalanced quotes")
-                })?;
-                anyhow::ensure!(!words.is_empty(), "--instrument-command is empty");
-                words
-            }
-            InstrumentArg::Virtual | InstrumentArg::Manual | InstrumentArg::File => Vec::new(),
-        };
+        let program = self.instrument_program()?;
         anyhow::ensure!(
             self.instrument_file.is_none() || self.instrument == InstrumentArg::File,
             "--instrument-file is followed by --instrument file only"
@@ -291,7 +322,52 @@ impl RigArgs {
         let model = ErrorModel::variant(self.error_variant);
         let platform = VirtualPlatform::new(geometry, &model, self.machine_seed, self.seed)?;
         let settings = self.settings(geometry, &program);
-        let machine: Box<dyn Machine> = match self.machine {
+        let machine = self.machine(geometry, &platform, compensation)?;
+        let instrument = self.instrument(geometry, platform, instrument_pose, program, timeout)?;
+        Ok(Rig {
+            machine,
+            instrument,
+            options,
+            settings,
+        })
+    }
+
+    /// How each pose is read: --readings, --dwell, --retries and --settle, checked.
+    fn campaign_options(&self) -> anyhow::Result<CampaignOptions> {
+        Ok(CampaignOptions {
+            readings: usize::from(self.readings),
+            dwell: Self::seconds("dwell", self.dwell)?,
+            retries: self.retries,
+            settle: Self::seconds("settle", self.settle)?,
+            ..CampaignOptions::default()
+        })
+    }
+
+    /// The words of --instrument-command with --instrument command (split as a shell does);
+    /// none for the other instruments.
+    fn instrument_program(&self) -> anyhow::Result<Vec<String>> {
+        match self.instrument {
+            InstrumentArg::Command => {
+                let text = self.instrument_command.as_deref().unwrap_or_default();
+                let words = shlex::split(text).ok_or_else(|| {
+                    anyhow::anyhow!("--instrument-command {text:?}: unbalanced quotes")
+                })?;
+                anyhow::ensure!(!words.is_empty(), "--instrument-command is empty");
+                Ok(words)
+            }
+            InstrumentArg::Virtual | InstrumentArg::Manual | InstrumentArg::File => Ok(Vec::new()),
+        }
+    }
+
+    /// The machine of --machine; `platform` is the virtual machine (or LinuxCNC's hardware with
+    /// the virtual instrument), `compensation` the model its controller applies.
+    fn machine(
+        &self,
+        geometry: &Geometry,
+        platform: &VirtualPlatform,
+        compensation: Option<Model>,
+    ) -> anyhow::Result<Box<dyn Machine>> {
+        Ok(match self.machine {
             MachineArg::Virtual => Box::new(VirtualMachine {
                 platform: platform.clone(),
                 seed: self.seed,
@@ -303,28 +379,7 @@ impl RigArgs {
                     "--model applies to the virtual machine: LinuxCNC compensates with what its \
                      hexacomp component's service serves"
                 );
-                let controller = Box::new(LinuxCncMachine::connect(
-                    geometry,
-                    &LinuxCncOptions {
-                        python: self.linuxcnc_python.clone(),
-                        drive_pins: self
-                            .linuxcnc_drive_pins
-                            .clone()
-                            .unwrap_or_else(|| "hexacomp.0.motor-out-#".into()),
-                        drive_pins_given: self.linuxcnc_drive_pins.is_some(),
-                        move_timeout: Self::seconds("move-timeout", self.move_timeout)?,
-                    },
-                )?);
-                match self.instrument {
-                    InstrumentArg::Virtual => Box::new(VirtualHardware {
-                        controller,
-                        platform: platform.clone(),
-                        seed: self.seed,
-                    }),
-                    InstrumentArg::Command | InstrumentArg::Manual | InstrumentArg::File => {
-                        controller
-                    }
-                }
+                self.linuxcnc(geometry, platform)?
             }
             MachineArg::Manual => {
                 anyhow::ensure!(
@@ -340,8 +395,49 @@ impl RigArgs {
                     geometry: geometry.clone(),
                 })
             }
-        };
-        let instrument: Box<dyn Instrument> = match self.instrument {
+        })
+    }
+
+    /// A running LinuxCNC, connected; with the virtual instrument, `platform` stands in for its
+    /// hardware.
+    fn linuxcnc(
+        &self,
+        geometry: &Geometry,
+        platform: &VirtualPlatform,
+    ) -> anyhow::Result<Box<dyn Machine>> {
+        let controller = Box::new(LinuxCncMachine::connect(
+            geometry,
+            &LinuxCncOptions {
+                python: self.linuxcnc_python.clone(),
+                drive_pins: self
+                    .linuxcnc_drive_pins
+                    .clone()
+                    .unwrap_or_else(|| "hexacomp.0.motor-out-#".into()),
+                drive_pins_given: self.linuxcnc_drive_pins.is_some(),
+                move_timeout: Self::seconds("move-timeout", self.move_timeout)?,
+            },
+        )?);
+        Ok(match self.instrument {
+            InstrumentArg::Virtual => Box::new(VirtualHardware {
+                controller,
+                platform: platform.clone(),
+                seed: self.seed,
+            }),
+            InstrumentArg::Command | InstrumentArg::Manual | InstrumentArg::File => controller,
+        })
+    }
+
+    /// The instrument of --instrument: the virtual one on `platform`, standing at
+    /// `instrument_pose` (base frame); `program` and `timeout` for a command or a followed file.
+    fn instrument(
+        &self,
+        geometry: &Geometry,
+        platform: VirtualPlatform,
+        instrument_pose: hexacomp_core::Pose,
+        program: Vec<String>,
+        timeout: Duration,
+    ) -> anyhow::Result<Box<dyn Instrument>> {
+        Ok(match self.instrument {
             InstrumentArg::Virtual => Box::new(VirtualInstrument {
                 platform,
                 instrument: instrument_pose,
@@ -365,12 +461,6 @@ impl RigArgs {
                         .map_err(|e| anyhow::anyhow!("--instrument-file {}: {e}", path.display()))?,
                 )
             }
-        };
-        Ok(Rig {
-            machine,
-            instrument,
-            options,
-            settings,
         })
     }
 }

@@ -6,7 +6,10 @@ use anyhow::Context;
 use hexacomp_core::Geometry;
 use hexacomp_core::error::compact;
 use hexacomp_core::pose::PoseConvention;
-use hexacomp_formats::{read_fiducials, read_poses, write_fiducials, write_measurements_in};
+use hexacomp_core::records::{MeasuredConfiguration, NamedPoint, NamedPose};
+use hexacomp_formats::{
+    Records, read_fiducials, read_poses, write_fiducials, write_measurements_in,
+};
 use hexacomp_lab::acquire::{Reporting, as_reported};
 use hexacomp_virtual::{
     DEFAULT_MACHINE_SEED, ErrorModel, ErrorVariant, VirtualPlatform, measure_fiducials,
@@ -39,17 +42,19 @@ pub struct SimulateArgs {
     #[arg(long, default_value_t = 1)]
     seed: u64,
     /// Seed that draws the virtual machine (its errors); 18 resembles the paper's prototype.
-    #[arg(long, default_value_t = DEFAULT_MACHINE_SEED)]
+    #[arg(help_heading = "Virtual machine", long, default_value_t = DEFAULT_MACHINE_SEED)]
     machine_seed: u64,
-    /// Error variant: paper, noise-free, geometric-only, strong-pitch, unseen.
-    #[arg(long, default_value_t = ErrorVariant::Paper)]
+    /// Error variant of the virtual machine.
+    #[arg(help_heading = "Virtual machine", long, default_value_t = ErrorVariant::Paper, value_parser = super::named::<ErrorVariant>(ErrorVariant::ALL.map(ErrorVariant::name)))]
     error_variant: ErrorVariant,
     /// Output measurements CSV.
     #[arg(long, value_name = "FILE")]
     out: PathBuf,
-    /// Where the instrument stands: its pose in the base frame `x,y,z,a,b,c` (mm, degrees;
-    /// R = Rz(c)·Ry(b)·Rx(a)). The targets are then written in the instrument's frame.
+    /// Where the instrument stands: its pose `x,y,z,a,b,c` in the base frame (mm, degrees).
+    ///
+    /// R = Rz(c)·Ry(b)·Rx(a). The targets are then written in the instrument's frame.
     #[arg(
+        help_heading = "Instrument",
         long,
         value_name = "X,Y,Z,A,B,C",
         value_delimiter = ',',
@@ -58,30 +63,44 @@ pub struct SimulateArgs {
     instrument_pose: Option<Vec<f64>>,
     /// Nominal fiducials on the machine base: CSV `name,x,y,z`, base frame, mm. Default: the
     /// `fiducials` of the geometry.
-    #[arg(long, value_name = "FILE", requires = "fiducials_out")]
+    #[arg(
+        help_heading = "Instrument",
+        long,
+        value_name = "FILE",
+        requires = "fiducials_out"
+    )]
     fiducials: Option<PathBuf>,
     /// Output: the fiducials as the instrument measures them (`name,x,y,z`, its frame, mm).
-    #[arg(long, value_name = "FILE")]
+    #[arg(help_heading = "Instrument", long, value_name = "FILE")]
     fiducials_out: Option<PathBuf>,
     /// Share of the configurations (0–1) in which one target, drawn at random, is not seen: its
     /// cells are left empty.
     #[arg(
+        help_heading = "Instrument",
         long,
         default_value_t = 0.0,
         value_name = "SHARE",
         conflicts_with = "probe"
     )]
     drop_rate: f64,
-    /// Report the platform's pose as a 6-DoF probe does (columns mx..mc, fitted to the measured
-    /// targets) instead of the targets.
-    #[arg(long)]
+    /// Report the platform's pose as a 6-DoF probe does, instead of the targets.
+    ///
+    /// Columns mx..mc, fitted to the measured targets.
+    #[arg(help_heading = "Instrument", long)]
     probe: bool,
-    /// Rotation convention of the measured poses written with --probe (linuxcnc: R =
-    /// Rz(c)·Ry(b)·Rx(a); pi-uvw: R = Rx(U)·Ry(V)·Rz(W), rotations about the moving axes).
-    #[arg(long, default_value_t = PoseConvention::Linuxcnc, value_name = "CONVENTION", requires = "probe")]
+    /// Rotation convention of the measured poses written with --probe.
+    ///
+    /// linuxcnc: R = Rz(c)·Ry(b)·Rx(a); pi-uvw: R = Rx(U)·Ry(V)·Rz(W), rotations about the
+    /// moving axes.
+    #[arg(help_heading = "Instrument", long, default_value_t = PoseConvention::Linuxcnc, value_parser = super::named::<PoseConvention>(PoseConvention::ALL.map(PoseConvention::name)), value_name = "CONVENTION", requires = "probe")]
     pose_convention: PoseConvention,
     /// Noise of each fiducial coordinate the instrument measures, mm (1 σ).
-    #[arg(long, default_value_t = 0.010, value_name = "MM")]
+    #[arg(
+        help_heading = "Instrument",
+        long,
+        default_value_t = 0.010,
+        value_name = "MM"
+    )]
     fiducial_noise: f64,
 }
 
@@ -115,43 +134,10 @@ pub fn run(geometry: &Geometry, args: &SimulateArgs) -> anyhow::Result<()> {
     }
     let instrument = super::instrument_pose(args.instrument_pose.as_deref())?;
     let plan = read_poses(&args.plan)?;
-    let fiducials = match (&args.fiducials, &args.fiducials_out) {
-        (Some(path), _) => Some((
-            read_fiducials(path)?.into_items(),
-            path.display().to_string(),
-        )),
-        (None, Some(_)) => Some((
-            geometry_fiducials(geometry)?,
-            format!("geometry {}", geometry.name),
-        )),
-        (None, None) => None,
-    };
+    let fiducials = nominal_fiducials(geometry, args)?;
     let model = ErrorModel::variant(args.error_variant);
     let mut platform = VirtualPlatform::new(geometry, &model, args.machine_seed, args.seed)?;
-    let mut rows = Vec::with_capacity(plan.len());
-    for (index, row) in plan.iter().enumerate() {
-        let at = || {
-            format!(
-                "{}:{}: configuration {}",
-                plan.file,
-                plan.line(index),
-                row.id
-            )
-        };
-        let [min, max] = geometry.leg_range;
-        if let Some((leg, length)) = super::leg_outside_stroke(geometry, &row.pose()) {
-            anyhow::bail!(
-                "{}: the pose needs leg {leg} at {} mm, outside the geometry's stroke [{min}, \
-                 {max}] mm",
-                at(),
-                compact(length, 3)
-            );
-        }
-        let measured = platform
-            .measure_plan(std::slice::from_ref(row))
-            .with_context(|| format!("{}: cannot be measured on the virtual machine", at()))?;
-        rows.extend(measured);
-    }
+    let mut rows = measure(geometry, &mut platform, &plan)?;
     let reporting = Reporting {
         instrument,
         missed_share: args.drop_rate,
@@ -186,4 +172,57 @@ pub fn run(geometry: &Geometry, args: &SimulateArgs) -> anyhow::Result<()> {
         args.out.display()
     );
     Ok(())
+}
+
+/// The fiducials' nominal positions (base frame, mm) to measure for --fiducials-out, and where
+/// they come from: --fiducials, or the geometry's; `None` without --fiducials-out.
+fn nominal_fiducials(
+    geometry: &Geometry,
+    args: &SimulateArgs,
+) -> anyhow::Result<Option<(Vec<NamedPoint>, String)>> {
+    Ok(match (&args.fiducials, &args.fiducials_out) {
+        (Some(path), _) => Some((
+            read_fiducials(path)?.into_items(),
+            path.display().to_string(),
+        )),
+        (None, Some(_)) => Some((
+            geometry_fiducials(geometry)?,
+            format!("geometry {}", geometry.name),
+        )),
+        (None, None) => None,
+    })
+}
+
+/// Measures every configuration of `plan` on the virtual machine `platform` (the targets in the
+/// base frame), refusing a pose outside the geometry's stroke, naming its line.
+fn measure(
+    geometry: &Geometry,
+    platform: &mut VirtualPlatform,
+    plan: &Records<NamedPose>,
+) -> anyhow::Result<Vec<MeasuredConfiguration>> {
+    let mut rows = Vec::with_capacity(plan.len());
+    for (index, row) in plan.iter().enumerate() {
+        let at = || {
+            format!(
+                "{}:{}: configuration {}",
+                plan.file,
+                plan.line(index),
+                row.id
+            )
+        };
+        let [min, max] = geometry.leg_range;
+        if let Some((leg, length)) = super::leg_outside_stroke(geometry, &row.pose()) {
+            anyhow::bail!(
+                "{}: the pose needs leg {leg} at {} mm, outside the geometry's stroke [{min}, \
+                 {max}] mm",
+                at(),
+                compact(length, 3)
+            );
+        }
+        let measured = platform
+            .measure_plan(std::slice::from_ref(row))
+            .with_context(|| format!("{}: cannot be measured on the virtual machine", at()))?;
+        rows.extend(measured);
+    }
+    Ok(rows)
 }

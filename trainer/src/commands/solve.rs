@@ -258,10 +258,10 @@ pub fn screen_corrections_file(
 pub struct ScreeningArgs {
     /// Exclude a configuration with a correction larger than this, mm (no real leg is that far
     /// off).
-    #[arg(long, default_value_t = Checks::default().max_correction_mm, value_name = "MM")]
+    #[arg(help_heading = "Screening", long, default_value_t = Checks::default().max_correction_mm, value_name = "MM")]
     max_correction: f64,
     /// Refuse the input when more than this share of its configurations is excluded.
-    #[arg(long, default_value_t = ScreeningOptions::default().max_excluded_share, value_name = "SHARE")]
+    #[arg(help_heading = "Screening", long, default_value_t = ScreeningOptions::default().max_excluded_share, value_name = "SHARE")]
     max_excluded_share: f64,
 }
 
@@ -285,19 +285,26 @@ impl ScreeningArgs {
 pub struct MeasuredScreeningArgs {
     #[command(flatten)]
     corrections: ScreeningArgs,
-    /// Exclude a configuration whose fit residual exceeds this many times the file's median
-    /// residual (pure noise exceeds 3× once in 10 000).
-    #[arg(long, default_value_t = ScreeningOptions::default().residual_factor)]
+    /// Exclude a configuration whose fit residual exceeds this many times the file's
+    /// median.
+    ///
+    /// Pure noise exceeds 3× once in 10 000.
+    #[arg(help_heading = "Screening", long, default_value_t = ScreeningOptions::default().residual_factor)]
     residual_factor: f64,
-    /// Exclude a configuration whose targets are further from the geometry identified from the
-    /// configurations (repeated without those beyond the limit) than this many times the median
-    /// distance.
-    #[arg(long, default_value_t = ScreeningOptions::default().identification_factor)]
+    /// Exclude a configuration this many times the median distance from the identified
+    /// geometry.
+    ///
+    /// Its targets are further from the geometry identified from the configurations
+    /// (repeated without those beyond the limit) than this many times the median distance.
+    #[arg(help_heading = "Screening", long, default_value_t = ScreeningOptions::default().identification_factor)]
     identification_factor: f64,
-    /// Exclude a configuration whose commanded legs differ from the inverse kinematics of its
-    /// commanded pose by more than this, mm (a wrong geometry file, swapped leg columns; files
-    /// must give poses and legs to enough decimals to meet it).
-    #[arg(long, default_value_t = Checks::default().legs_tolerance_mm, value_name = "MM")]
+    /// Exclude a configuration whose commanded legs differ from its pose's by more than
+    /// this, mm.
+    ///
+    /// The legs are compared with the inverse kinematics of its commanded pose: a wrong
+    /// geometry file, swapped leg columns; files must give poses and legs to enough
+    /// decimals to meet it.
+    #[arg(help_heading = "Screening", long, default_value_t = Checks::default().legs_tolerance_mm, value_name = "MM")]
     legs_tolerance: f64,
 }
 

@@ -10,6 +10,8 @@ use hexacomp_virtual::{
 
 use hexacomp_report::table::Table;
 
+/// Report the uncompensated virtual platform's pose errors at random workspace poses.
+///
 /// Drive the virtual platform uncompensated to random workspace poses and report its pose
 /// errors (max/mean/std of the position error ‖δ_A‖ in mm and the orientation error ‖ε‖ in
 /// degrees), next to the paper's prototype before compensation.
@@ -23,7 +25,7 @@ pub struct SurveyArgs {
     seed: u64,
     /// Error variant of the virtual machine: paper, noise-free, geometric-only, strong-pitch,
     /// unseen.
-    #[arg(long, default_value_t = ErrorVariant::Paper)]
+    #[arg(long, default_value_t = ErrorVariant::Paper, value_parser = super::named::<ErrorVariant>(ErrorVariant::ALL.map(ErrorVariant::name)))]
     error_variant: ErrorVariant,
     /// Seed that draws the virtual machine's errors (joint offsets, pitch, compliance).
     #[arg(long, default_value_t = DEFAULT_MACHINE_SEED)]

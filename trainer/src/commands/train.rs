@@ -34,8 +34,10 @@ pub struct TrainArgs {
     /// coupled: one network with six outputs; decoupled: six single-output networks.
     #[arg(long, value_enum, default_value_t = ArchitectureArg::Decoupled)]
     arch: ArchitectureArg,
-    /// Network input: `equivalent` legs q⁽ᴸ⁾ = q⁽⁰⁾ − Δq (N inverts the machine's map, so
-    /// q + N(q) is right at the corrected point), or `commanded` legs q⁽⁰⁾ (the paper).
+    /// Network input: the equivalent legs, or the commanded legs (the paper).
+    ///
+    /// `equivalent` legs q⁽ᴸ⁾ = q⁽⁰⁾ − Δq (N inverts the machine's map, so q + N(q) is
+    /// right at the corrected point), or `commanded` legs q⁽⁰⁾ (the paper).
     #[arg(long, value_enum, default_value_t = InputArg::Equivalent)]
     input: InputArg,
     /// Largest hidden-node count of the sweep (it tries 1..=N).

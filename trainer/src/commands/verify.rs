@@ -7,9 +7,12 @@ use std::time::{Duration, SystemTime};
 
 use anyhow::Context;
 use hexacomp_core::Geometry;
-use hexacomp_iso9283::pose_test::{TestPoseOptions, approach_pose, cycle_poses, test_cube};
+use hexacomp_iso9283::pose_test::{
+    TestCube, TestPoseOptions, approach_pose, cycle_poses, test_cube,
+};
 use hexacomp_iso9283::verify::{PoseTest, TestRun, characteristics_of};
 use hexacomp_iso9283::verify_report::{Conditions, VerifyReport, html, improvement, raw_csv};
+use hexacomp_measuring::campaign::CampaignOptions;
 use hexacomp_measuring::registration::InstrumentMpe;
 use hexacomp_report::table::Table;
 
@@ -35,45 +38,57 @@ use hexacomp_report::table::Table;
 /// compensation is whatever the NC has active.
 #[derive(Debug, clap::Args)]
 pub struct VerifyArgs {
-    #[command(flatten)]
-    rig: super::rig::RigArgs,
     /// The raw attained poses: CSV `cycle,pose,x,y,z,a,b,c` (mm, degrees, base frame).
     #[arg(long, value_name = "FILE")]
     out: PathBuf,
-    /// The report as JSON (default: --out with the extension .json).
-    #[arg(long, value_name = "FILE")]
-    json: Option<PathBuf>,
-    /// The readable report, HTML (default: --out with the extension .html).
-    #[arg(long, value_name = "FILE")]
-    report: Option<PathBuf>,
-    /// A previous run's JSON report (the same poses), set beside this one in the HTML report
-    /// (before and after a calibration).
-    #[arg(long, value_name = "FILE")]
-    before: Option<PathBuf>,
-    /// Cycles, 2 to 10000 (ISO 9283 asks for 30).
-    #[arg(long, default_value_t = 30, value_parser = clap::value_parser!(u16).range(2..=10000))]
-    cycles: u16,
-    /// Leave out the orientation poses O1–O6 (test ISO's five poses and any extra ones only).
-    #[arg(long)]
-    no_orientation_poses: bool,
-    /// Poses drawn from the task workspace (seeded by --seed) added to the test, E1….
-    #[arg(long, default_value_t = 0)]
-    extra_poses: usize,
     /// With the virtual machine: the model its controller applies (`calibrate` writes one).
     #[arg(long, value_name = "FILE")]
     model: Option<PathBuf>,
-    /// The registration that brings the instrument's measurements into the base frame
-    /// (`hexacomp-trainer register`); without it they are taken to be in the base frame.
+    /// The registration that brings the instrument's measurements into the base frame.
+    ///
+    /// Made by `hexacomp-trainer register`; without it they are taken to be in the base
+    /// frame.
     #[arg(long, value_name = "FILE")]
     registration: Option<PathBuf>,
+    /// Cycles, 2 to 10000 (ISO 9283 asks for 30).
+    #[arg(long, default_value_t = 30, value_parser = clap::value_parser!(u16).range(2..=10000))]
+    cycles: u16,
+    #[command(flatten)]
+    rig: super::rig::RigArgs,
+    /// The report as JSON (default: --out with the extension .json).
+    #[arg(help_heading = "Output", long, value_name = "FILE")]
+    json: Option<PathBuf>,
+    /// The readable report, HTML (default: --out with the extension .html).
+    #[arg(help_heading = "Output", long, value_name = "FILE")]
+    report: Option<PathBuf>,
+    /// A previous run's JSON report (the same poses), set beside this one in the HTML report
+    /// (before and after a calibration).
+    #[arg(help_heading = "Output", long, value_name = "FILE")]
+    before: Option<PathBuf>,
+    /// Leave out the orientation poses O1–O6 (test ISO's five poses and any extra ones only).
+    #[arg(help_heading = "Test poses", long)]
+    no_orientation_poses: bool,
+    /// Poses drawn from the task workspace (seeded by --seed) added to the test, E1….
+    #[arg(help_heading = "Test poses", long, default_value_t = 0)]
+    extra_poses: usize,
     /// The instrument's maximum permissible error `A+B` (µm + µm/m), stated in the report.
-    #[arg(long, value_name = "A+B")]
+    #[arg(help_heading = "Conditions", long, value_name = "A+B")]
     instrument_mpe: Option<InstrumentMpe>,
     /// The air temperature during the test, °C, stated in the report.
-    #[arg(long, value_name = "CELSIUS", allow_negative_numbers = true)]
+    #[arg(
+        help_heading = "Conditions",
+        long,
+        value_name = "CELSIUS",
+        allow_negative_numbers = true
+    )]
     air_temperature: Option<f64>,
     /// The machine's temperature during the test, °C, stated in the report.
-    #[arg(long, value_name = "CELSIUS", allow_negative_numbers = true)]
+    #[arg(
+        help_heading = "Conditions",
+        long,
+        value_name = "CELSIUS",
+        allow_negative_numbers = true
+    )]
     machine_temperature: Option<f64>,
 }
 
@@ -129,19 +144,7 @@ fn read_before(path: &Path) -> anyhow::Result<VerifyReport> {
 
 pub fn run(geometry: &Geometry, args: &VerifyArgs) -> anyhow::Result<()> {
     let (json_path, report_path) = (args.json_path(), args.report_path());
-    let outputs = [args.out.as_path(), &json_path, &report_path];
-    for (k, a) in outputs.iter().enumerate() {
-        anyhow::ensure!(
-            !outputs[k + 1..].contains(a),
-            "{} is given for two outputs: give --out, --json and --report different files",
-            a.display()
-        );
-    }
-    // The derived outputs are checked here (--out's are checked with the inputs by main).
-    let inputs = args.files().inputs;
-    for derived in [&json_path, &report_path] {
-        hexacomp_formats::refuse_same_file(derived, &inputs)?;
-    }
+    refuse_shared_outputs(args, &json_path, &report_path)?;
     let air = temperature("air-temperature", args.air_temperature)?;
     let machine_temperature = temperature("machine-temperature", args.machine_temperature)?;
     let (compensation, instrument_frame) = args.rig.compensation_and_frame(
@@ -165,34 +168,8 @@ pub fn run(geometry: &Geometry, args: &VerifyArgs) -> anyhow::Result<()> {
         before.check_same_poses(&poses, &path.display().to_string())?;
     }
     let cycles = usize::from(args.cycles);
-
-    let super::rig::Rig {
-        mut machine,
-        mut instrument,
-        options,
-        ..
-    } = rig;
-    let measurements = cycles * poses.len();
-    let dwelling = options.dwell.as_secs_f64() * (options.readings - 1) as f64;
-    eprintln!(
-        "test cube: centre {:?} mm, side {:.3} mm; {} poses × {cycles} cycles = {measurements} \
-         attained poses, {} readings each{}",
-        cube.centre.to_array(),
-        cube.side_mm,
-        poses.len(),
-        options.readings,
-        if dwelling > 0.0 {
-            format!(
-                ", about {} of dwelling alone",
-                humantime::format_duration(Duration::from_secs(
-                    (measurements as f64 * dwelling) as u64
-                ))
-            )
-        } else {
-            String::new()
-        }
-    );
-    let bar = args.rig.progress_bar(measurements, "attained poses");
+    let options = rig.options;
+    announce_test(&cube, poses.len(), cycles, &options);
     let test = PoseTest {
         geometry,
         poses: &poses,
@@ -201,17 +178,7 @@ pub fn run(geometry: &Geometry, args: &VerifyArgs) -> anyhow::Result<()> {
         options,
         approach: approach_pose(&poses),
     };
-    let mut run = TestRun::default();
-    let outcome = test.run(machine.as_mut(), instrument.as_mut(), &mut run, &mut || {
-        bar.inc(1)
-    });
-    bar.finish_and_clear();
-    for missed in &run.missed {
-        eprintln!(
-            "{} in cycle {} was not measured ({}): left out of its figures",
-            missed.pose, missed.cycle, missed.why
-        );
-    }
+    let (run, outcome) = run_test(&test, rig, args);
     // The attained poses are kept whatever happens next (a machine that stops, a pose with too
     // few of them for its figures); with none, an earlier run's file is left as it is.
     if !run.attained.is_empty() {
@@ -227,18 +194,7 @@ pub fn run(geometry: &Geometry, args: &VerifyArgs) -> anyhow::Result<()> {
     outcome.map_err(|e| kept(e.into()))?;
     let figures = characteristics_of(&poses, &run.attained).map_err(|e| kept(e.into()))?;
     let report = VerifyReport::new(
-        Conditions {
-            rig: args.rig.description(),
-            instrument_mpe_um: args.instrument_mpe.map(|m| [m.constant_um, m.per_metre_um]),
-            readings: options.readings,
-            dwell_s: options.dwell.as_secs_f64(),
-            cycles,
-            air_temperature_c: air,
-            machine_temperature_c: machine_temperature,
-            model: args.model.as_ref().map(|p| p.display().to_string()),
-            registration: args.registration.as_ref().map(|p| p.display().to_string()),
-            geometry: geometry.fingerprint().to_string(),
-        },
+        conditions(args, geometry, &options, cycles, air, machine_temperature),
         &cube,
         &poses
             .iter()
@@ -259,6 +215,104 @@ pub fn run(geometry: &Geometry, args: &VerifyArgs) -> anyhow::Result<()> {
         report_path.display()
     );
     Ok(())
+}
+
+/// Refuses --out, --json and --report naming one file twice, and the derived reports naming an
+/// input (--out's are checked with the inputs by main).
+fn refuse_shared_outputs(
+    args: &VerifyArgs,
+    json_path: &Path,
+    report_path: &Path,
+) -> anyhow::Result<()> {
+    let outputs = [args.out.as_path(), json_path, report_path];
+    for (k, a) in outputs.iter().enumerate() {
+        anyhow::ensure!(
+            !outputs[k + 1..].contains(a),
+            "{} is given for two outputs: give --out, --json and --report different files",
+            a.display()
+        );
+    }
+    let inputs = args.files().inputs;
+    for derived in [json_path, report_path] {
+        hexacomp_formats::refuse_same_file(derived, &inputs)?;
+    }
+    Ok(())
+}
+
+/// Says what the test measures: the cube (centre in the base frame, mm; side, mm), the poses
+/// and cycles, and how long the dwelling alone takes.
+fn announce_test(cube: &TestCube, poses: usize, cycles: usize, options: &CampaignOptions) {
+    let measurements = cycles * poses;
+    let dwelling = options.dwell.as_secs_f64() * (options.readings - 1) as f64;
+    eprintln!(
+        "test cube: centre {:?} mm, side {:.3} mm; {poses} poses × {cycles} cycles = \
+         {measurements} attained poses, {} readings each{}",
+        cube.centre.to_array(),
+        cube.side_mm,
+        options.readings,
+        if dwelling > 0.0 {
+            format!(
+                ", about {} of dwelling alone",
+                humantime::format_duration(Duration::from_secs(
+                    (measurements as f64 * dwelling) as u64
+                ))
+            )
+        } else {
+            String::new()
+        }
+    );
+}
+
+/// Runs the test on the rig with a progress bar, and says which attained poses were not
+/// measured: what was attained, and how the test ended.
+fn run_test(
+    test: &PoseTest<'_>,
+    rig: super::rig::Rig,
+    args: &VerifyArgs,
+) -> (TestRun, hexacomp_iso9283::Result<()>) {
+    let super::rig::Rig {
+        mut machine,
+        mut instrument,
+        ..
+    } = rig;
+    let bar = args
+        .rig
+        .progress_bar(test.cycles * test.poses.len(), "attained poses");
+    let mut run = TestRun::default();
+    let outcome = test.run(machine.as_mut(), instrument.as_mut(), &mut run, &mut || {
+        bar.inc(1)
+    });
+    bar.finish_and_clear();
+    for missed in &run.missed {
+        eprintln!(
+            "{} in cycle {} was not measured ({}): left out of its figures",
+            missed.pose, missed.cycle, missed.why
+        );
+    }
+    (run, outcome)
+}
+
+/// The conditions of the test, as the report states them.
+fn conditions(
+    args: &VerifyArgs,
+    geometry: &Geometry,
+    options: &CampaignOptions,
+    cycles: usize,
+    air_temperature_c: Option<f64>,
+    machine_temperature_c: Option<f64>,
+) -> Conditions {
+    Conditions {
+        rig: args.rig.description(),
+        instrument_mpe_um: args.instrument_mpe.map(|m| [m.constant_um, m.per_metre_um]),
+        readings: options.readings,
+        dwell_s: options.dwell.as_secs_f64(),
+        cycles,
+        air_temperature_c,
+        machine_temperature_c,
+        model: args.model.as_ref().map(|p| p.display().to_string()),
+        registration: args.registration.as_ref().map(|p| p.display().to_string()),
+        geometry: geometry.fingerprint().to_string(),
+    }
 }
 
 /// Prints each pose's figures (µm and degrees), and the worst AP_P and RP_l beside `before`'s.
