@@ -6,8 +6,9 @@
 
 use anyhow::Context;
 use hexacomp_calibration::distill::DistillOptions;
-use hexacomp_calibration::identify::{PHYSICAL, identify};
-use hexacomp_calibration::physical_candidate::carried_into_networks;
+use hexacomp_calibration::identify::{IdentifyOptions, PHYSICAL, identify};
+use hexacomp_calibration::physical::PhysicalModel;
+use hexacomp_calibration::physical_candidate::{CarriedModel, carried_into_networks};
 use hexacomp_calibration::pipeline::Pipeline;
 use hexacomp_calibration::pitch_resolution::{
     ResolutionChoice, chosen_if_cross_validated, identifications,
@@ -17,6 +18,7 @@ use hexacomp_calibration::train::{Architecture, CROSS_VALIDATION_FOLDS, training
 use hexacomp_calibration::uncertainty::Repeatability;
 use hexacomp_core::Geometry;
 use hexacomp_core::model::Model;
+use hexacomp_core::records::{JointCorrection, MeasuredConfiguration};
 use hexacomp_virtual::{ErrorModel, ErrorVariant, VirtualPlatform};
 use indicatif::{ProgressBar, ProgressStyle};
 
@@ -93,20 +95,7 @@ pub fn calibrate(
         seed,
         ..DistillOptions::default()
     };
-    let choosing = work_bar(
-        identifications(CROSS_VALIDATION_FOLDS),
-        "choosing the physical model's lead-screw resolution",
-    );
-    let resolution = chosen_if_cross_validated(
-        &geometry,
-        &kept,
-        &solved.corrections,
-        seed,
-        CROSS_VALIDATION_FOLDS,
-        &|n| choosing.inc(n),
-    );
-    choosing.finish_and_clear();
-    let resolution = resolution.context("choosing the virtual platform's lead-screw resolution")?;
+    let resolution = choose_resolution(&geometry, &kept, &solved.corrections, seed)?;
     for (basis, why) in resolution.iter().flat_map(|r| &r.failed) {
         eprintln!("{basis} lead-screw coefficients per leg left out: {why}");
     }
@@ -117,26 +106,13 @@ pub fn calibrate(
     let alternative_bases = resolution
         .as_ref()
         .map_or_else(Vec::new, ResolutionChoice::indistinguishable);
-    let bar = work_bar(
-        training_work(
-            options.samples + kept.len(),
-            Architecture::Decoupled,
-            &options.train,
-        ),
-        "carrying the physical model into networks",
-    );
-    let carried = carried_into_networks(
+    let carried = carry_into_networks(
         &geometry,
         (&physical, &identification),
         &alternative_bases,
         &kept,
         &options,
-        Repeatability::Known(error_model().repeatability_sigma_mm),
-        &|n| bar.inc(n),
-    );
-    bar.finish_and_clear();
-    let carried =
-        carried.context("carrying the virtual platform's physical model into networks")?;
+    )?;
     if let Err(e) = &carried.uncertainty {
         eprintln!("the model carries no uncertainty: {e}");
     }
@@ -154,4 +130,58 @@ pub fn calibrate(
         departure_mm: carried.fidelity.rms_mm,
         seconds: start.elapsed().as_secs_f64(),
     })
+}
+
+/// Cross-validates the lead-screw resolutions of the physical model on `kept` (with a progress
+/// bar): the one chosen, or `None` where there are too few configurations to choose.
+fn choose_resolution(
+    geometry: &Geometry,
+    kept: &[MeasuredConfiguration],
+    corrections: &[JointCorrection],
+    seed: u64,
+) -> anyhow::Result<Option<ResolutionChoice>> {
+    let choosing = work_bar(
+        identifications(CROSS_VALIDATION_FOLDS),
+        "choosing the physical model's lead-screw resolution",
+    );
+    let resolution = chosen_if_cross_validated(
+        geometry,
+        kept,
+        corrections,
+        seed,
+        CROSS_VALIDATION_FOLDS,
+        &|n| choosing.inc(n),
+    );
+    choosing.finish_and_clear();
+    resolution.context("choosing the virtual platform's lead-screw resolution")
+}
+
+/// Carries `physical` into networks with its uncertainty, the virtual machine's repeatability
+/// known (with a progress bar).
+fn carry_into_networks(
+    geometry: &Geometry,
+    physical: (&PhysicalModel, &IdentifyOptions),
+    alternative_bases: &[usize],
+    kept: &[MeasuredConfiguration],
+    options: &DistillOptions,
+) -> anyhow::Result<CarriedModel> {
+    let bar = work_bar(
+        training_work(
+            options.samples + kept.len(),
+            Architecture::Decoupled,
+            &options.train,
+        ),
+        "carrying the physical model into networks",
+    );
+    let carried = carried_into_networks(
+        geometry,
+        physical,
+        alternative_bases,
+        kept,
+        options,
+        Repeatability::Known(error_model().repeatability_sigma_mm),
+        &|n| bar.inc(n),
+    );
+    bar.finish_and_clear();
+    carried.context("carrying the virtual platform's physical model into networks")
 }

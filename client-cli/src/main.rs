@@ -95,121 +95,143 @@ fn run(instance: &str, timeout_ms: u64, command: Command) -> anyhow::Result<()> 
         timeout: Duration::from_millis(timeout_ms),
     };
     match command {
-        Command::Metrics { output } => {
-            // A service that is not there or does not answer is what `hexacomp_up 0` says; a
-            // wrong instance name, another user's service or another protocol are errors of
-            // the setup, which the timer running this must show.
-            let status = match hexacomp_client::status_of(instance, &options) {
-                Ok(status) => Some(status),
-                Err(
-                    e @ (hexacomp_client::Error::ServiceAbsent { .. }
-                    | hexacomp_client::Error::Timeout { .. }
-                    | hexacomp_client::Error::Transport(_)),
-                ) => {
-                    eprintln!("hexacomp_up 0: instance {}: {e}", instance);
-                    None
-                }
-                Err(e) => return Err(e.into()),
-            };
-            let mut text = metrics::prometheus_text(instance, status.as_ref());
-            if status.is_some() {
-                // The answer times, deadline misses and the model's age; a service of an older
-                // release has no telemetry endpoint: those are left out, and it is said.
-                match hexacomp_client::telemetry_of(instance, &options) {
-                    Ok(telemetry) => text.push_str(&metrics::telemetry_text(
-                        instance,
-                        &telemetry,
-                        std::time::SystemTime::now(),
-                    )),
-                    Err(hexacomp_client::Error::ServiceAbsent { .. }) => eprintln!(
-                        "instance {instance}: the service has no telemetry endpoint (a release \
-                         before it): answer times, deadline misses and the model's age left out"
-                    ),
-                    Err(e) => eprintln!(
-                        "instance {instance}: no telemetry ({e}): answer times, deadline misses \
-                         and the model's age left out"
-                    ),
-                }
-            }
-            match output {
-                Some(file) => hexacomp_core::durable::replace_file(&file, text.as_bytes())
-                    .with_context(|| format!("writing {}", file.display()))?,
-                None => print!("{text}"),
-            }
-        }
+        Command::Metrics { output } => write_metrics(instance, &options, output.as_deref())?,
         Command::Status { json: true } => {
             let status = hexacomp_client::status_of(instance, &options)?;
             println!("{}", metrics::status_json(instance, &status));
         }
-        Command::Status { json: false } => {
-            let s = hexacomp_client::status_of(instance, &options)?;
-            println!("instance      {}", instance);
-            println!(
-                "geometry      {} ({})",
-                s.geometry_name, s.geometry_fingerprint
-            );
-            if s.generation == 0 {
-                println!(
-                    "model         none (answering nominal inverse kinematics, status no_model)"
-                );
-            } else {
-                println!("model         generation {}: {}", s.generation, s.model);
-            }
-            println!(
-                "requests      {} ({} points), {} errors, {} overloaded",
-                s.requests, s.points, s.errors, s.overloaded
-            );
-            if s.persist_failures > 0 {
-                println!(
-                    "persistence   {} accepted models NOT persisted (state directory not writable?): a restart would serve an older model",
-                    s.persist_failures
-                );
-            }
-            println!("waiting       {}", s.wait_mode);
-            println!("uptime        {:.1} s", s.uptime.as_secs_f64());
-        }
+        Command::Status { json: false } => print_status(instance, &options)?,
         Command::Compensate {
             input,
             output,
             joints,
-        } => {
-            hexacomp_formats::refuse_same_file(&output, &[&input])?;
-            let mut client = Client::connect(instance, &options)?;
-            let (file, kind) = if joints {
-                (PointsFile::Joints(&input), RequestKind::Joints)
-            } else {
-                (PointsFile::Poses(&input), RequestKind::Poses)
-            };
-            let mut generations = std::collections::BTreeSet::new();
-            let mut answers = vec![CompensatedPoint::empty(); MAX_BATCH];
-            let progress = bytes_progress(&input);
-            let summary = compensate_file::<anyhow::Error>(
-                file,
-                &output,
-                MAX_BATCH,
-                |points, out| {
-                    let answers = &mut answers[..points.len()];
-                    client.compensate_batch(kind, points, answers)?;
-                    out.extend(answers.iter().map(|r| Compensated {
-                        legs: r.legs,
-                        corrections: r.corrections,
-                        status: compensator_status(r.status),
-                        uncertainty_mm: r.uncertainty_mm,
-                    }));
-                    generations.extend(answers.iter().map(|r| r.generation));
-                    Ok(())
-                },
-                |bytes| progress.set_position(bytes),
-            )?;
-            progress.finish_and_clear();
-            eprintln!(
-                "compensated {} points → {} ({}; model generations {generations:?})",
-                summary.points,
-                output.display(),
-                summary.statuses
-            );
+        } => compensate(instance, &options, &input, &output, joints)?,
+    }
+    Ok(())
+}
+
+/// Writes the service's metrics in the Prometheus text format to `output` (whole or not at
+/// all) or standard output; a service absent or not answering is `hexacomp_up 0`, not an error.
+fn write_metrics(
+    instance: &str,
+    options: &ClientOptions,
+    output: Option<&std::path::Path>,
+) -> anyhow::Result<()> {
+    // A service that is not there or does not answer is what `hexacomp_up 0` says; a
+    // wrong instance name, another user's service or another protocol are errors of
+    // the setup, which the timer running this must show.
+    let status = match hexacomp_client::status_of(instance, options) {
+        Ok(status) => Some(status),
+        Err(
+            e @ (hexacomp_client::Error::ServiceAbsent { .. }
+            | hexacomp_client::Error::Timeout { .. }
+            | hexacomp_client::Error::Transport(_)),
+        ) => {
+            eprintln!("hexacomp_up 0: instance {}: {e}", instance);
+            None
+        }
+        Err(e) => return Err(e.into()),
+    };
+    let mut text = metrics::prometheus_text(instance, status.as_ref());
+    if status.is_some() {
+        // The answer times, deadline misses and the model's age; a service of an older
+        // release has no telemetry endpoint: those are left out, and it is said.
+        match hexacomp_client::telemetry_of(instance, options) {
+            Ok(telemetry) => text.push_str(&metrics::telemetry_text(
+                instance,
+                &telemetry,
+                std::time::SystemTime::now(),
+            )),
+            Err(hexacomp_client::Error::ServiceAbsent { .. }) => eprintln!(
+                "instance {instance}: the service has no telemetry endpoint (a release \
+                     before it): answer times, deadline misses and the model's age left out"
+            ),
+            Err(e) => eprintln!(
+                "instance {instance}: no telemetry ({e}): answer times, deadline misses \
+                     and the model's age left out"
+            ),
         }
     }
+    match output {
+        Some(file) => hexacomp_core::durable::replace_file(file, text.as_bytes())
+            .with_context(|| format!("writing {}", file.display()))?,
+        None => print!("{text}"),
+    }
+    Ok(())
+}
+
+/// Prints the service's status for people: geometry, model, counters, wait mode and uptime.
+fn print_status(instance: &str, options: &ClientOptions) -> anyhow::Result<()> {
+    let s = hexacomp_client::status_of(instance, options)?;
+    println!("instance      {}", instance);
+    println!(
+        "geometry      {} ({})",
+        s.geometry_name, s.geometry_fingerprint
+    );
+    if s.generation == 0 {
+        println!("model         none (answering nominal inverse kinematics, status no_model)");
+    } else {
+        println!("model         generation {}: {}", s.generation, s.model);
+    }
+    println!(
+        "requests      {} ({} points), {} errors, {} overloaded",
+        s.requests, s.points, s.errors, s.overloaded
+    );
+    if s.persist_failures > 0 {
+        println!(
+            "persistence   {} accepted models NOT persisted (state directory not writable?): a restart would serve an older model",
+            s.persist_failures
+        );
+    }
+    println!("waiting       {}", s.wait_mode);
+    println!("uptime        {:.1} s", s.uptime.as_secs_f64());
+    Ok(())
+}
+
+/// Compensates the poses (or, with `joints`, the nominal legs) of `input` through the service in
+/// batches of up to [`MAX_BATCH`], writes them to `output` and says what it wrote.
+fn compensate(
+    instance: &str,
+    options: &ClientOptions,
+    input: &std::path::Path,
+    output: &std::path::Path,
+    joints: bool,
+) -> anyhow::Result<()> {
+    hexacomp_formats::refuse_same_file(output, &[input])?;
+    let mut client = Client::connect(instance, options)?;
+    let (file, kind) = if joints {
+        (PointsFile::Joints(input), RequestKind::Joints)
+    } else {
+        (PointsFile::Poses(input), RequestKind::Poses)
+    };
+    let mut generations = std::collections::BTreeSet::new();
+    let mut answers = vec![CompensatedPoint::empty(); MAX_BATCH];
+    let progress = bytes_progress(input);
+    let summary = compensate_file::<anyhow::Error>(
+        file,
+        output,
+        MAX_BATCH,
+        |points, out| {
+            let answers = &mut answers[..points.len()];
+            client.compensate_batch(kind, points, answers)?;
+            out.extend(answers.iter().map(|r| Compensated {
+                legs: r.legs,
+                corrections: r.corrections,
+                status: compensator_status(r.status),
+                uncertainty_mm: r.uncertainty_mm,
+            }));
+            generations.extend(answers.iter().map(|r| r.generation));
+            Ok(())
+        },
+        |bytes| progress.set_position(bytes),
+    )?;
+    progress.finish_and_clear();
+    eprintln!(
+        "compensated {} points → {} ({}; model generations {generations:?})",
+        summary.points,
+        output.display(),
+        summary.statuses
+    );
     Ok(())
 }
 

@@ -132,6 +132,111 @@ fn header(kind: JournalKind, extra: &[&str]) -> String {
     columns.join(",") + "\n"
 }
 
+/// An error at `line` of the journal at `path` (0: the file as a whole).
+fn format_error(path: &Path, line: u64, message: String) -> Error {
+    Error::Format {
+        file: path.display().to_string(),
+        line,
+        column: None,
+        message,
+    }
+}
+
+/// Opens the journal at `path` for reading and appending, creating it when it does not exist,
+/// and locks it (`flock`, exclusive, not waiting): the file and whether this open created it.
+/// Refused when another campaign holds the lock, or when the file locked is no longer the one
+/// at `path`.
+fn open_locked(path: &Path) -> Result<(std::fs::File, bool)> {
+    let open = |create: bool| {
+        std::fs::OpenOptions::new()
+            .read(true)
+            .append(true)
+            .create_new(create)
+            .open(path)
+    };
+    let (file, created) = match open(true) {
+        Ok(file) => (Ok(file), true),
+        Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => (open(false), false),
+        Err(e) => (Err(e), false),
+    };
+    let file = file.map_err(|e| format_error(path, 0, format!("cannot open the journal: {e}")))?;
+    rustix::fs::flock(&file, rustix::fs::FlockOperation::NonBlockingLockExclusive).map_err(
+        |e| {
+            format_error(
+                path,
+                0,
+                format!(
+                    "another campaign is recording into this file ({e}): one campaign per file"
+                ),
+            )
+        },
+    )?;
+    // Locked, but perhaps a file a refused run removed meanwhile
+    // ([`MeasurementsJournal::discard_if_created`]): what is recorded must reach the path.
+    if !path_holds(path, &file) {
+        return Err(format_error(
+            path,
+            0,
+            "the file was removed while it was being opened (another campaign refused at the \
+             same moment): run again"
+                .into(),
+        ));
+    }
+    Ok((file, created))
+}
+
+/// Refuses the journal at `path` holding `bytes` unless they begin with the `expected` header
+/// and settings line, or are the beginning of them (a header cut short): the error names the
+/// first line that differs, what it holds and what this campaign writes there.
+fn refuse_unless_recorded_by(path: &Path, bytes: &[u8], expected: &str) -> Result<()> {
+    let ours = bytes.starts_with(expected.as_bytes()) || expected.as_bytes().starts_with(bytes);
+    if ours {
+        return Ok(());
+    }
+    let first = bytes.split(|b| *b == b'\n').next().unwrap_or_default();
+    let second = bytes.split(|b| *b == b'\n').nth(1).unwrap_or_default();
+    let expected_header = expected.lines().next().unwrap_or_default();
+    let (line, found, wanted) = if first == expected_header.as_bytes() {
+        (2, second, expected.lines().nth(1).unwrap_or_default())
+    } else {
+        (1, first, expected.lines().next().unwrap_or_default())
+    };
+    Err(format_error(
+        path,
+        line,
+        format!(
+            "this file was not recorded by this campaign: it has {:?} where this campaign writes \
+             {wanted:?} (another file, another instrument, seed or geometry: give another --out, \
+             or the settings it was recorded with); it was left as it is",
+            String::from_utf8_lossy(found)
+        ),
+    ))
+}
+
+/// Drops from the journal `file` (at `path`, its contents `bytes`, truncated alike) a last row
+/// cut short by a kill (no line end), which was never recorded, and a header cut short (shorter
+/// than its `header_len` bytes with the settings line), which is written again; on disk before
+/// this returns.
+fn drop_cut_short(
+    path: &Path,
+    file: &std::fs::File,
+    bytes: &mut Vec<u8>,
+    header_len: usize,
+) -> Result<()> {
+    let whole = bytes
+        .iter()
+        .rposition(|b| *b == b'\n')
+        .map_or(0, |last| last + 1);
+    if whole < bytes.len() || bytes.len() < header_len {
+        let keep = if whole < header_len { 0 } else { whole };
+        file.set_len(keep as u64)
+            .and_then(|()| file.sync_data())
+            .map_err(|e| format_error(path, 0, format!("cannot drop the row cut short: {e}")))?;
+        bytes.truncate(keep);
+    }
+    Ok(())
+}
+
 impl MeasurementsJournal {
     /// Opens the journal at `path` to record into, with the `extra` columns after the measured
     /// ones ([`JOURNAL_COLUMNS`] for a campaign's record, [`DRIFT_COLUMNS`] for its drift log),
@@ -149,91 +254,20 @@ impl MeasurementsJournal {
         settings: &str,
         extra: &'static [&'static str],
     ) -> Result<Self> {
-        let file_name = path.display().to_string();
-        let fail = |line: u64, message: String| Error::Format {
-            file: file_name.clone(),
-            line,
-            column: None,
-            message,
-        };
-        let open = |create: bool| {
-            std::fs::OpenOptions::new()
-                .read(true)
-                .append(true)
-                .create_new(create)
-                .open(path)
-        };
-        let (file, created) = match open(true) {
-            Ok(file) => (Ok(file), true),
-            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => (open(false), false),
-            Err(e) => (Err(e), false),
-        };
-        let mut file = file.map_err(|e| fail(0, format!("cannot open the journal: {e}")))?;
-        rustix::fs::flock(&file, rustix::fs::FlockOperation::NonBlockingLockExclusive).map_err(
-            |e| {
-                fail(
-                    0,
-                    format!(
-                        "another campaign is recording into this file ({e}): one campaign per \
-                         file"
-                    ),
-                )
-            },
-        )?;
-        // Locked, but perhaps a file a refused run removed meanwhile
-        // ([`MeasurementsJournal::discard_if_created`]): what is recorded must reach the path.
-        if !path_holds(path, &file) {
-            return Err(fail(
-                0,
-                "the file was removed while it was being opened (another campaign refused at \
-                 the same moment): run again"
-                    .into(),
-            ));
-        }
+        let (mut file, created) = open_locked(path)?;
         let mut bytes = Vec::new();
         file.read_to_end(&mut bytes)
-            .map_err(|e| fail(0, format!("cannot read the journal: {e}")))?;
+            .map_err(|e| format_error(path, 0, format!("cannot read the journal: {e}")))?;
         let expected = format!("{}# campaign: {settings}\n", header(kind, extra));
-        let whole = bytes
-            .iter()
-            .rposition(|b| *b == b'\n')
-            .map_or(0, |last| last + 1);
-        let ours =
-            bytes.starts_with(expected.as_bytes()) || expected.as_bytes().starts_with(&bytes[..]);
-        if !ours {
-            let first = bytes.split(|b| *b == b'\n').next().unwrap_or_default();
-            let second = bytes.split(|b| *b == b'\n').nth(1).unwrap_or_default();
-            let expected_header = expected.lines().next().unwrap_or_default();
-            let (line, found, wanted) = if first == expected_header.as_bytes() {
-                (2, second, expected.lines().nth(1).unwrap_or_default())
-            } else {
-                (1, first, expected.lines().next().unwrap_or_default())
-            };
-            return Err(fail(
-                line,
-                format!(
-                    "this file was not recorded by this campaign: it has {:?} where this \
-                     campaign writes {wanted:?} (another file, another instrument, seed or \
-                     geometry: give another --out, or the settings it was recorded with); it was \
-                     left as it is",
-                    String::from_utf8_lossy(found)
-                ),
-            ));
-        }
-        if whole < bytes.len() || bytes.len() < expected.len() {
-            // A last row cut short by a kill was never recorded; a header cut short is written
-            // again.
-            let keep = if whole < expected.len() { 0 } else { whole };
-            file.set_len(keep as u64)
-                .and_then(|()| file.sync_data())
-                .map_err(|e| fail(0, format!("cannot drop the row cut short: {e}")))?;
-            bytes.truncate(keep);
-        }
+        refuse_unless_recorded_by(path, &bytes, &expected)?;
+        drop_cut_short(path, &file, &mut bytes, expected.len())?;
         if bytes.is_empty() {
             file.write_all(expected.as_bytes())
                 .and_then(|()| file.sync_data())
                 .and_then(|()| sync_directory_of(path))
-                .map_err(|e| fail(0, format!("cannot write the journal's header: {e}")))?;
+                .map_err(|e| {
+                    format_error(path, 0, format!("cannot write the journal's header: {e}"))
+                })?;
         }
         Ok(Self {
             path: path.to_path_buf(),

@@ -80,16 +80,35 @@ pub fn summarise(model: &hexacomp_core::model::Model) -> String {
     )
 }
 
-/// Creates the status, telemetry and deploy endpoints and serves them until stopped.
-pub fn run(setup: ControlSetup, ready: Sender<Result<(), Error>>) {
-    let started = (|| -> Result<_, Error> {
+/// A server of one of the control thread's endpoints: requests `Req` in, replies `Reply` out.
+type ControlServer<Req, Reply> = iceoryx2::port::server::Server<ipc::Service, Req, (), Reply, ()>;
+
+/// The control thread's node and its endpoints' servers. The fields are dropped in their
+/// order: the servers, then their endpoints, then the node.
+struct ControlPorts {
+    telemetry: ControlServer<u64, TelemetryReport>,
+    deploy: ControlServer<[u8], DeployReply>,
+    status: ControlServer<u64, StatusReport>,
+    /// The endpoints (status, deploy, telemetry), kept open while their servers serve.
+    _endpoints: (
+        endpoints::StatusEndpoint,
+        endpoints::DeployEndpoint,
+        endpoints::TelemetryEndpoint,
+    ),
+    node: Node<ipc::Service>,
+}
+
+impl ControlPorts {
+    /// Creates the control thread's node and serves the status, deploy and telemetry endpoints
+    /// of `instance`.
+    fn open(instance: &str) -> Result<Self, Error> {
         let node = NodeBuilder::new()
             .signal_handling_mode(SignalHandlingMode::Disabled)
             .create::<ipc::Service>()
             .map_err(|e| Error::Iceoryx(format!("creating the control thread's node: {e}")))?;
-        let status_service = endpoints::status(&node, &setup.instance, Role::Serve)?;
-        let deploy_service = endpoints::deploy(&node, &setup.instance, Role::Serve)?;
-        let telemetry_service = endpoints::telemetry(&node, &setup.instance, Role::Serve)?;
+        let status_service = endpoints::status(&node, instance, Role::Serve)?;
+        let deploy_service = endpoints::deploy(&node, instance, Role::Serve)?;
+        let telemetry_service = endpoints::telemetry(&node, instance, Role::Serve)?;
         let status = status_service
             .server_builder()
             .create()
@@ -102,13 +121,22 @@ pub fn run(setup: ControlSetup, ready: Sender<Result<(), Error>>) {
             .server_builder()
             .create()
             .map_err(|e| Error::Iceoryx(format!("telemetry server: {e:?}")))?;
-        let services = (status_service, deploy_service, telemetry_service);
-        Ok((node, services, status, deploy, telemetry))
-    })();
-    let (node, _services, status, deploy, telemetry) = match started {
-        Ok(parts) => {
+        Ok(Self {
+            telemetry,
+            deploy,
+            status,
+            _endpoints: (status_service, deploy_service, telemetry_service),
+            node,
+        })
+    }
+}
+
+/// Creates the status, telemetry and deploy endpoints and serves them until stopped.
+pub fn run(setup: ControlSetup, ready: Sender<Result<(), Error>>) {
+    let ports = match ControlPorts::open(&setup.instance) {
+        Ok(ports) => {
             let _ = ready.send(Ok(()));
-            parts
+            ports
         }
         Err(e) => {
             let _ = ready.send(Err(e));
@@ -129,39 +157,24 @@ pub fn run(setup: ControlSetup, ready: Sender<Result<(), Error>>) {
         while let Ok(old) = setup.retired.try_recv() {
             drop(old);
         }
-        if let Ok(Some(request)) = status.receive() {
+        if let Ok(Some(request)) = ports.status.receive() {
             busy = true;
-            let c = &setup.counters;
-            let report = StatusReport {
-                protocol: PROTOCOL_VERSION,
-                wait_mode: setup.wait_mode,
-                geometry_fingerprint: setup.geometry.fingerprint().0,
-                generation: c.generation.load(Ordering::Relaxed),
-                requests: c.requests.load(Ordering::Relaxed),
-                points: c.points.load(Ordering::Relaxed),
-                errors: c.errors.load(Ordering::Relaxed),
-                overloaded: c.overloaded.load(Ordering::Relaxed),
-                persist_failures: c.persist_failures.load(Ordering::Relaxed),
-                uptime_ns: start.elapsed().as_nanos() as u64,
-                geometry_name: text_field(&setup.geometry.name),
-                model: text_field(&serving.summary),
-            };
-            if let Err(e) = request.send_copy(report) {
+            if let Err(e) = request.send_copy(status_report(&setup, &serving, start)) {
                 tracing::warn!("answering a status request failed: {e:?}");
             }
         }
-        if let Ok(Some(request)) = telemetry.receive() {
+        if let Ok(Some(request)) = ports.telemetry.receive() {
             busy = true;
             if let Err(e) = request.send_copy(telemetry_report(&setup.counters, &serving)) {
                 tracing::warn!("answering a telemetry request failed: {e:?}");
             }
         }
-        if let Ok(Some(request)) = deploy.receive() {
+        if let Ok(Some(request)) = ports.deploy.receive() {
             busy = true;
             // A deployer killed before the answer leaves the old model serving: its dead node is
             // cleaned up, which disconnects its request, and the validated model is dropped.
             let deployer_alive = || {
-                node.try_cleanup_dead_nodes();
+                ports.node.try_cleanup_dead_nodes();
                 request.is_connected()
             };
             let reply = handle_deploy(
@@ -178,6 +191,26 @@ pub fn run(setup: ControlSetup, ready: Sender<Result<(), Error>>) {
         if !busy {
             std::thread::sleep(IDLE_POLL);
         }
+    }
+}
+
+/// The status report: the counters, the geometry and the model serving, `start` the instant the
+/// control thread started serving (the uptime counts from it).
+fn status_report(setup: &ControlSetup, serving: &ServingModel, start: Instant) -> StatusReport {
+    let c = &setup.counters;
+    StatusReport {
+        protocol: PROTOCOL_VERSION,
+        wait_mode: setup.wait_mode,
+        geometry_fingerprint: setup.geometry.fingerprint().0,
+        generation: c.generation.load(Ordering::Relaxed),
+        requests: c.requests.load(Ordering::Relaxed),
+        points: c.points.load(Ordering::Relaxed),
+        errors: c.errors.load(Ordering::Relaxed),
+        overloaded: c.overloaded.load(Ordering::Relaxed),
+        persist_failures: c.persist_failures.load(Ordering::Relaxed),
+        uptime_ns: start.elapsed().as_nanos() as u64,
+        geometry_name: text_field(&setup.geometry.name),
+        model: text_field(&serving.summary),
     }
 }
 
@@ -248,35 +281,14 @@ fn handle_deploy(
             return refuse("the serving thread has stopped".into());
         }
     }
-    let mut note = String::new();
-    if let Err(e) = state::persist(&setup.state_dir, bytes, number) {
-        tracing::error!("accepted generation {number} but could not persist it: {e}");
-        setup
-            .counters
-            .persist_failures
-            .fetch_add(1, Ordering::Relaxed);
-        note = format!(
-            "accepted but not persisted ({e}); a restart would serve {}",
-            match state::persisted_generation(&setup.state_dir) {
-                Ok(Some(persisted)) => format!("generation {persisted}"),
-                Ok(None) => "no model".into(),
-                Err(e) => format!("nothing: {e}"),
-            }
-        );
-    }
+    let mut note = persist_accepted(setup, bytes, number);
     // The reply says the model serves: wait until the serving thread has taken it in (between
     // two requests; within its 10 ms tick when it sleeps in event mode).
-    let deadline = Instant::now() + TAKE_IN_PATIENCE;
-    while setup.counters.generation.load(Ordering::Relaxed) < number {
-        if Instant::now() >= deadline {
-            tracing::warn!("generation {number} was not taken in within {TAKE_IN_PATIENCE:?}");
-            note = join(
-                note,
-                "accepted, not serving yet: the serving thread has not taken it in",
-            );
-            break;
-        }
-        std::thread::sleep(Duration::from_micros(100));
+    if !taken_in(&setup.counters, number) {
+        note = join(
+            note,
+            "accepted, not serving yet: the serving thread has not taken it in",
+        );
     }
     serving.summary = line;
     serving.since = Some(std::time::SystemTime::now());
@@ -287,6 +299,41 @@ fn handle_deploy(
         generation: number,
         message: text_field(&note),
     }
+}
+
+/// Persists the accepted model file `bytes` as generation `number`: an empty note, or, when
+/// that fails (counted), what the deploy's reply says of it: what a restart would serve.
+fn persist_accepted(setup: &ControlSetup, bytes: &[u8], number: u64) -> String {
+    let Err(e) = state::persist(&setup.state_dir, bytes, number) else {
+        return String::new();
+    };
+    tracing::error!("accepted generation {number} but could not persist it: {e}");
+    setup
+        .counters
+        .persist_failures
+        .fetch_add(1, Ordering::Relaxed);
+    format!(
+        "accepted but not persisted ({e}); a restart would serve {}",
+        match state::persisted_generation(&setup.state_dir) {
+            Ok(Some(persisted)) => format!("generation {persisted}"),
+            Ok(None) => "no model".into(),
+            Err(e) => format!("nothing: {e}"),
+        }
+    )
+}
+
+/// Waits up to [`TAKE_IN_PATIENCE`], polling every 100 µs, until the serving thread serves
+/// generation `number` or a later one; whether it did (a warning is logged when not).
+fn taken_in(counters: &Counters, number: u64) -> bool {
+    let deadline = Instant::now() + TAKE_IN_PATIENCE;
+    while counters.generation.load(Ordering::Relaxed) < number {
+        if Instant::now() >= deadline {
+            tracing::warn!("generation {number} was not taken in within {TAKE_IN_PATIENCE:?}");
+            return false;
+        }
+        std::thread::sleep(Duration::from_micros(100));
+    }
+    true
 }
 
 #[cfg(test)]

@@ -140,32 +140,13 @@ impl Service {
         } = options;
         hexacomp_protocol::service_name(&instance, hexacomp_protocol::Endpoint::Compensate)?;
         state::prepare(&state_dir)?;
-        let persisted = state::persisted_generation(&state_dir)?;
-        // A start model is numbered after whatever the state directory holds, so that a number
-        // never names two models; it is persisted only once this service owns the instance.
-        let (initial, start_model_file) = match &model {
-            Some(path) => {
-                let (model, bytes) = start_model(path, &geometry)?;
-                let number = next_generation(persisted)?;
-                (Some((model, number)), Some((bytes, number)))
-            }
-            None => (state::restore(&state_dir, &geometry)?, None),
-        };
-        // When the model serving was accepted: now for a start model, its deploy (the persisted
-        // file's time) for a restored one; now, said, when that time cannot be read.
-        let model_since = match (&initial, &model) {
-            (None, _) => None,
-            (Some(_), Some(_)) => Some(std::time::SystemTime::now()),
-            (Some(_), None) => Some(persisted_at(&state_dir)),
-        };
-        let initial_summary = initial
+        let start = StartModel::choose(model.as_deref(), &state_dir, &geometry)?;
+        let initial_summary = start
+            .initial
             .as_ref()
             .map(|(model, _)| summarise(model))
             .unwrap_or_default();
-        let initial_generation = initial.as_ref().map_or(0, |(_, number)| *number);
-        // Deploys are numbered after every number the state directory has used, also when its
-        // model was ignored (another geometry, damaged): a number never names two models.
-        let last_numbered = initial_generation.max(persisted.unwrap_or(0));
+        let initial_generation = start.initial.as_ref().map_or(0, |(_, number)| *number);
         tracing::info!(
             "instance {instance} geometry {} ({}), model generation {initial_generation}, state {}",
             geometry.name,
@@ -179,14 +160,12 @@ impl Service {
         let stop = Arc::new(AtomicBool::new(false));
         let (to_serving, incoming) = crossbeam_channel::bounded(1);
         let (retired_tx, retired_rx) = crossbeam_channel::bounded(4);
-        // One "ready" channel per thread, its only sender moved into the thread: a thread that
-        // ends before it is ready (a panic) drops it, which ends the wait with an error.
-        let (serving_ready, serving_ready_rx) = crossbeam_channel::bounded(1);
-        let (control_ready, control_ready_rx) = crossbeam_channel::bounded(1);
         let setup = ServingSetup {
             instance: instance.clone(),
             geometry: geometry.clone(),
-            initial: initial.map(|(model, number)| Box::new(Generation::new(&model, number))),
+            initial: start
+                .initial
+                .map(|(model, number)| Box::new(Generation::new(&model, number))),
             incoming,
             retired: retired_tx,
             counters: counters.clone(),
@@ -194,26 +173,14 @@ impl Service {
             wait,
             client_budget,
         };
-        let serving = spawn("serving", move || {
-            schedule_serving_thread(cpu, realtime);
-            serving::serve(setup, serving_ready)
-        })?;
         // From here on, a failure stops and joins what has started (`Drop`).
-        let mut service = Self {
-            threads: Some(Threads {
-                serving,
-                control: None,
-            }),
-            stop: stop.clone(),
-            counters: counters.clone(),
-        };
-        let effective_wait = await_ready("serving", &serving_ready_rx)?;
+        let (mut service, effective_wait) = Self::start_serving(setup, cpu, realtime)?;
         // The instance is ours (a second service stops at the line above): persist the start
         // model now, before the control thread may number deploys after it.
-        if let Some((bytes, number)) = &start_model_file {
+        if let Some((bytes, number)) = &start.to_persist {
             state::persist(&state_dir, bytes, *number)?;
         }
-        let setup = ControlSetup {
+        service.start_control(ControlSetup {
             instance: instance.clone(),
             geometry,
             state_dir: state_dir.clone(),
@@ -222,17 +189,50 @@ impl Service {
             counters,
             stop,
             initial_summary,
-            last_numbered,
-            model_since,
+            last_numbered: start.last_numbered,
+            model_since: start.since,
             wait_mode: effective_wait.wire_value(),
-        };
-        let control = spawn("control", move || control::run(setup, control_ready))?;
-        if let Some(threads) = service.threads.as_mut() {
-            threads.control = Some(control);
-        }
-        await_ready("control", &control_ready_rx)?;
+        })?;
         tracing::info!("serving instance {instance}");
         Ok(service)
+    }
+
+    /// Starts the serving thread on `setup`, pinned and prioritised as asked, and waits until it
+    /// serves: the service (its control thread not started yet) and the wait mode in effect. A
+    /// serving thread that cannot start is stopped and joined (`Drop`).
+    fn start_serving(
+        setup: ServingSetup,
+        cpu: Option<usize>,
+        realtime: Option<i32>,
+    ) -> Result<(Self, WaitMode), Error> {
+        let (stop, counters) = (setup.stop.clone(), setup.counters.clone());
+        // One "ready" channel per thread, its only sender moved into the thread: a thread that
+        // ends before it is ready (a panic) drops it, which ends the wait with an error.
+        let (serving_ready, serving_ready_rx) = crossbeam_channel::bounded(1);
+        let serving = spawn("serving", move || {
+            schedule_serving_thread(cpu, realtime);
+            serving::serve(setup, serving_ready)
+        })?;
+        let service = Self {
+            threads: Some(Threads {
+                serving,
+                control: None,
+            }),
+            stop,
+            counters,
+        };
+        let effective_wait = await_ready("serving", &serving_ready_rx)?;
+        Ok((service, effective_wait))
+    }
+
+    /// Starts the control thread on `setup` beside the serving one and waits until it is ready.
+    fn start_control(&mut self, setup: ControlSetup) -> Result<(), Error> {
+        let (control_ready, control_ready_rx) = crossbeam_channel::bounded(1);
+        let control = spawn("control", move || control::run(setup, control_ready))?;
+        if let Some(threads) = self.threads.as_mut() {
+            threads.control = Some(control);
+        }
+        await_ready("control", &control_ready_rx)
     }
 
     /// The counters both threads keep (requests, points, errors, generation serving, …).
@@ -274,6 +274,57 @@ impl Drop for Service {
                 tracing::error!("{e}");
             }
         }
+    }
+}
+
+/// The model a service starts with, and where the numbering of the deploys after it stands.
+struct StartModel {
+    /// The model served from the start, with its generation number.
+    initial: Option<(hexacomp_core::model::Model, u64)>,
+    /// A start model's file and its number, to persist once the instance is this service's.
+    to_persist: Option<(Vec<u8>, u64)>,
+    /// When the model serving was accepted; `None` without a model.
+    since: Option<std::time::SystemTime>,
+    /// The last generation number used (the start model's, or any the state directory used):
+    /// deploys are numbered after it.
+    last_numbered: u64,
+}
+
+impl StartModel {
+    /// The start model: the file `model` (validated) when given, else the model `state_dir`
+    /// persisted for `geometry`, if any.
+    fn choose(
+        model: Option<&std::path::Path>,
+        state_dir: &std::path::Path,
+        geometry: &Geometry,
+    ) -> Result<Self, Error> {
+        let persisted = state::persisted_generation(state_dir)?;
+        // A start model is numbered after whatever the state directory holds, so that a number
+        // never names two models; it is persisted only once this service owns the instance.
+        let (initial, to_persist) = match model {
+            Some(path) => {
+                let (model, bytes) = start_model(path, geometry)?;
+                let number = next_generation(persisted)?;
+                (Some((model, number)), Some((bytes, number)))
+            }
+            None => (state::restore(state_dir, geometry)?, None),
+        };
+        // When the model serving was accepted: now for a start model, its deploy (the persisted
+        // file's time) for a restored one; now, said, when that time cannot be read.
+        let since = match (&initial, model) {
+            (None, _) => None,
+            (Some(_), Some(_)) => Some(std::time::SystemTime::now()),
+            (Some(_), None) => Some(persisted_at(state_dir)),
+        };
+        let initial_generation = initial.as_ref().map_or(0, |(_, number)| *number);
+        Ok(Self {
+            initial,
+            to_persist,
+            since,
+            // Deploys are numbered after every number the state directory has used, also when
+            // its model was ignored (another geometry, damaged): a number never names two models.
+            last_numbered: initial_generation.max(persisted.unwrap_or(0)),
+        })
     }
 }
 

@@ -253,19 +253,7 @@ pub fn serve(setup: ServingSetup, ready: Sender<Result<WaitMode, Error>>) {
         wait,
         client_budget,
     } = setup;
-    // No signal handling by iceoryx2: the binary takes SIGTERM/SIGINT itself (`termination`),
-    // and iceoryx2's handler would also record SIGCONT, SIGUSR1, … as "the last signal".
-    let started = NodeBuilder::new()
-        .signal_handling_mode(SignalHandlingMode::Disabled)
-        .create::<ipc::Service>()
-        .map_err(|e| {
-            Error::Iceoryx(format!(
-                "creating the serving thread's node: {e}{}",
-                hexacomp_protocol::foreign_root_hint()
-            ))
-        })
-        .and_then(|node| Ok((compensation_endpoint(&node, &instance)?, node)));
-    let ((_service, server), node) = match started {
+    let ((_service, server), node) = match serving_node(&instance) {
         Ok(parts) => parts,
         Err(e) => {
             let _ = ready.send(Err(e));
@@ -284,20 +272,7 @@ pub fn serve(setup: ServingSetup, ready: Sender<Result<WaitMode, Error>>) {
     let wake_endpoint = endpoints::wake(&node, &instance, Role::Serve)
         .inspect_err(|e| tracing::error!("{e}: clients cannot wake this service"))
         .ok();
-    let wake = match (wait, &wake_endpoint) {
-        (WaitMode::Event, Some(endpoint)) => match wake_listener(endpoint) {
-            Ok(listener) => Some(listener),
-            Err(e) => {
-                tracing::error!("{e}; serving with --wait sleep instead");
-                None
-            }
-        },
-        (WaitMode::Event, None) => {
-            tracing::error!("no wake endpoint; serving with --wait sleep instead");
-            None
-        }
-        _ => None,
-    };
+    let wake = event_listener(wait, wake_endpoint.as_ref());
     let effective = match (wait, &wake) {
         (WaitMode::Event, None) => WaitMode::Sleep,
         _ => wait,
@@ -320,6 +295,45 @@ pub fn serve(setup: ServingSetup, ready: Sender<Result<WaitMode, Error>>) {
             (None, WaitMode::Spin) => std::hint::spin_loop(),
             (None, _) => std::thread::sleep(Duration::from_micros(50)),
         }
+    }
+}
+
+/// The serving thread's node and the compensation endpoint of `instance` served on it; refused
+/// when another service owns the instance.
+fn serving_node(instance: &str) -> Result<(CompensationEndpoint, Node<ipc::Service>), Error> {
+    // No signal handling by iceoryx2: the binary takes SIGTERM/SIGINT itself (`termination`),
+    // and iceoryx2's handler would also record SIGCONT, SIGUSR1, … as "the last signal".
+    NodeBuilder::new()
+        .signal_handling_mode(SignalHandlingMode::Disabled)
+        .create::<ipc::Service>()
+        .map_err(|e| {
+            Error::Iceoryx(format!(
+                "creating the serving thread's node: {e}{}",
+                hexacomp_protocol::foreign_root_hint()
+            ))
+        })
+        .and_then(|node| Ok((compensation_endpoint(&node, instance)?, node)))
+}
+
+/// In event mode, this thread's listener on the wake `endpoint`; `None` in the other modes,
+/// and (said, the service then sleeping instead) when there is no endpoint or no listener.
+fn event_listener(
+    wait: WaitMode,
+    endpoint: Option<&endpoints::WakeEndpoint>,
+) -> Option<iceoryx2::port::listener::Listener<ipc::Service>> {
+    match (wait, endpoint) {
+        (WaitMode::Event, Some(endpoint)) => match wake_listener(endpoint) {
+            Ok(listener) => Some(listener),
+            Err(e) => {
+                tracing::error!("{e}; serving with --wait sleep instead");
+                None
+            }
+        },
+        (WaitMode::Event, None) => {
+            tracing::error!("no wake endpoint; serving with --wait sleep instead");
+            None
+        }
+        _ => None,
     }
 }
 

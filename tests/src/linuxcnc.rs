@@ -211,42 +211,9 @@ impl SimConfig {
             let _ = std::fs::remove_dir_all(ServiceUnit::installed().state_dir(INSTALLED_INSTANCE));
         }
         let dir = std::env::temp_dir().join(format!("hexacomp-lcnc-{test}-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(dir.join("config")).expect("config directory");
-        for entry in std::fs::read_dir(integration_dir().join("hexapod-sim")).expect("example") {
-            let path = entry.expect("example entry").path();
-            std::fs::copy(&path, dir.join(path.file_name().expect("a file name")))
-                .expect("copying the example configuration");
-        }
-        std::fs::copy(
-            integration_dir().join("tests/drive.py"),
-            dir.join("drive.py"),
-        )
-        .expect("copying drive.py");
-        if !installed() {
-            std::fs::copy(binary("hexacomp-service"), dir.join("hexacomp-service"))
-                .expect("copying hexacomp-service");
-        }
+        copy_example(&dir);
         let ini = dir.join("hexapod-hexacomp.ini");
-        let text = std::fs::read_to_string(&ini).expect("reading the ini");
-        let display = format!("DISPLAY = {}", dir.join("drive.py").display());
-        let text = adapt_ini(text.replace("DISPLAY = axis", &display));
-        // The servo thread of LinuxCNC's non-realtime mode on a shared 2-core VM is preempted for
-        // hundreds of µs; a real machine keeps the example's 200 µs.
-        let hal = dir.join("hexacomp.hal");
-        let wiring = std::fs::read_to_string(&hal).expect("reading hexacomp.hal");
-        let mut wiring = wiring.replace(
-            "setp hexacomp.0.wait-us 200",
-            &format!("setp hexacomp.0.wait-us {WAIT_US}"),
-        );
-        if installed() {
-            wiring = wiring.replace(
-                "loadrt hexacomp instance=default",
-                &format!("loadrt hexacomp instance={INSTALLED_INSTANCE}"),
-            );
-        }
-        std::fs::write(&hal, wiring).expect("writing hexacomp.hal");
-        std::fs::write(&ini, text).expect("writing the ini");
+        adapt_example(&dir, &ini, adapt_ini);
         // Installed, everything uses iceoryx2's default root, as on the machine.
         if !installed() {
             std::fs::write(
@@ -261,20 +228,7 @@ impl SimConfig {
         }
 
         write_sampler_hal(&dir);
-        let geometry_file = dir.join("geometry.toml");
-        let output = Command::new(binary("hexacomp-trainer"))
-            .args(["geometry", "--from-linuxcnc"])
-            .arg(&ini)
-            .arg("--out")
-            .arg(&geometry_file)
-            .output()
-            .expect("running hexacomp-trainer geometry");
-        assert!(
-            output.status.success(),
-            "converting the LinuxCNC geometry: {}",
-            String::from_utf8_lossy(&output.stderr)
-        );
-        let geometry = Geometry::load(&geometry_file).expect("the converted geometry");
+        let geometry = converted_geometry(&ini, &dir.join("geometry.toml"));
         // With an uncertainty, for the component's `uncertainty` pin.
         let model = Model {
             uncertainty: Some(test_uncertainty_over(geometry.leg_range)),
@@ -446,24 +400,10 @@ impl SimConfig {
             .as_ref()
             .expect("the installed service is started as root");
         if !state.exists() {
-            std::fs::create_dir(&state).expect("creating the state directory");
-            let mode = unit.get("StateDirectoryMode").map_or(0o755, |m| {
-                u32::from_str_radix(m, 8).expect("StateDirectoryMode in octal")
-            });
-            std::fs::set_permissions(&state, std::os::unix::fs::PermissionsExt::from_mode(mode))
-                .expect("the state directory's mode");
-            std::os::unix::fs::chown(&state, Some(user.uid), Some(user.gid))
-                .expect("the state directory's owner");
+            create_state_dir(&unit, &state, user);
         }
         let socket_path = self.dir.join("notify.sock");
-        let _ = std::fs::remove_file(&socket_path);
-        let socket =
-            std::os::unix::net::UnixDatagram::bind(&socket_path).expect("the notify socket");
-        std::os::unix::fs::chown(&socket_path, Some(user.uid), Some(user.gid))
-            .expect("the notify socket's owner");
-        socket
-            .set_read_timeout(Some(Duration::from_millis(200)))
-            .expect("a read timeout");
+        let socket = notify_socket(&socket_path, user);
         let line = unit.exec_start(instance);
         eprintln!("the unit's ExecStart as {}: {}", user.name, line.join(" "));
         let log_path = self.dir.join(log);
@@ -476,28 +416,32 @@ impl SimConfig {
             .stderr(std::fs::File::create(&log_path).expect("service log"))
             .spawn()
             .unwrap_or_else(|e| panic!("starting {line:?}: {e}"));
-        let deadline = Instant::now() + Duration::from_secs(20);
-        let mut buffer = [0u8; 4096];
-        loop {
-            if let Ok(n) = socket.recv(&mut buffer) {
-                let message = String::from_utf8_lossy(&buffer[..n]);
-                if message.lines().any(|l| l == "READY=1") {
-                    break;
-                }
-            }
-            if let Ok(Some(status)) = child.try_wait() {
-                panic!(
-                    "{line:?} exited ({status}):\n{}",
-                    std::fs::read_to_string(&log_path).unwrap_or_default()
-                );
-            }
-            assert!(
-                Instant::now() < deadline,
-                "{line:?} never notified READY=1:\n{}",
-                std::fs::read_to_string(&log_path).unwrap_or_default()
-            );
-        }
+        wait_for_ready(&socket, &mut child, &line, &log_path);
         let service = SimService(child);
+        self.check_installed_service_access(user);
+        let deploy = self.run(
+            binary("hexacomp-trainer"),
+            &["deploy", "--instance", instance, "--model", model],
+        );
+        assert!(
+            deploy.status.success(),
+            "deploying {model}: {}",
+            String::from_utf8_lossy(&deploy.stderr)
+        );
+        let persisted = std::fs::metadata(state.join("model.hxm")).expect("the persisted model");
+        assert_eq!(
+            std::os::unix::fs::MetadataExt::uid(&persisted),
+            user.uid,
+            "the persisted model's owner"
+        );
+        service
+    }
+
+    /// Checks that the installed service of [`INSTALLED_INSTANCE`], running as `user`, answers
+    /// `hexacomp-client status` run as `user`, and refuses [`LINUXCNC_USER`] (another user)
+    /// saying whose it is.
+    fn check_installed_service_access(&self, user: &RunAs) {
+        let instance = INSTALLED_INSTANCE;
         let client = binary("hexacomp-client");
         let status = self.run(&client, &["--instance", instance, "status"]);
         assert!(
@@ -523,22 +467,127 @@ impl SimConfig {
             "{LINUXCNC_USER} was not refused access to the service of {}: {refusal}",
             user.name
         );
-        let deploy = self.run(
-            binary("hexacomp-trainer"),
-            &["deploy", "--instance", instance, "--model", model],
+    }
+}
+
+/// Creates the directory `dir` and copies into it the example configuration, `drive.py` and,
+/// unless the installed packages are tested, this build's `hexacomp-service`.
+fn copy_example(dir: &Path) {
+    let _ = std::fs::remove_dir_all(dir);
+    std::fs::create_dir_all(dir.join("config")).expect("config directory");
+    for entry in std::fs::read_dir(integration_dir().join("hexapod-sim")).expect("example") {
+        let path = entry.expect("example entry").path();
+        std::fs::copy(&path, dir.join(path.file_name().expect("a file name")))
+            .expect("copying the example configuration");
+    }
+    std::fs::copy(
+        integration_dir().join("tests/drive.py"),
+        dir.join("drive.py"),
+    )
+    .expect("copying drive.py");
+    if !installed() {
+        std::fs::copy(binary("hexacomp-service"), dir.join("hexacomp-service"))
+            .expect("copying hexacomp-service");
+    }
+}
+
+/// Adapts the example copied into `dir` to the tests: the `ini`'s display is the driver script,
+/// then `adapt_ini` changes what it will; the component waits [`WAIT_US`] for the service, and,
+/// installed, asks [`INSTALLED_INSTANCE`].
+fn adapt_example(dir: &Path, ini: &Path, adapt_ini: impl FnOnce(String) -> String) {
+    let text = std::fs::read_to_string(ini).expect("reading the ini");
+    let display = format!("DISPLAY = {}", dir.join("drive.py").display());
+    let text = adapt_ini(text.replace("DISPLAY = axis", &display));
+    // The servo thread of LinuxCNC's non-realtime mode on a shared 2-core VM is preempted for
+    // hundreds of µs; a real machine keeps the example's 200 µs.
+    let hal = dir.join("hexacomp.hal");
+    let wiring = std::fs::read_to_string(&hal).expect("reading hexacomp.hal");
+    let mut wiring = wiring.replace(
+        "setp hexacomp.0.wait-us 200",
+        &format!("setp hexacomp.0.wait-us {WAIT_US}"),
+    );
+    if installed() {
+        wiring = wiring.replace(
+            "loadrt hexacomp instance=default",
+            &format!("loadrt hexacomp instance={INSTALLED_INSTANCE}"),
         );
+    }
+    std::fs::write(&hal, wiring).expect("writing hexacomp.hal");
+    std::fs::write(ini, text).expect("writing the ini");
+}
+
+/// Converts the geometry of the LinuxCNC configuration `ini` with `hexacomp-trainer geometry
+/// --from-linuxcnc` into `geometry_file` and loads it (mm).
+fn converted_geometry(ini: &Path, geometry_file: &Path) -> Geometry {
+    let output = Command::new(binary("hexacomp-trainer"))
+        .args(["geometry", "--from-linuxcnc"])
+        .arg(ini)
+        .arg("--out")
+        .arg(geometry_file)
+        .output()
+        .expect("running hexacomp-trainer geometry");
+    assert!(
+        output.status.success(),
+        "converting the LinuxCNC geometry: {}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    Geometry::load(geometry_file).expect("the converted geometry")
+}
+
+/// Creates the installed unit's state directory `state` as systemd does: with the unit's
+/// `StateDirectoryMode` (0755 without one), owned by `user`.
+fn create_state_dir(unit: &ServiceUnit, state: &Path, user: &RunAs) {
+    std::fs::create_dir(state).expect("creating the state directory");
+    let mode = unit.get("StateDirectoryMode").map_or(0o755, |m| {
+        u32::from_str_radix(m, 8).expect("StateDirectoryMode in octal")
+    });
+    std::fs::set_permissions(state, std::os::unix::fs::PermissionsExt::from_mode(mode))
+        .expect("the state directory's mode");
+    std::os::unix::fs::chown(state, Some(user.uid), Some(user.gid))
+        .expect("the state directory's owner");
+}
+
+/// A socket at `path` (replacing what is there) for the service's `sd_notify` messages, owned
+/// by `user` (the service sends as that user), its reads waiting 200 ms at most.
+fn notify_socket(path: &Path, user: &RunAs) -> std::os::unix::net::UnixDatagram {
+    let _ = std::fs::remove_file(path);
+    let socket = std::os::unix::net::UnixDatagram::bind(path).expect("the notify socket");
+    std::os::unix::fs::chown(path, Some(user.uid), Some(user.gid))
+        .expect("the notify socket's owner");
+    socket
+        .set_read_timeout(Some(Duration::from_millis(200)))
+        .expect("a read timeout");
+    socket
+}
+
+/// Waits (20 s at most) until the service started as `child` by `line` notifies `READY=1` on
+/// `socket`; panics with its log at `log_path` when it exits or the time is up first.
+fn wait_for_ready(
+    socket: &std::os::unix::net::UnixDatagram,
+    child: &mut Child,
+    line: &[String],
+    log_path: &Path,
+) {
+    let deadline = Instant::now() + Duration::from_secs(20);
+    let mut buffer = [0u8; 4096];
+    loop {
+        if let Ok(n) = socket.recv(&mut buffer) {
+            let message = String::from_utf8_lossy(&buffer[..n]);
+            if message.lines().any(|l| l == "READY=1") {
+                break;
+            }
+        }
+        if let Ok(Some(status)) = child.try_wait() {
+            panic!(
+                "{line:?} exited ({status}):\n{}",
+                std::fs::read_to_string(log_path).unwrap_or_default()
+            );
+        }
         assert!(
-            deploy.status.success(),
-            "deploying {model}: {}",
-            String::from_utf8_lossy(&deploy.stderr)
+            Instant::now() < deadline,
+            "{line:?} never notified READY=1:\n{}",
+            std::fs::read_to_string(log_path).unwrap_or_default()
         );
-        let persisted = std::fs::metadata(state.join("model.hxm")).expect("the persisted model");
-        assert_eq!(
-            std::os::unix::fs::MetadataExt::uid(&persisted),
-            user.uid,
-            "the persisted model's owner"
-        );
-        service
     }
 }
 

@@ -7,7 +7,7 @@ use hdrhistogram::Histogram;
 use crate::path::interpolate;
 use crate::report::{self, JsonSummary, Summary, write_into};
 use crate::session::{PathArgs, Session, SetupArgs, VariantKind};
-use crate::stream::{Pacing, StreamOptions, new_histogram, stream};
+use crate::stream::{Pacing, StreamOptions, StreamRun, new_histogram, stream};
 
 /// Stream the same path through all four variants — `hexacomp` (the service over iceoryx2),
 /// `echo` (an iceoryx2 server that computes nothing: the transport floor), `uds` (the same
@@ -45,6 +45,30 @@ struct Ratios {
     p50_uds: f64,
 }
 
+/// One variant's round trips merged over all rounds.
+struct VariantTotals {
+    kind: VariantKind,
+    /// Round trips of every round, ns.
+    histogram: Histogram<u64>,
+    /// Points streamed in all rounds.
+    points: usize,
+    /// Requests answered after their deadline, all rounds.
+    misses: usize,
+    /// Time spent streaming in all rounds, s.
+    seconds: f64,
+}
+
+impl VariantTotals {
+    /// The merged latency figures and the points per second over all rounds.
+    fn summary(&self) -> (VariantKind, Summary, f64) {
+        (
+            self.kind,
+            Summary::of(&self.histogram, self.points, self.misses),
+            self.points as f64 / self.seconds,
+        )
+    }
+}
+
 pub fn run(command: &CompareCommand) -> anyhow::Result<()> {
     anyhow::ensure!(
         command.points > 0 && command.rounds > 0,
@@ -54,6 +78,7 @@ pub fn run(command: &CompareCommand) -> anyhow::Result<()> {
     let duration = command.points as f64 / command.path.rate;
     let path = interpolate(&session.geometry, &command.path.spec(duration))?;
     let poses = &path.poses[..command.points.min(path.poses.len())];
+    let warm_up = &path.poses[..WARM_UP.min(path.poses.len())];
     let options = StreamOptions {
         pacing: Pacing::FreeRunning,
         batch: 1,
@@ -61,62 +86,29 @@ pub fn run(command: &CompareCommand) -> anyhow::Result<()> {
         swapping: None,
         deadline_s: path.period_s,
     };
-    let mut merged: Vec<(VariantKind, Histogram<u64>, usize, usize, f64)> = VariantKind::ALL
+    let mut totals: Vec<VariantTotals> = VariantKind::ALL
         .iter()
-        .map(|k| (*k, new_histogram(), 0, 0, 0.0))
-        .collect();
-    let mut rounds = Vec::new();
-    for round in 1..=command.rounds {
-        let mut p = std::collections::HashMap::new();
-        for entry in merged.iter_mut() {
-            let kind = entry.0;
-            let (mut variant, child) = session.variant(kind)?;
-            stream(
-                variant.as_mut(),
-                &path.poses[..WARM_UP.min(path.poses.len())],
-                &options,
-            )?;
-            let run = stream(variant.as_mut(), poses, &options)?;
-            drop(variant);
-            drop(child);
-            run.ensure_no_failures(kind.name())?;
-            let s = Summary::of_run(&run);
-            eprintln!(
-                "round {round}/{}: {:<9} p50 {:>8.2} µs  p99.9 {:>8.2} µs",
-                command.rounds,
-                kind.name(),
-                s.p50_ns as f64 / 1e3,
-                s.p999_ns as f64 / 1e3
-            );
-            p.insert(kind, s);
-            entry.1.add(&run.histogram)?;
-            entry.2 += run.points;
-            entry.3 += run.deadline_misses;
-            entry.4 += run.elapsed.as_secs_f64();
-        }
-        let ratio = |a: u64, b: u64| a as f64 / b as f64;
-        let (h, e, u) = (
-            p[&VariantKind::Hexacomp],
-            p[&VariantKind::Echo],
-            p[&VariantKind::Uds],
-        );
-        rounds.push(Ratios {
-            p50_echo: ratio(h.p50_ns, e.p50_ns),
-            p999_echo: ratio(h.p999_ns, e.p999_ns),
-            p50_uds: ratio(h.p50_ns, u.p50_ns),
-        });
-    }
-
-    let summaries: Vec<(VariantKind, Summary, f64)> = merged
-        .iter()
-        .map(|(kind, histogram, points, misses, seconds)| {
-            (
-                *kind,
-                Summary::of(histogram, *points, *misses),
-                *points as f64 / seconds,
-            )
+        .map(|&kind| VariantTotals {
+            kind,
+            histogram: new_histogram(),
+            points: 0,
+            misses: 0,
+            seconds: 0.0,
         })
         .collect();
+    let setup = RoundSetup {
+        session: &session,
+        warm_up,
+        poses,
+        options: &options,
+    };
+    let mut rounds = Vec::new();
+    for round in 1..=command.rounds {
+        rounds.push(setup.stream(round, command.rounds, &mut totals)?);
+    }
+
+    let summaries: Vec<(VariantKind, Summary, f64)> =
+        totals.iter().map(VariantTotals::summary).collect();
     let rows: Vec<(&str, Summary, f64)> = summaries
         .iter()
         .map(|(k, s, rate)| (k.name(), *s, *rate))
@@ -130,6 +122,82 @@ pub fn run(command: &CompareCommand) -> anyhow::Result<()> {
         report::latency_table(&rows)
     );
     print_ratio_table(&summaries);
+    print_round_ratios(&rounds);
+    write_distributions(session.out_dir(), &totals)?;
+    if let Some(file) = &command.json {
+        let mut json = JsonSummary::default();
+        for (kind, summary, _) in &summaries {
+            json.variants.insert(kind.name().to_string(), *summary);
+        }
+        json.write(file)?;
+        println!("wrote {}", file.display());
+    }
+    Ok(())
+}
+
+/// What every round streams, and how.
+struct RoundSetup<'a> {
+    session: &'a Session,
+    /// Streamed unmeasured before each variant's run.
+    warm_up: &'a [[f64; 6]],
+    /// Streamed and measured.
+    poses: &'a [[f64; 6]],
+    options: &'a StreamOptions,
+}
+
+impl RoundSetup<'_> {
+    /// Round `round` of `rounds`: streams every variant once, one server at a time, prints its
+    /// percentiles, adds its run to `totals` and returns hexacomp's ratios to the baselines.
+    fn stream(
+        &self,
+        round: usize,
+        rounds: usize,
+        totals: &mut [VariantTotals],
+    ) -> anyhow::Result<Ratios> {
+        let mut p = std::collections::HashMap::new();
+        for entry in totals.iter_mut() {
+            let kind = entry.kind;
+            let run = self.stream_variant(kind)?;
+            run.ensure_no_failures(kind.name())?;
+            let s = Summary::of_run(&run);
+            eprintln!(
+                "round {round}/{rounds}: {:<9} p50 {:>8.2} µs  p99.9 {:>8.2} µs",
+                kind.name(),
+                s.p50_ns as f64 / 1e3,
+                s.p999_ns as f64 / 1e3
+            );
+            p.insert(kind, s);
+            entry.histogram.add(&run.histogram)?;
+            entry.points += run.points;
+            entry.misses += run.deadline_misses;
+            entry.seconds += run.elapsed.as_secs_f64();
+        }
+        let ratio = |a: u64, b: u64| a as f64 / b as f64;
+        let (h, e, u) = (
+            p[&VariantKind::Hexacomp],
+            p[&VariantKind::Echo],
+            p[&VariantKind::Uds],
+        );
+        Ok(Ratios {
+            p50_echo: ratio(h.p50_ns, e.p50_ns),
+            p999_echo: ratio(h.p999_ns, e.p999_ns),
+            p50_uds: ratio(h.p50_ns, u.p50_ns),
+        })
+    }
+
+    /// Starts `kind`'s server, warms it up, streams the measured poses and stops the server.
+    fn stream_variant(&self, kind: VariantKind) -> anyhow::Result<StreamRun> {
+        let (mut variant, child) = self.session.variant(kind)?;
+        stream(variant.as_mut(), self.warm_up, self.options)?;
+        let run = stream(variant.as_mut(), self.poses, self.options)?;
+        drop(variant);
+        drop(child);
+        Ok(run)
+    }
+}
+
+/// Each ratio of hexacomp to a baseline: its median over `rounds` and every round's value.
+fn print_round_ratios(rounds: &[Ratios]) {
     let median = |f: fn(&Ratios) -> f64| {
         let mut v: Vec<f64> = rounds.iter().map(f).collect();
         v.sort_by(f64::total_cmp);
@@ -146,33 +214,30 @@ pub fn run(command: &CompareCommand) -> anyhow::Result<()> {
             each.join(", ")
         );
     }
+}
 
-    let dir = session.out_dir();
-    let curves: Vec<(&str, &Histogram<u64>)> =
-        merged.iter().map(|(k, h, ..)| (k.name(), h)).collect();
+/// Writes the percentile chart of every variant and each one's `.hgrm` distribution into `dir`,
+/// and says what it wrote.
+fn write_distributions(dir: &std::path::Path, totals: &[VariantTotals]) -> anyhow::Result<()> {
+    let curves: Vec<(&str, &Histogram<u64>)> = totals
+        .iter()
+        .map(|t| (t.kind.name(), &t.histogram))
+        .collect();
     let mut written = vec![write_into(
         dir,
         "compare-percentiles.svg",
         &report::percentile_chart("Round trip per point: hexacomp and baselines", &curves)
             .to_svg()?,
     )?];
-    for (kind, histogram, ..) in &merged {
+    for t in totals {
         written.push(write_into(
             dir,
-            &format!("compare-{}.hgrm", kind.name()),
-            &report::percentile_distribution(histogram),
+            &format!("compare-{}.hgrm", t.kind.name()),
+            &report::percentile_distribution(&t.histogram),
         )?);
     }
     let names: Vec<String> = written.iter().map(|p| p.display().to_string()).collect();
     println!("wrote {}", names.join(", "));
-    if let Some(file) = &command.json {
-        let mut json = JsonSummary::default();
-        for (kind, summary, _) in &summaries {
-            json.variants.insert(kind.name().to_string(), *summary);
-        }
-        json.write(file)?;
-        println!("wrote {}", file.display());
-    }
     Ok(())
 }
 

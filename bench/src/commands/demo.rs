@@ -34,24 +34,7 @@ pub fn run(command: &DemoCommand) -> anyhow::Result<()> {
 
     println!("\n2. service started without a model, then the model hot-swapped in");
     let (instance, _service) = session.hexacomp_service(false)?;
-    let mut client = Client::connect(&instance, &ClientOptions::default())?;
-    let before = client.status()?;
-    println!(
-        "   instance {instance}: geometry {} ({}), generation {}",
-        before.geometry_name, before.geometry_fingerprint, before.generation
-    );
-    match client.deploy(&std::fs::read(&session.model_path)?)? {
-        DeployOutcome::Accepted { generation, .. } => {
-            println!(
-                "   deployed {}: accepted as generation {generation}",
-                session.model_path.display()
-            )
-        }
-        DeployOutcome::Refused { reason, .. } => {
-            anyhow::bail!("the service refused the model: {reason}")
-        }
-    }
-    drop(client);
+    hot_swap_model_in(&session, &instance)?;
 
     let spec = command.path.spec(command.duration);
     let path = interpolate(&session.geometry, &spec)?;
@@ -84,7 +67,46 @@ pub fn run(command: &DemoCommand) -> anyhow::Result<()> {
     let report = super::path::report_path(&session, &path, &runs, "demo")?;
     let hexacomp = report.summaries[0].1;
 
-    let accuracy = match report.accuracy {
+    let accuracy = accuracy_sentence(report.accuracy);
+    println!(
+        "\nSummary: {accuracy}; round trip p50 {:.2} µs, p99.9 {:.2} µs, deadline misses at {} \
+         Hz: {}; {:.1} s in all.",
+        hexacomp.p50_ns as f64 / 1e3,
+        hexacomp.p999_ns as f64 / 1e3,
+        spec.rate_hz,
+        hexacomp.deadline_misses,
+        total.elapsed().as_secs_f64()
+    );
+    super::path::ensure_no_failures(&runs)
+}
+
+/// Says which model the service serves on `instance`, deploys the session's model there and
+/// says which generation it was accepted as; an error if it was refused.
+fn hot_swap_model_in(session: &Session, instance: &str) -> anyhow::Result<()> {
+    let mut client = Client::connect(instance, &ClientOptions::default())?;
+    let before = client.status()?;
+    println!(
+        "   instance {instance}: geometry {} ({}), generation {}",
+        before.geometry_name, before.geometry_fingerprint, before.generation
+    );
+    match client.deploy(&std::fs::read(&session.model_path)?)? {
+        DeployOutcome::Accepted { generation, .. } => {
+            println!(
+                "   deployed {}: accepted as generation {generation}",
+                session.model_path.display()
+            )
+        }
+        DeployOutcome::Refused { reason, .. } => {
+            anyhow::bail!("the service refused the model: {reason}")
+        }
+    }
+    Ok(())
+}
+
+/// The summary's words on the path accuracy: the virtual machine's path error before and after
+/// compensation and at the floor (mm), and the service's uncertainty against it.
+fn accuracy_sentence(accuracy: Option<PathStats>) -> String {
+    match accuracy {
         Some(PathStats {
             before,
             after,
@@ -106,15 +128,5 @@ pub fn run(command: &DemoCommand) -> anyhow::Result<()> {
             )),
         ),
         None => "path error not measured: not every point was answered".to_string(),
-    };
-    println!(
-        "\nSummary: {accuracy}; round trip p50 {:.2} µs, p99.9 {:.2} µs, deadline misses at {} \
-         Hz: {}; {:.1} s in all.",
-        hexacomp.p50_ns as f64 / 1e3,
-        hexacomp.p999_ns as f64 / 1e3,
-        spec.rate_hz,
-        hexacomp.deadline_misses,
-        total.elapsed().as_secs_f64()
-    );
-    super::path::ensure_no_failures(&runs)
+    }
 }

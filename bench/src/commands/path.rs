@@ -170,6 +170,42 @@ pub fn report_path(
         .iter()
         .map(|(kind, run)| (*kind, Summary::of_run(run)))
         .collect();
+    print_latencies(runs, &summaries);
+    let dir = session.out_dir();
+    let mut written = write_latency_files(dir, stem, path, runs)?;
+    // Forward kinematics of the virtual machine at up to 6000 points of each run.
+    let stride = path.poses.len().div_ceil(6000).max(1);
+    let accuracy = if run.points_out.len() == path.poses.len() {
+        accuracy::along_path(&session.platform, &path.poses, &run.points_out, stride)?
+    } else {
+        PathAccuracy::default()
+    };
+    let stats = accuracy.stats();
+    if !accuracy.before.is_empty() {
+        print_accuracy(session, &accuracy, &stats);
+        written.push(write_into(
+            dir,
+            &format!("{stem}-accuracy.svg"),
+            &accuracy::chart(
+                &accuracy,
+                path.period_s * stride as f64,
+                "Path error of the virtual machine",
+            )
+            .to_svg()?,
+        )?);
+    }
+    let names: Vec<String> = written.iter().map(|p| p.display().to_string()).collect();
+    println!("wrote {}", names.join(", "));
+    Ok(PathReport {
+        summaries,
+        accuracy: (!accuracy.before.is_empty()).then_some(stats),
+    })
+}
+
+/// Prints the latency table of `runs` (their `summaries` beside their points per second), the
+/// failed requests of each, and hexacomp's (the first run's) late starts and points not ok.
+fn print_latencies(runs: &[(VariantKind, StreamRun)], summaries: &[(VariantKind, Summary)]) {
+    let run = &runs[0].1;
     let rows: Vec<(&str, Summary, f64)> = summaries
         .iter()
         .zip(runs)
@@ -194,8 +230,18 @@ pub fn report_path(
     for (status, count) in &run.not_ok {
         println!("{count} points answered {}", status.name());
     }
-    let dir = session.out_dir();
-    let mut written = vec![
+}
+
+/// Writes into `dir` hexacomp's (the first run's) `<stem>-latency.hgrm` and the percentile and
+/// along-the-path charts of every run; returns the files written.
+fn write_latency_files(
+    dir: &std::path::Path,
+    stem: &str,
+    path: &Path,
+    runs: &[(VariantKind, StreamRun)],
+) -> anyhow::Result<Vec<PathBuf>> {
+    let run = &runs[0].1;
+    Ok(vec![
         write_into(
             dir,
             &format!("{stem}-latency.hgrm"),
@@ -226,65 +272,44 @@ pub fn report_path(
             )
             .to_svg()?,
         )?,
-    ];
-    // Forward kinematics of the virtual machine at up to 6000 points of each run.
-    let stride = path.poses.len().div_ceil(6000).max(1);
-    let accuracy = if run.points_out.len() == path.poses.len() {
-        accuracy::along_path(&session.platform, &path.poses, &run.points_out, stride)?
-    } else {
-        PathAccuracy::default()
-    };
-    let stats = accuracy.stats();
-    if !accuracy.before.is_empty() {
-        let mut table = hexacomp_report::table::Table::new([
-            "legs commanded",
-            "mean ‖δ_A‖ mm",
-            "max ‖δ_A‖ mm",
-            "mean ‖ε‖ deg",
-            "max ‖ε‖ deg",
+    ])
+}
+
+/// Prints the virtual machine's path error (mm, degrees) uncompensated, compensated and at the
+/// floor, and how well the service's uncertainty covers the compensated errors.
+fn print_accuracy(session: &Session, accuracy: &PathAccuracy, stats: &PathStats) {
+    let mut table = hexacomp_report::table::Table::new([
+        "legs commanded",
+        "mean ‖δ_A‖ mm",
+        "max ‖δ_A‖ mm",
+        "mean ‖ε‖ deg",
+        "max ‖ε‖ deg",
+    ]);
+    for (name, s) in [
+        ("nominal (uncompensated)", stats.before),
+        ("compensated", stats.after),
+        ("exact (the floor)", stats.floor),
+    ] {
+        table.row([
+            name.to_string(),
+            format!("{:.4}", s.position_mm.mean),
+            format!("{:.4}", s.position_mm.max),
+            format!("{:.4}", s.orientation_deg.mean),
+            format!("{:.4}", s.orientation_deg.max),
         ]);
-        for (name, s) in [
-            ("nominal (uncompensated)", stats.before),
-            ("compensated", stats.after),
-            ("exact (the floor)", stats.floor),
-        ] {
-            table.row([
-                name.to_string(),
-                format!("{:.4}", s.position_mm.mean),
-                format!("{:.4}", s.position_mm.max),
-                format!("{:.4}", s.orientation_deg.mean),
-                format!("{:.4}", s.orientation_deg.max),
-            ]);
-        }
-        println!(
-            "\nPath error of the virtual machine (seed {}), {} points:\n{table}",
-            session.args.machine_seed,
-            accuracy.before.len()
-        );
-        match stats.uncertainty {
-            Some(u) => println!(
-                "the service's uncertainty: mean σ {:.4} mm; {:.1} % of the compensated errors \
-                 within 2σ (95.45 % if calibrated)",
-                u.mean_sigma_mm,
-                100.0 * u.within_two_sigma
-            ),
-            None => println!("the service's uncertainty: not given for every point"),
-        }
-        written.push(write_into(
-            dir,
-            &format!("{stem}-accuracy.svg"),
-            &accuracy::chart(
-                &accuracy,
-                path.period_s * stride as f64,
-                "Path error of the virtual machine",
-            )
-            .to_svg()?,
-        )?);
     }
-    let names: Vec<String> = written.iter().map(|p| p.display().to_string()).collect();
-    println!("wrote {}", names.join(", "));
-    Ok(PathReport {
-        summaries,
-        accuracy: (!accuracy.before.is_empty()).then_some(stats),
-    })
+    println!(
+        "\nPath error of the virtual machine (seed {}), {} points:\n{table}",
+        session.args.machine_seed,
+        accuracy.before.len()
+    );
+    match stats.uncertainty {
+        Some(u) => println!(
+            "the service's uncertainty: mean σ {:.4} mm; {:.1} % of the compensated errors \
+             within 2σ (95.45 % if calibrated)",
+            u.mean_sigma_mm,
+            100.0 * u.within_two_sigma
+        ),
+        None => println!("the service's uncertainty: not given for every point"),
+    }
 }

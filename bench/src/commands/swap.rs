@@ -7,7 +7,7 @@ use std::time::{Duration, Instant};
 
 use hexacomp_client::{Client, ClientOptions, DeployOutcome};
 
-use crate::path::interpolate;
+use crate::path::{Path, interpolate};
 use crate::report::{self, JsonSummary, Summary, write_into};
 use crate::session::{PathArgs, Session, SetupArgs};
 use crate::stream::{Pacing, StreamOptions, StreamRun, stream};
@@ -53,24 +53,85 @@ pub fn run(command: &SwapCommand) -> anyhow::Result<()> {
         "--duration must exceed --interval (> 0)"
     );
     let session = Session::prepare(&command.setup)?;
-    let period = 1.0 / command.path.rate;
     // One lap of the path, streamed over and over until the duration has passed.
     let path = interpolate(
         &session.geometry,
         &command.path.spec(command.duration.min(60.0)),
     )?;
     let (instance, _service) = session.hexacomp_service(true)?;
+    let (runs, deploys, start) = stream_while_deploying(command, &session, &path, &instance)?;
+    let totals = Totals::of(&runs)?;
+    let steady_summary = Summary::of(
+        &totals.steady,
+        totals.points - totals.during.len() as usize,
+        totals.misses,
+    );
+    let during_summary = Summary::of(&totals.during, totals.during.len() as usize, 0);
+    println!(
+        "\n{:.1} s, {} requests, {} deploys accepted, {} refused, slowest deploy {:.1} ms; \
+         generations served {}..={}; {} failed requests, {} points not ok\n{}",
+        start.elapsed().as_secs_f64(),
+        totals.points,
+        deploys.accepted,
+        deploys.refused.len(),
+        deploys.slowest.as_secs_f64() * 1e3,
+        totals.generations.first().copied().unwrap_or(0),
+        totals.generations.last().copied().unwrap_or(0),
+        totals.failures,
+        totals.not_ok,
+        report::latency_table(&[
+            ("steady", steady_summary, 0.0),
+            ("during swaps", during_summary, 0.0),
+        ])
+    );
+    println!(
+        "p99.9 during swaps ÷ steady: {:.2}; p50: {:.2}",
+        during_summary.p999_ns as f64 / steady_summary.p999_ns as f64,
+        during_summary.p50_ns as f64 / steady_summary.p50_ns as f64
+    );
+    for reason in &deploys.refused {
+        println!("refused: {reason}");
+    }
+    let svg = write_into(
+        session.out_dir(),
+        "swap-percentiles.svg",
+        &report::percentile_chart(
+            "Round trip during hot swaps and in steady state",
+            &[("steady", &totals.steady), ("during swaps", &totals.during)],
+        )
+        .to_svg()?,
+    )?;
+    println!("wrote {}", svg.display());
+    if let Some(file) = &command.json {
+        let mut json = JsonSummary::default();
+        json.variants.insert("steady".into(), steady_summary);
+        json.variants.insert("during_swaps".into(), during_summary);
+        json.write(file)?;
+    }
+    ensure_all_served_and_deployed(&totals, &deploys)
+}
+
+/// Streams `path` over and over through `instance` for --duration while a thread deploys the
+/// session's model every --interval: the stream's slices, what the deployer saw and when the
+/// streaming started.
+fn stream_while_deploying(
+    command: &SwapCommand,
+    session: &Session,
+    path: &Path,
+    instance: &str,
+) -> anyhow::Result<(Vec<StreamRun>, Deploys, Instant)> {
+    let period = 1.0 / command.path.rate;
     let model_bytes = std::fs::read(&session.model_path)?;
     let swapping = Arc::new(AtomicBool::new(false));
     let done = Arc::new(AtomicBool::new(false));
     let deployer = spawn_deployer(
-        instance.clone(),
+        instance.to_string(),
         model_bytes,
         Duration::from_secs_f64(command.interval),
         swapping.clone(),
         done.clone(),
     );
-    let mut variant = OverIceoryx::connect(&instance)?;
+    let mut variant = OverIceoryx::connect(instance)?;
     session.pin_client()?;
     let options = StreamOptions {
         pacing: if command.paced {
@@ -96,68 +157,24 @@ pub fn run(command: &SwapCommand) -> anyhow::Result<()> {
     let deploys = deployer
         .join()
         .map_err(|_| anyhow::anyhow!("the deploying thread panicked"))??;
+    Ok((runs, deploys, start))
+}
 
-    let Totals {
-        steady,
-        during,
-        points,
-        failures,
-        misses,
-        not_ok,
-        generations,
-    } = Totals::of(&runs)?;
-    let steady_summary = Summary::of(&steady, points - during.len() as usize, misses);
-    let during_summary = Summary::of(&during, during.len() as usize, 0);
-    println!(
-        "\n{:.1} s, {} requests, {} deploys accepted, {} refused, slowest deploy {:.1} ms; \
-         generations served {}..={}; {failures} failed requests, {not_ok} points not ok\n{}",
-        start.elapsed().as_secs_f64(),
-        points,
-        deploys.accepted,
-        deploys.refused.len(),
-        deploys.slowest.as_secs_f64() * 1e3,
-        generations.first().copied().unwrap_or(0),
-        generations.last().copied().unwrap_or(0),
-        report::latency_table(&[
-            ("steady", steady_summary, 0.0),
-            ("during swaps", during_summary, 0.0),
-        ])
-    );
-    println!(
-        "p99.9 during swaps ÷ steady: {:.2}; p50: {:.2}",
-        during_summary.p999_ns as f64 / steady_summary.p999_ns as f64,
-        during_summary.p50_ns as f64 / steady_summary.p50_ns as f64
-    );
-    for reason in &deploys.refused {
-        println!("refused: {reason}");
-    }
-    let svg = write_into(
-        session.out_dir(),
-        "swap-percentiles.svg",
-        &report::percentile_chart(
-            "Round trip during hot swaps and in steady state",
-            &[("steady", &steady), ("during swaps", &during)],
-        )
-        .to_svg()?,
-    )?;
-    println!("wrote {}", svg.display());
-    if let Some(file) = &command.json {
-        let mut json = JsonSummary::default();
-        json.variants.insert("steady".into(), steady_summary);
-        json.variants.insert("during_swaps".into(), during_summary);
-        json.write(file)?;
-    }
+/// An error unless every request was answered, every deploy accepted and the generations
+/// served advanced once per deploy.
+fn ensure_all_served_and_deployed(totals: &Totals, deploys: &Deploys) -> anyhow::Result<()> {
     anyhow::ensure!(
-        failures == 0 && deploys.refused.is_empty(),
-        "{failures} requests failed, {} deploys refused",
+        totals.failures == 0 && deploys.refused.is_empty(),
+        "{} requests failed, {} deploys refused",
+        totals.failures,
         deploys.refused.len()
     );
     // The last deploy may land after the last request.
     anyhow::ensure!(
-        (deploys.accepted..=deploys.accepted + 1).contains(&generations.len()),
+        (deploys.accepted..=deploys.accepted + 1).contains(&totals.generations.len()),
         "{} deploys accepted but {} generations served",
         deploys.accepted,
-        generations.len()
+        totals.generations.len()
     );
     Ok(())
 }
