@@ -93,6 +93,65 @@ pub fn trainer_in(dir: &std::path::Path, args: &[&str]) -> Output {
         .unwrap_or_else(|e| panic!("running hexacomp-trainer: {e}"))
 }
 
+/// A command's output (its standard output or error) as text, invalid UTF-8 replaced.
+pub fn text(bytes: &[u8]) -> String {
+    String::from_utf8_lossy(bytes).into_owned()
+}
+
+/// `path` as a command's argument; panics on a path that is not UTF-8.
+pub fn path_str(path: &std::path::Path) -> &str {
+    path.to_str().expect("a UTF-8 path")
+}
+
+/// The JSON file at `path`, parsed; panics when it cannot be read or parsed.
+pub fn json_file(path: &std::path::Path) -> serde_json::Value {
+    let text =
+        std::fs::read_to_string(path).unwrap_or_else(|e| panic!("reading {}: {e}", path.display()));
+    serde_json::from_str(&text).unwrap_or_else(|e| panic!("parsing {}: {e}", path.display()))
+}
+
+/// `output` of a command run with `args`, which must have succeeded: else panics with the
+/// arguments and the command's standard error.
+#[track_caller]
+pub fn expect_success(output: Output, args: &[&str]) -> Output {
+    assert!(
+        output.status.success(),
+        "{args:?}: {}",
+        text(&output.stderr)
+    );
+    output
+}
+
+/// Runs `hexacomp-trainer` in `dir` with `args` as [`trainer_in`] does, asserting that it
+/// succeeds: its standard error, where it says what it did.
+#[track_caller]
+pub fn trainer_ok(dir: &std::path::Path, args: &[&str]) -> String {
+    text(&expect_success(trainer_in(dir, args), args).stderr)
+}
+
+/// [`trainer_ok`], but its standard output: where `verify` and `check` print their reports.
+#[track_caller]
+pub fn trainer_ok_stdout(dir: &std::path::Path, args: &[&str]) -> String {
+    text(&expect_success(trainer_in(dir, args), args).stdout)
+}
+
+/// Runs `hexacomp-trainer` in `dir` with `args` as [`trainer_in`] does, asserting that it
+/// fails: its standard error, where it says why.
+#[track_caller]
+pub fn trainer_fails(dir: &std::path::Path, args: &[&str]) -> String {
+    let output = trainer_in(dir, args);
+    assert!(!output.status.success(), "{args:?} succeeded");
+    text(&output.stderr)
+}
+
+/// Asserts that a command's `output` (its standard output or error) says `expected`; panics
+/// with all it said otherwise.
+#[track_caller]
+pub fn assert_says(output: &[u8], expected: &str) {
+    let said = text(output);
+    assert!(said.contains(expected), "expected {expected:?} in:\n{said}");
+}
+
 /// A unique instance name for one test: tests run in parallel, each with its own service.
 pub fn unique_instance(test: &str) -> String {
     use std::sync::atomic::{AtomicUsize, Ordering};

@@ -6,16 +6,12 @@
 use std::path::{Path, PathBuf};
 use std::sync::{Mutex, MutexGuard, OnceLock};
 
-use hexacomp_tests::run;
+use hexacomp_tests::{json_file, path_str, run, text};
 
 /// One benchmark at a time: each starts a busy-polling server, and the machine has two cores.
 fn exclusive() -> MutexGuard<'static, ()> {
     static LOCK: Mutex<()> = Mutex::new(());
     LOCK.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
-}
-
-fn text(bytes: &[u8]) -> String {
-    String::from_utf8_lossy(bytes).into_owned()
 }
 
 fn bench(args: &[&str]) -> String {
@@ -29,27 +25,19 @@ fn bench(args: &[&str]) -> String {
     text(&output.stdout)
 }
 
-fn p(path: &Path) -> &str {
-    path.to_str().unwrap()
-}
-
 /// The demo, run once on short settings: its output folder (with the calibrated model) and
 /// what it printed.
 fn demo() -> &'static (tempfile::TempDir, String) {
     static DEMO: OnceLock<(tempfile::TempDir, String)> = OnceLock::new();
     DEMO.get_or_init(|| {
         let dir = tempfile::tempdir().unwrap();
-        let stdout = bench(&["demo", "--duration", "2", "--out-dir", p(dir.path())]);
+        let stdout = bench(&["demo", "--duration", "2", "--out-dir", path_str(dir.path())]);
         (dir, stdout)
     })
 }
 
 fn model() -> PathBuf {
     demo().0.path().join("model.hxm")
-}
-
-fn json(path: &Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
 }
 
 /// Runs `command` with the demo's model on 3000 points of a line, reports into `dir`: what it
@@ -59,17 +47,17 @@ fn on_a_short_line(command: &str, dir: &Path) -> (String, serde_json::Value) {
     let stdout = bench(&[
         command,
         "--model",
-        p(&model()),
+        path_str(&model()),
         "--points",
         "3000",
         "--shape",
         "line",
         "--json",
-        p(&summary),
+        path_str(&summary),
         "--out-dir",
-        p(dir),
+        path_str(dir),
     ]);
-    (stdout, json(&summary))
+    (stdout, json_file(&summary))
 }
 
 /// The curves of a chart that have at least two points: its coloured lines (the axes and the
@@ -194,7 +182,7 @@ fn compare_reports_all_four_variants_in_the_json_summary() {
     let stdout = bench(&[
         "compare",
         "--model",
-        p(&model()),
+        path_str(&model()),
         "--points",
         "4000",
         "--rounds",
@@ -202,11 +190,11 @@ fn compare_reports_all_four_variants_in_the_json_summary() {
         "--shape",
         "figure-eight",
         "--json",
-        p(&summary),
+        path_str(&summary),
         "--out-dir",
-        p(dir.path()),
+        path_str(dir.path()),
     ]);
-    let json = json(&summary);
+    let json = json_file(&summary);
     let variants = json["variants"].as_object().unwrap();
     assert_eq!(variants.len(), 4, "{json}");
     for name in ["hexacomp", "echo", "uds", "inprocess"] {
@@ -299,15 +287,15 @@ fn hot_swaps_under_load_lose_nothing() {
     let stdout = bench(&[
         "swap",
         "--model",
-        p(&model()),
+        path_str(&model()),
         "--duration",
         "3",
         "--interval",
         "0.5",
         "--json",
-        p(&summary),
+        path_str(&summary),
         "--out-dir",
-        p(dir.path()),
+        path_str(dir.path()),
     ]);
     assert!(
         stdout.contains("0 failed requests, 0 points not ok"),
@@ -315,7 +303,7 @@ fn hot_swaps_under_load_lose_nothing() {
     );
     let accepted = number_after(&stdout, "requests, ");
     assert!(accepted >= 4.0, "{stdout}");
-    let json = json(&summary);
+    let json = json_file(&summary);
     assert!(
         json["variants"]["during_swaps"]["points"].as_u64().unwrap() > 0,
         "{json}"
@@ -335,7 +323,7 @@ fn paths_that_leave_the_workspace_are_refused_before_anything_starts() {
         &[
             "path",
             "--model",
-            p(&model()),
+            path_str(&model()),
             "--shape",
             "circle",
             "--size",
@@ -343,7 +331,7 @@ fn paths_that_leave_the_workspace_are_refused_before_anything_starts() {
             "--duration",
             "1",
             "--out-dir",
-            p(dir.path()),
+            path_str(dir.path()),
         ],
     );
     assert!(!output.status.success());

@@ -10,26 +10,7 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use hexacomp_formats::read_measurements;
-use hexacomp_tests::{binary, signal_child};
-
-fn text(bytes: &[u8]) -> String {
-    String::from_utf8_lossy(bytes).into_owned()
-}
-
-/// Runs the trainer in `dir` with `args` (relative file names), asserting success; its stderr.
-fn trainer_ok(dir: &Path, args: &[&str]) -> String {
-    let output = trainer(dir, args);
-    assert!(
-        output.status.success(),
-        "{args:?}: {}",
-        text(&output.stderr)
-    );
-    text(&output.stderr)
-}
-
-fn trainer(dir: &std::path::Path, args: &[&str]) -> std::process::Output {
-    hexacomp_tests::trainer_in(dir, args)
-}
+use hexacomp_tests::{assert_says, binary, signal_child, text, trainer_in, trainer_ok};
 
 /// The data lines of a file (header and comment lines left out), whole lines only.
 fn data_lines(path: &Path) -> Vec<String> {
@@ -210,7 +191,7 @@ fn a_users_instrument_program_is_read_and_its_failures_are_recorded_gaps() {
     script(d, "hang.sh", "sleep 30 &\nsleep 30");
     let hang = d.join("hang.sh").display().to_string();
     let start = Instant::now();
-    let output = trainer(
+    let output = trainer_in(
         d,
         &[
             "campaign",
@@ -247,7 +228,7 @@ fn a_users_instrument_program_is_read_and_its_failures_are_recorded_gaps() {
     script(d, "narrow.sh", "echo 1,2,3,4");
     let narrow = d.join("narrow.sh").display().to_string();
     let said = text(
-        &trainer(
+        &trainer_in(
             d,
             &[
                 "campaign",
@@ -271,7 +252,7 @@ fn a_users_instrument_program_is_read_and_its_failures_are_recorded_gaps() {
         "{said}"
     );
     // solve lists the gaps as configurations with nothing seen.
-    let output = trainer(
+    let output = trainer_in(
         d,
         &["solve", "--measurements", "narrow.csv", "--out", "dq.csv"],
     );
@@ -291,12 +272,11 @@ fn a_plan_outside_the_stroke_and_another_plans_record_are_refused_with_their_pla
         "id,x,y,z,a,b,c\n1,0,0,280,0,0,0\n2,0,0,900,0,0,0\n",
     )
     .unwrap();
-    let output = trainer(d, &["campaign", "--plan", "plan.csv", "--out", "m.csv"]);
+    let output = trainer_in(d, &["campaign", "--plan", "plan.csv", "--out", "m.csv"]);
     assert!(!output.status.success());
-    assert!(
-        text(&output.stderr).contains("plan.csv:3: configuration 2: the pose needs leg 1"),
-        "{}",
-        text(&output.stderr)
+    assert_says(
+        &output.stderr,
+        "plan.csv:3: configuration 2: the pose needs leg 1",
     );
     assert!(!d.join("m.csv").exists(), "a record was started");
 
@@ -310,7 +290,7 @@ fn a_plan_outside_the_stroke_and_another_plans_record_are_refused_with_their_pla
     );
     trainer_ok(d, &["campaign", "--plan", "one.csv", "--out", "m.csv"]);
     let before = std::fs::read(d.join("m.csv")).unwrap();
-    let output = trainer(d, &["campaign", "--plan", "two.csv", "--out", "m.csv"]);
+    let output = trainer_in(d, &["campaign", "--plan", "two.csv", "--out", "m.csv"]);
     assert!(!output.status.success());
     assert!(
         text(&output.stderr).contains("m.csv:3: configuration")
@@ -327,7 +307,7 @@ fn a_program_that_cannot_start_stops_the_campaign_before_anything_is_recorded() 
     let d = dir.path();
     trainer_ok(d, &["plan", "--count", "5", "--out", "plan.csv"]);
     let missing = d.join("no such tracker.sh").display().to_string();
-    let output = trainer(
+    let output = trainer_in(
         d,
         &[
             "campaign",
@@ -356,41 +336,38 @@ fn two_campaigns_on_one_file_other_settings_and_foreign_files_are_refused_and_le
     trainer_ok(d, &["plan", "--count", "8", "--out", "plan.csv"]);
     // A second campaign while the first records.
     let mut first = campaign_recording(d, "m.csv", "0.3", 1);
-    let output = trainer(d, &["campaign", "--plan", "plan.csv", "--out", "m.csv"]);
+    let output = trainer_in(d, &["campaign", "--plan", "plan.csv", "--out", "m.csv"]);
     assert!(!output.status.success());
-    assert!(
-        text(&output.stderr).contains("another campaign is recording into this file"),
-        "{}",
-        text(&output.stderr)
+    assert_says(
+        &output.stderr,
+        "another campaign is recording into this file",
     );
     signal_child(&first, libc::SIGKILL);
     first.wait().unwrap();
 
     // The same record with another seed: refused at its settings line, unchanged.
     let before = std::fs::read(d.join("m.csv")).unwrap();
-    let output = trainer(
+    let output = trainer_in(
         d,
         &[
             "campaign", "--plan", "plan.csv", "--out", "m.csv", "--seed", "2",
         ],
     );
     assert!(!output.status.success());
-    assert!(
-        text(&output.stderr).contains("m.csv:2: this file was not recorded by this campaign"),
-        "{}",
-        text(&output.stderr)
+    assert_says(
+        &output.stderr,
+        "m.csv:2: this file was not recorded by this campaign",
     );
     assert_eq!(std::fs::read(d.join("m.csv")).unwrap(), before);
 
     // A file of another kind, its last line without a line end: refused, not cut.
     let foreign = "id,x,y,z\n1,2,3,4";
     std::fs::write(d.join("other.csv"), foreign).unwrap();
-    let output = trainer(d, &["campaign", "--plan", "plan.csv", "--out", "other.csv"]);
+    let output = trainer_in(d, &["campaign", "--plan", "plan.csv", "--out", "other.csv"]);
     assert!(!output.status.success());
-    assert!(
-        text(&output.stderr).contains("other.csv:1: this file was not recorded by this campaign"),
-        "{}",
-        text(&output.stderr)
+    assert_says(
+        &output.stderr,
+        "other.csv:1: this file was not recorded by this campaign",
     );
     assert_eq!(
         std::fs::read_to_string(d.join("other.csv")).unwrap(),
@@ -495,7 +472,7 @@ fn a_tracker_moved_between_runs_stops_the_campaign_and_registered_again_it_goes_
     trainer_ok(d, &campaign("first.csv", "c.csv", at_a, &under_a));
     assert_eq!(data_lines(&d.join("c.csv")).len(), 12);
     // The tracker moved to B; the campaign still believes it at A: the reference moved metres.
-    let output = trainer(d, &campaign("plan.csv", "c.csv", at_b, &under_a));
+    let output = trainer_in(d, &campaign("plan.csv", "c.csv", at_b, &under_a));
     let error = text(&output.stderr);
     assert!(!output.status.success());
     assert!(
@@ -510,7 +487,7 @@ fn a_tracker_moved_between_runs_stops_the_campaign_and_registered_again_it_goes_
     let events = drift_events(&d.join("c.drift.csv"));
     assert_eq!(events.last().unwrap().1, "stopped", "{events:?}");
     // A run without a registration cannot continue a campaign begun with one.
-    let error = text(&trainer(d, &campaign("plan.csv", "c.csv", at_b, &[])).stderr);
+    let error = text(&trainer_in(d, &campaign("plan.csv", "c.csv", at_b, &[])).stderr);
     assert!(error.contains("began with a registration"), "{error}");
     // Registered again at B: it goes on, its readings brought into A's frame.
     trainer_ok(
@@ -552,7 +529,7 @@ fn a_tracker_moved_between_runs_stops_the_campaign_and_registered_again_it_goes_
     }
     // The fiducials measured at the end (at B) against A's registration: the record's frame
     // changed during the campaign, so a registration made from them is not the record's.
-    let output = trainer(d, &campaign("plan.csv", "c.csv", at_b, &under_a));
+    let output = trainer_in(d, &campaign("plan.csv", "c.csv", at_b, &under_a));
     let error = text(&output.stderr);
     assert!(
         !output.status.success() && error.contains("frame changed during the campaign"),
@@ -567,7 +544,7 @@ fn accepted_drift_is_logged_and_a_warm_up_that_does_not_settle_records_nothing()
     trainer_ok(d, &["plan", "--count", "6", "--out", "plan.csv"]);
     // A reference that never agrees with itself to 0.1 µm: the gate gives up after three.
     let error = text(
-        &trainer(
+        &trainer_in(
             d,
             &[
                 "campaign",
@@ -611,7 +588,7 @@ fn accepted_drift_is_logged_and_a_warm_up_that_does_not_settle_records_nothing()
         "--reference-every",
         "2",
     ];
-    let error = text(&trainer(d, &tight).stderr);
+    let error = text(&trainer_in(d, &tight).stderr);
     assert!(error.contains("may hold the drift"), "{error}");
     let recorded = data_lines(&d.join("t.csv")).len();
     assert_eq!(recorded, 2, "{error}");
@@ -621,7 +598,7 @@ fn accepted_drift_is_logged_and_a_warm_up_that_does_not_settle_records_nothing()
         .collect();
     assert!(error.contains(&ids.join(", ")), "{error}");
     // Run again as it is: refused before anything moves, the suspect rows named.
-    let error = text(&trainer(d, &tight).stderr);
+    let error = text(&trainer_in(d, &tight).stderr);
     assert!(
         error.contains("stopped on drift") && error.contains(&ids.join(", ")),
         "{error}"
@@ -629,7 +606,7 @@ fn accepted_drift_is_logged_and_a_warm_up_that_does_not_settle_records_nothing()
     assert_eq!(data_lines(&d.join("t.csv")).len(), 2);
     // Kept with --accept-drift: the start's reference, beyond the limit, becomes the baseline and
     // the kept rows are logged; the tight limit stops the campaign again at its next reference.
-    let output = trainer(d, &[&tight[..], &["--accept-drift"]].concat());
+    let output = trainer_in(d, &[&tight[..], &["--accept-drift"]].concat());
     assert!(!output.status.success());
     let events = drift_events(&d.join("t.drift.csv"));
     let accepted = events
@@ -642,7 +619,7 @@ fn accepted_drift_is_logged_and_a_warm_up_that_does_not_settle_records_nothing()
     );
     assert_eq!(data_lines(&d.join("t.csv")).len(), 4);
     // With a limit above the machine's repeatability it ends.
-    let output = trainer(
+    let output = trainer_in(
         d,
         &[&tight[..5], &["--accept-drift", "--reference-every", "2"]].concat(),
     );
@@ -664,13 +641,13 @@ fn accepted_drift_is_logged_and_a_warm_up_that_does_not_settle_records_nothing()
         "--reference-every",
         "0",
     ];
-    let output = trainer(d, &end_only);
+    let output = trainer_in(d, &end_only);
     assert!(!output.status.success());
     assert_eq!(
         drift_events(&d.join("e.drift.csv")).last().unwrap().1,
         "stopped"
     );
-    let said = text(&trainer(d, &[&end_only[..], &["--accept-drift"]].concat()).stderr);
+    let said = text(&trainer_in(d, &[&end_only[..], &["--accept-drift"]].concat()).stderr);
     assert!(!said.contains("nothing to do"), "{said}");
     let last = drift_events(&d.join("e.drift.csv")).pop().unwrap();
     assert!(
@@ -697,7 +674,7 @@ fn a_drift_log_lost_edited_or_shared_is_refused_and_a_missing_end_reference_is_t
     let log = std::fs::read_to_string(d.join("a.drift.csv")).unwrap();
     // Lost: the record's rows would lose the frame and baseline they were measured under.
     std::fs::rename(d.join("a.drift.csv"), d.join("kept.csv")).unwrap();
-    let error = text(&trainer(d, &["campaign", "--plan", "plan.csv", "--out", "a.csv"]).stderr);
+    let error = text(&trainer_in(d, &["campaign", "--plan", "plan.csv", "--out", "a.csv"]).stderr);
     assert!(
         error.contains("holds 3 configurations but its drift log"),
         "{error}"
@@ -713,14 +690,14 @@ fn a_drift_log_lost_edited_or_shared_is_refused_and_a_missing_end_reference_is_t
         log.replace(",baseline,", ",basline,"),
     )
     .unwrap();
-    let error = text(&trainer(d, &["campaign", "--plan", "plan.csv", "--out", "a.csv"]).stderr);
+    let error = text(&trainer_in(d, &["campaign", "--plan", "plan.csv", "--out", "a.csv"]).stderr);
     assert!(
         error.contains("a.drift.csv:3") && error.contains("\"basline\" is not one of"),
         "{error}"
     );
     // Shared: another record's log is refused.
     std::fs::write(d.join("a.drift.csv"), &log).unwrap();
-    let output = trainer(
+    let output = trainer_in(
         d,
         &[
             "campaign",
@@ -732,11 +709,7 @@ fn a_drift_log_lost_edited_or_shared_is_refused_and_a_missing_end_reference_is_t
             "a.drift.csv",
         ],
     );
-    assert!(
-        text(&output.stderr).contains("not recorded by this campaign"),
-        "{}",
-        text(&output.stderr)
-    );
+    assert_says(&output.stderr, "not recorded by this campaign");
     assert_eq!(std::fs::read_to_string(d.join("a.drift.csv")).unwrap(), log);
     assert!(
         !d.join("b.csv").exists() && !d.join("b.readings.csv").exists(),
@@ -758,7 +731,7 @@ fn a_drift_log_lost_edited_or_shared_is_refused_and_a_missing_end_reference_is_t
     assert!(said.contains("nothing to do"), "{said}");
     // A plan id that names a reference measurement.
     std::fs::write(d.join("r.csv"), "id,x,y,z,a,b,c\nR1,0,0,280,0,0,0\n").unwrap();
-    let error = text(&trainer(d, &["campaign", "--plan", "r.csv", "--out", "r-out.csv"]).stderr);
+    let error = text(&trainer_in(d, &["campaign", "--plan", "r.csv", "--out", "r-out.csv"]).stderr);
     assert!(error.contains("r.csv:2: configuration R1"), "{error}");
 }
 
@@ -836,11 +809,7 @@ fn an_operator_confirms_the_moves_and_types_the_readings_and_the_end_of_input_st
     );
     // Run again: only B is asked for; "stop" at the move ends the campaign without a row.
     let output = trainer_typing(d, &args, "stop\n");
-    assert!(
-        text(&output.stderr).contains("stopped by the operator"),
-        "{}",
-        text(&output.stderr)
-    );
+    assert_says(&output.stderr, "stopped by the operator");
     assert_eq!(data_lines(&d.join("m.csv")).len(), 1);
     let output = trainer_typing(d, &args, "\n4,5,6,7,8,9,10,11,12\n4,5,6,7,8,9,10,11,12\n");
     assert!(output.status.success(), "{}", text(&output.stderr));
@@ -942,7 +911,7 @@ fn the_readings_log_holds_every_attempt_its_outcome_and_the_temperatures_and_giv
 
     // A temperature program that fails: said, the cells left empty, the campaign goes on.
     script(d, "broken.sh", "exit 3");
-    let output = trainer(
+    let output = trainer_in(
         d,
         &[
             "campaign",
@@ -955,11 +924,7 @@ fn the_readings_log_holds_every_attempt_its_outcome_and_the_temperatures_and_giv
         ],
     );
     assert!(output.status.success(), "{}", text(&output.stderr));
-    assert!(
-        text(&output.stderr).contains("temperatures not read"),
-        "{}",
-        text(&output.stderr)
-    );
+    assert_says(&output.stderr, "temperatures not read");
 }
 
 #[test]
@@ -1074,7 +1039,7 @@ fn the_fiducials_measured_at_the_end_refuse_a_registration_the_tracker_no_longer
     // A user's own file where the campaign writes its fiducials: refused before anything.
     let foreign = "name,x,y,z\nF1,1,2,3\n";
     std::fs::write(d.join("x.fiducials.csv"), foreign).unwrap();
-    let error = text(&trainer(d, &campaign("plan.csv", "x.csv", at, &under_a)).stderr);
+    let error = text(&trainer_in(d, &campaign("plan.csv", "x.csv", at, &under_a)).stderr);
     assert!(error.contains("a campaign did not write"), "{error}");
     assert!(!d.join("x.csv").exists());
     assert_eq!(
@@ -1116,7 +1081,7 @@ fn the_fiducials_measured_at_the_end_refuse_a_registration_the_tracker_no_longer
         "{stderr}"
     );
 
-    let output = trainer(d, &campaign("plan.csv", "c.csv", bumped, &under_a));
+    let output = trainer_in(d, &campaign("plan.csv", "c.csv", bumped, &under_a));
     let error = text(&output.stderr);
     assert!(!output.status.success(), "{error}");
     assert!(
@@ -1132,7 +1097,7 @@ fn the_fiducials_measured_at_the_end_refuse_a_registration_the_tracker_no_longer
         "each fiducial moved the bump: {moved:?}"
     );
     // Run again, the decision stands, unless the check is declined in so many words.
-    let output = trainer(d, &campaign("plan.csv", "c.csv", bumped, &under_a));
+    let output = trainer_in(d, &campaign("plan.csv", "c.csv", bumped, &under_a));
     assert!(!output.status.success());
     assert!(text(&output.stderr).contains("moved together"));
     let declined = trainer_ok(

@@ -3,7 +3,6 @@
 //! a state directory that cannot be written.
 
 use std::collections::HashSet;
-use std::path::Path;
 use std::time::{Duration, Instant};
 
 use hexacomp_client::DeployOutcome;
@@ -12,15 +11,11 @@ use hexacomp_core::compensator::compensate_pose;
 use hexacomp_core::fused::FusedModel;
 use hexacomp_core::pose::Pose;
 use hexacomp_tests::{
-    ServiceProcess, save_smooth_model, spawn_test_client, test_client_report, unique_instance,
-    wait_until_connected,
+    ServiceProcess, path_str, save_smooth_model, spawn_test_client, test_client_report,
+    unique_instance, wait_until_connected,
 };
 use iceoryx2::node::NodeView;
 use iceoryx2::prelude::*;
-
-fn p(path: &Path) -> &str {
-    path.to_str().unwrap()
-}
 
 /// iceoryx2 nodes (alive or dead, not yet cleaned up) created by any of `pids`.
 fn nodes_of(pids: &HashSet<i32>) -> usize {
@@ -92,7 +87,7 @@ fn the_service_sigkilled_mid_stream_five_times_restarts_without_cleanup_and_clie
         killed.insert(service.pid() as i32);
         service.kill();
         // Restart at once: no --model (the persisted one serves), no cleanup by hand.
-        service = ServiceProcess::start(&instance, &["--state-dir", p(&state)]);
+        service = ServiceProcess::start(&instance, &["--state-dir", path_str(&state)]);
     }
     let mut status = service.client().unwrap();
     assert_eq!(status.status().unwrap().generation, 1);
@@ -210,7 +205,10 @@ fn a_deployer_killed_mid_deploy_leaves_the_old_model_serving() {
             deployers < 100 && Instant::now() < deadline,
             "no dead deployer's model reached the service in {deployers} tries"
         );
-        let child = spawn_test_client(&instance, &["deploy-and-die", "--model", p(&new_path)]);
+        let child = spawn_test_client(
+            &instance,
+            &["deploy-and-die", "--model", path_str(&new_path)],
+        );
         let output = child.wait_with_output().unwrap();
         use std::os::unix::process::ExitStatusExt;
         assert_eq!(output.status.signal(), Some(libc::SIGKILL));
@@ -239,7 +237,7 @@ fn a_deployer_killed_mid_deploy_leaves_the_old_model_serving() {
     // The persisted model is still the old one: a restart serves it.
     drop(client);
     service.kill();
-    let service = ServiceProcess::start(&instance, &["--state-dir", p(&state)]);
+    let service = ServiceProcess::start(&instance, &["--state-dir", path_str(&state)]);
     let mut client = service.client().unwrap();
     assert!(client.status().unwrap().model.contains("smooth_model(3)"));
     // A deployer that stays for the answer is accepted as usual.
@@ -296,7 +294,7 @@ fn a_state_directory_that_cannot_be_written_is_reported_and_serving_goes_on() {
     // As the warning said, a restart serves generation 1, whole.
     drop(client);
     service.kill();
-    let service = ServiceProcess::start(&instance, &["--state-dir", p(&state)]);
+    let service = ServiceProcess::start(&instance, &["--state-dir", path_str(&state)]);
     let status = service.client().unwrap().status().unwrap();
     assert_eq!(status.generation, 1);
     assert!(status.model.contains("smooth_model(5)"), "{}", status.model);
@@ -308,14 +306,14 @@ fn a_client_connected_to_a_spinning_service_wakes_the_event_mode_service_that_re
     let state = dir.path().join("state");
     let (_, path) = save_smooth_model(dir.path(), 1);
     let instance = unique_instance("waitswitch");
-    let args = |wait: &'static str| ["--state-dir", p(&state), "--wait", wait];
+    let args = |wait: &'static str| ["--state-dir", path_str(&state), "--wait", wait];
     let service = ServiceProcess::start(
         &instance,
         &[
             "--state-dir",
-            p(&state),
+            path_str(&state),
             "--model",
-            p(&path),
+            path_str(&path),
             "--wait",
             "spin",
         ],

@@ -7,11 +7,7 @@ use std::os::unix::process::CommandExt;
 use std::path::Path;
 use std::process::{Command, Output};
 
-use hexacomp_tests::binary;
-
-fn text(bytes: &[u8]) -> String {
-    String::from_utf8_lossy(bytes).into_owned()
-}
+use hexacomp_tests::{binary, expect_success, text};
 
 /// Runs `name` with `args` in `dir`.
 fn run_in(dir: &Path, name: &str, args: &[&str]) -> Output {
@@ -22,14 +18,9 @@ fn run_in(dir: &Path, name: &str, args: &[&str]) -> Output {
         .unwrap_or_else(|e| panic!("running {name}: {e}"))
 }
 
+/// Runs `name` with `args` in `dir`, asserting success; its stderr.
 fn ok(dir: &Path, name: &str, args: &[&str]) -> String {
-    let output = run_in(dir, name, args);
-    assert!(
-        output.status.success(),
-        "{args:?}: {}",
-        text(&output.stderr)
-    );
-    text(&output.stderr)
+    text(&expect_success(run_in(dir, name, args), args).stderr)
 }
 
 /// Every file of `dir` (not recursive) with its bytes.

@@ -7,36 +7,36 @@ use hexacomp_core::Geometry;
 use hexacomp_core::compensator::{compensate_legs, compensate_pose};
 use hexacomp_core::fused::FusedModel;
 use hexacomp_core::model::Model;
-use hexacomp_tests::{run, test_uncertainty};
-
-fn text(bytes: &[u8]) -> String {
-    String::from_utf8_lossy(bytes).into_owned()
-}
+use hexacomp_tests::{assert_says, expect_success, path_str, run, test_uncertainty, text};
 
 fn trainer(args: &[&str]) -> std::process::Output {
     run("hexacomp-trainer", args)
 }
 
+/// Runs the trainer with `args`, asserting success; its stdout and stderr.
 fn ok(args: &[&str]) -> String {
-    let output = trainer(args);
-    assert!(
-        output.status.success(),
-        "{args:?}: {}",
-        text(&output.stderr)
-    );
+    let output = expect_success(trainer(args), args);
     text(&output.stdout) + &text(&output.stderr)
-}
-
-fn p(path: &Path) -> &str {
-    path.to_str().unwrap()
 }
 
 /// Plans, simulates and solves 40 configurations; returns the corrections file.
 fn corrections(dir: &Path) -> PathBuf {
     let (poses, m, c) = (dir.join("poses.csv"), dir.join("m.csv"), dir.join("c.csv"));
-    ok(&["plan", "--count", "40", "--out", p(&poses)]);
-    ok(&["simulate", "--plan", p(&poses), "--out", p(&m)]);
-    ok(&["solve", "--measurements", p(&m), "--out", p(&c)]);
+    ok(&["plan", "--count", "40", "--out", path_str(&poses)]);
+    ok(&[
+        "simulate",
+        "--plan",
+        path_str(&poses),
+        "--out",
+        path_str(&m),
+    ]);
+    ok(&[
+        "solve",
+        "--measurements",
+        path_str(&m),
+        "--out",
+        path_str(&c),
+    ]);
     c
 }
 
@@ -46,7 +46,7 @@ fn train_small(dir: &Path, arch: &str) -> PathBuf {
     let out = ok(&[
         "train",
         "--corrections",
-        p(&c),
+        path_str(&c),
         "--arch",
         arch,
         "--hidden-max",
@@ -54,7 +54,7 @@ fn train_small(dir: &Path, arch: &str) -> PathBuf {
         "--restarts",
         "1",
         "--out",
-        p(&model),
+        path_str(&model),
     ]);
     assert!(out.contains("Selection of hidden nodes"), "{out}");
     assert!(dir.join(format!("{arch}.selection.svg")).exists());
@@ -66,7 +66,7 @@ fn predict_returns_exactly_the_library_compensation() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     let model_path = train_small(d, "decoupled");
-    let inspected = ok(&["inspect", p(&model_path)]);
+    let inspected = ok(&["inspect", path_str(&model_path)]);
     assert!(
         inspected.contains("decoupled (six single-output networks)"),
         "{inspected}"
@@ -85,7 +85,7 @@ fn predict_returns_exactly_the_library_compensation() {
     let mut with = Model::load(&model_path, &Geometry::prototype()).unwrap();
     with.uncertainty = Some(test_uncertainty());
     with.save(&model_path).unwrap();
-    let inspected = ok(&["inspect", p(&model_path)]);
+    let inspected = ok(&["inspect", path_str(&model_path)]);
     assert!(inspected.contains("format version 2"), "{inspected}");
     assert!(
         inspected.contains("uncertainty    1-σ position"),
@@ -96,11 +96,11 @@ fn predict_returns_exactly_the_library_compensation() {
     ok(&[
         "predict",
         "--model",
-        p(&model_path),
+        path_str(&model_path),
         "--poses",
-        p(&d.join("poses.csv")),
+        path_str(&d.join("poses.csv")),
         "--out",
-        p(&out),
+        path_str(&out),
     ]);
     let g = Geometry::prototype();
     let model = Model::load(&model_path, &g).unwrap();
@@ -146,11 +146,11 @@ fn predict_returns_exactly_the_library_compensation() {
     ok(&[
         "predict",
         "--model",
-        p(&model_path),
+        path_str(&model_path),
         "--joints",
-        p(&d.join("joints.csv")),
+        path_str(&d.join("joints.csv")),
         "--out",
-        p(&out2),
+        path_str(&out2),
     ]);
     let legs = hexacomp_formats::read_joints(&d.join("joints.csv")).unwrap();
     let written = std::fs::read_to_string(&out2).unwrap();
@@ -201,13 +201,13 @@ fn bad_model_files_are_refused_each_with_its_reason() {
             vec![
                 "predict",
                 "--model",
-                p(&path),
+                path_str(&path),
                 "--poses",
-                p(&d.join("poses.csv")),
+                path_str(&d.join("poses.csv")),
                 "--out",
-                p(&d.join("o.csv")),
+                path_str(&d.join("o.csv")),
             ],
-            vec!["inspect", p(&path)],
+            vec!["inspect", path_str(&path)],
         ] {
             let output = trainer(&args);
             assert_eq!(output.status.code(), Some(1), "{name}");
@@ -226,20 +226,16 @@ fn bad_model_files_are_refused_each_with_its_reason() {
     let output = trainer(&[
         "predict",
         "--geometry",
-        p(&geometry),
+        path_str(&geometry),
         "--model",
-        p(&model_path),
+        path_str(&model_path),
         "--poses",
-        p(&d.join("poses.csv")),
+        path_str(&d.join("poses.csv")),
         "--out",
-        p(&d.join("o.csv")),
+        path_str(&d.join("o.csv")),
     ]);
     assert_eq!(output.status.code(), Some(1));
-    assert!(
-        text(&output.stderr).contains("trained for geometry"),
-        "{}",
-        text(&output.stderr)
-    );
+    assert_says(&output.stderr, "trained for geometry");
 }
 
 #[test]
@@ -265,9 +261,9 @@ fn empty_and_one_row_corrections_files_are_refused() {
         let output = trainer(&[
             "train",
             "--corrections",
-            p(&path),
+            path_str(&path),
             "--out",
-            p(&d.join("m.hxm")),
+            path_str(&d.join("m.hxm")),
         ]);
         assert_eq!(output.status.code(), Some(1), "{name}");
         assert!(
@@ -290,7 +286,7 @@ fn calibrate_runs_the_whole_pipeline_and_summarises() {
         "--validation",
         "30",
         "--out-dir",
-        p(&out_dir),
+        path_str(&out_dir),
     ]);
     for file in [
         "poses.csv",
@@ -462,13 +458,9 @@ fn calibrate_runs_the_whole_pipeline_and_summarises() {
     );
     // A repeatability that is not a length is refused before anything runs.
     for bad in ["--repeatability-mm=-0.1", "--repeatability-mm=nan"] {
-        let refused = trainer(&["calibrate", bad, "--out-dir", p(&out_dir)]);
+        let refused = trainer(&["calibrate", bad, "--out-dir", path_str(&out_dir)]);
         assert!(!refused.status.success());
-        assert!(
-            text(&refused.stderr).contains("is not a repeatability in mm"),
-            "{}",
-            text(&refused.stderr)
-        );
+        assert_says(&refused.stderr, "is not a repeatability in mm");
     }
 }
 
@@ -521,11 +513,11 @@ fn predict_streams_a_large_file_in_far_less_memory_than_its_size() {
         .args([
             "predict",
             "--model",
-            p(&model),
+            path_str(&model),
             "--poses",
-            p(&poses),
+            path_str(&poses),
             "--out",
-            p(&out),
+            path_str(&out),
         ])
         .stderr(std::process::Stdio::null())
         .spawn()

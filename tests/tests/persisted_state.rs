@@ -9,11 +9,7 @@ use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
 use hexacomp_client::DeployOutcome;
-use hexacomp_tests::{ServiceProcess, binary, save_smooth_model, unique_instance};
-
-fn p(path: &Path) -> &str {
-    path.to_str().unwrap()
-}
+use hexacomp_tests::{ServiceProcess, binary, path_str, save_smooth_model, unique_instance};
 
 /// Starts the service and expects it to refuse to start: its output once it exited (within
 /// 30 s; a service that serves instead is killed and the test fails).
@@ -88,9 +84,9 @@ fn a_refused_second_service_changes_nothing_in_the_state_directory() {
         "--instance",
         &instance,
         "--state-dir",
-        p(&state),
+        path_str(&state),
         "--model",
-        p(&other),
+        path_str(&other),
     ]);
     let message = String::from_utf8_lossy(&output.stderr);
     assert!(message.contains("already served"), "{message}");
@@ -105,7 +101,7 @@ fn a_refused_second_service_changes_nothing_in_the_state_directory() {
     // A restart serves what the first service persisted, under its number.
     let (status, _) = service.stop_with(libc::SIGTERM);
     assert!(status.success());
-    let restarted = ServiceProcess::start(&instance, &["--state-dir", p(&state)]);
+    let restarted = ServiceProcess::start(&instance, &["--state-dir", path_str(&state)]);
     assert_eq!(restarted.client().unwrap().status().unwrap().generation, 3);
 }
 
@@ -129,7 +125,7 @@ fn a_generation_file_without_a_number_is_refused_by_name() {
     ServiceProcess::with_model(&instance, &state, &model).stop_with(libc::SIGTERM);
     // Written over what the link points to: the file the service reads.
     std::fs::write(state.join("generation"), "garbage").unwrap();
-    let output = refused_start(&["--instance", &instance, "--state-dir", p(&state)]);
+    let output = refused_start(&["--instance", &instance, "--state-dir", path_str(&state)]);
     let message = String::from_utf8_lossy(&output.stderr);
     assert!(
         message.contains(
@@ -151,7 +147,7 @@ fn at_the_last_generation_number_a_deploy_is_refused_and_the_model_keeps_its_num
     let (_, model) = save_smooth_model(dir.path(), 1);
     ServiceProcess::with_model(&instance, &state, &model).stop_with(libc::SIGTERM);
     std::fs::write(state.join("generation"), u64::MAX.to_string()).unwrap();
-    let service = ServiceProcess::start(&instance, &["--state-dir", p(&state)]);
+    let service = ServiceProcess::start(&instance, &["--state-dir", path_str(&state)]);
     match deploy(&service, &model) {
         DeployOutcome::Refused { reason, generation } => {
             assert!(reason.contains("exhausted"), "{reason}");
@@ -181,7 +177,7 @@ fn a_shared_state_directory_is_refused_and_left_as_it_was() {
         "--instance",
         &unique_instance("shared"),
         "--state-dir",
-        p(&shared),
+        path_str(&shared),
     ]);
     let message = String::from_utf8_lossy(&output.stderr);
     assert!(message.contains("writable by others"), "{message}");
@@ -194,7 +190,7 @@ fn after_an_ignored_persisted_model_deploys_are_numbered_after_its_number() {
     let (_dir, state, instance, model) = two_generations_persisted("ignorednumber");
     // Damaged (written through the link, into the current generation's file): ignored.
     std::fs::write(state.join("model.hxm"), b"not a model").unwrap();
-    let service = ServiceProcess::start(&instance, &["--state-dir", p(&state)]);
+    let service = ServiceProcess::start(&instance, &["--state-dir", path_str(&state)]);
     assert_eq!(service.client().unwrap().status().unwrap().generation, 0);
     assert!(
         service.log().contains("ignoring the persisted model"),

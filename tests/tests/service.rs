@@ -15,7 +15,7 @@ use hexacomp_core::model::Model;
 use hexacomp_core::sampling::{SamplerOptions, WorkspaceSampler};
 use hexacomp_core::stats::PoseErrorNorm;
 use hexacomp_core::{Geometry, Pose, inverse_kinematics};
-use hexacomp_tests::{ServiceProcess, test_uncertainty, unique_instance};
+use hexacomp_tests::{ServiceProcess, path_str, test_uncertainty, unique_instance};
 use hexacomp_virtual::{DEFAULT_MACHINE_SEED, ErrorModel, VirtualPlatform};
 
 /// A small decoupled model of the default virtual machine, trained with `seed`, saved in `dir`.
@@ -54,10 +54,6 @@ fn poses(count: usize, seed: u64) -> Vec<Pose> {
         .unwrap()
 }
 
-fn p(path: &Path) -> &str {
-    path.to_str().unwrap()
-}
-
 fn assert_same(got: &CompensatedPoint, expected: &hexacomp_core::compensator::Compensated) {
     assert_eq!(got.legs, expected.legs);
     assert_eq!(got.corrections, expected.corrections);
@@ -77,15 +73,8 @@ fn client_results_equal_predict_for_10000_poses_single_and_batched() {
     model.uncertainty = Some(test_uncertainty());
     model.save(&path).unwrap();
     let g = Geometry::prototype();
-    let service = ServiceProcess::start(
-        &unique_instance("equal"),
-        &[
-            "--state-dir",
-            p(&dir.path().join("state")),
-            "--model",
-            p(&path),
-        ],
-    );
+    let service =
+        ServiceProcess::with_model(&unique_instance("equal"), &dir.path().join("state"), &path);
     let mut client = service.client().unwrap();
     let poses = poses(10_000, 3);
     let mut with_uncertainty = 0;
@@ -147,15 +136,8 @@ fn hot_swap_in_a_stream_of_requests_loses_nothing_and_never_mixes_a_batch() {
     let dir = tempfile::tempdir().unwrap();
     let (_, first) = small_model(dir.path(), 1);
     let (_, second) = small_model(dir.path(), 2);
-    let service = ServiceProcess::start(
-        &unique_instance("swap"),
-        &[
-            "--state-dir",
-            p(&dir.path().join("state")),
-            "--model",
-            p(&first),
-        ],
-    );
+    let service =
+        ServiceProcess::with_model(&unique_instance("swap"), &dir.path().join("state"), &first);
     let mut client = service.client().unwrap();
     let points: Vec<[f64; 6]> = poses(8, 5).iter().map(|p| p.to_mm_deg()).collect();
     let mut out = [CompensatedPoint::empty(); 8];
@@ -183,7 +165,13 @@ fn hot_swap_in_a_stream_of_requests_loses_nothing_and_never_mixes_a_batch() {
     let deployer = std::thread::spawn(move || {
         let output = hexacomp_tests::run(
             "hexacomp-trainer",
-            &["deploy", "--instance", &instance, "--model", p(&second)],
+            &[
+                "deploy",
+                "--instance",
+                &instance,
+                "--model",
+                path_str(&second),
+            ],
         );
         String::from_utf8_lossy(&output.stdout).into_owned()
             + &String::from_utf8_lossy(&output.stderr)
@@ -223,14 +211,10 @@ fn hot_swap_in_a_stream_of_requests_loses_nothing_and_never_mixes_a_batch() {
 fn refused_deploys_leave_the_old_model_serving_and_say_why() {
     let dir = tempfile::tempdir().unwrap();
     let (_, first) = small_model(dir.path(), 1);
-    let service = ServiceProcess::start(
+    let service = ServiceProcess::with_model(
         &unique_instance("refuse"),
-        &[
-            "--state-dir",
-            p(&dir.path().join("state")),
-            "--model",
-            p(&first),
-        ],
+        &dir.path().join("state"),
+        &first,
     );
     let mut client = service.client().unwrap();
     let bytes = std::fs::read(&first).unwrap();
@@ -271,8 +255,10 @@ fn after_sigkill_a_restarted_service_serves_the_last_accepted_model() {
     let (_, first) = small_model(dir.path(), 1);
     let (second_model, second) = small_model(dir.path(), 2);
     let instance = unique_instance("kill");
-    let service =
-        ServiceProcess::start(&instance, &["--state-dir", p(&state), "--model", p(&first)]);
+    let service = ServiceProcess::start(
+        &instance,
+        &["--state-dir", path_str(&state), "--model", path_str(&first)],
+    );
     let mut client = service.client().unwrap();
     let bytes = std::fs::read(&second).unwrap();
     assert!(matches!(
@@ -289,7 +275,7 @@ fn after_sigkill_a_restarted_service_serves_the_last_accepted_model() {
         "{error:?}"
     );
     // Restart without --model and without any cleanup: the persisted generation 2 serves.
-    let service = ServiceProcess::start(&instance, &["--state-dir", p(&state)]);
+    let service = ServiceProcess::start(&instance, &["--state-dir", path_str(&state)]);
     assert_eq!(service.client().unwrap().status().unwrap().generation, 2);
     // The old client works again once the service is back (a retry within its deadline).
     let g = Geometry::prototype();
@@ -316,14 +302,10 @@ fn after_sigkill_a_restarted_service_serves_the_last_accepted_model() {
 fn invalid_points_get_their_status_and_the_service_keeps_serving() {
     let dir = tempfile::tempdir().unwrap();
     let (model, path) = small_model(dir.path(), 1);
-    let service = ServiceProcess::start(
+    let service = ServiceProcess::with_model(
         &unique_instance("invalid"),
-        &[
-            "--state-dir",
-            p(&dir.path().join("state")),
-            "--model",
-            p(&path),
-        ],
+        &dir.path().join("state"),
+        &path,
     );
     let mut client = service.client().unwrap();
     let nan = client
@@ -355,7 +337,7 @@ fn without_a_model_the_service_answers_nominal_inverse_kinematics() {
     let dir = tempfile::tempdir().unwrap();
     let service = ServiceProcess::start(
         &unique_instance("nomodel"),
-        &["--state-dir", p(&dir.path().join("state"))],
+        &["--state-dir", path_str(&dir.path().join("state"))],
     );
     let mut client = service.client().unwrap();
     let pose = [10.0, 20.0, 300.0, 3.0, -2.0, 5.0];
@@ -376,14 +358,15 @@ fn a_second_service_for_the_same_instance_is_refused_and_the_absent_one_is_repor
         matches!(absent, hexacomp_client::Error::ServiceAbsent { .. }),
         "{absent:?}"
     );
-    let service = ServiceProcess::start(&instance, &["--state-dir", p(&dir.path().join("a"))]);
+    let service =
+        ServiceProcess::start(&instance, &["--state-dir", path_str(&dir.path().join("a"))]);
     let mut first = service.client().unwrap();
     let output = std::process::Command::new(hexacomp_tests::binary("hexacomp-service"))
         .args([
             "--instance",
             &instance,
             "--state-dir",
-            p(&dir.path().join("b")),
+            path_str(&dir.path().join("b")),
         ])
         .output()
         .unwrap();
@@ -424,9 +407,9 @@ fn event_mode_serves_the_same_numbers_swaps_and_leaves_the_core_free_when_idle()
         &unique_instance("event"),
         &[
             "--state-dir",
-            p(&dir.path().join("state")),
+            path_str(&dir.path().join("state")),
             "--model",
-            p(&first),
+            path_str(&first),
             "--wait",
             "event",
         ],

@@ -13,12 +13,8 @@ use hexacomp_client::wire::{
 use hexacomp_client::{Error, PointStatus};
 use hexacomp_core::Geometry;
 use hexacomp_tests::{
-    ServiceProcess, binary, raw_client, save_smooth_model, smooth_model, unique_instance,
+    ServiceProcess, binary, path_str, raw_client, save_smooth_model, smooth_model, unique_instance,
 };
-
-fn p(path: &Path) -> &str {
-    path.to_str().unwrap()
-}
 
 /// The prototype with its base 1 mm wider: another geometry fingerprint.
 fn other_geometry() -> Geometry {
@@ -52,7 +48,7 @@ fn a_damaged_or_foreign_persisted_model_is_ignored_with_a_warning_and_not_served
         (foreign.to_bytes(), "trained for geometry"),
     ] {
         std::fs::write(&persisted, &bytes).unwrap();
-        let service = ServiceProcess::start(&instance, &["--state-dir", p(&state)]);
+        let service = ServiceProcess::start(&instance, &["--state-dir", path_str(&state)]);
         let mut client = service.client().unwrap();
         assert_eq!(client.status().unwrap().generation, 0);
         let point = client
@@ -80,7 +76,7 @@ fn a_model_that_validation_refuses_stops_the_start_with_the_reason() {
     foreign.save(&path).unwrap();
     let output = std::process::Command::new(binary("hexacomp-service"))
         .args(["--instance", &unique_instance("badmodel")])
-        .args(["--state-dir", p(&state), "--model", p(&path)])
+        .args(["--state-dir", path_str(&state), "--model", path_str(&path)])
         .output()
         .unwrap();
     let message = String::from_utf8_lossy(&output.stderr);
@@ -129,7 +125,7 @@ fn sigterm_and_sigint_stop_the_service_cleanly_and_the_instance_can_start_again(
             "{absent:?}"
         );
         // The instance starts again at once, with the persisted model.
-        service = ServiceProcess::start(&instance, &["--state-dir", p(&state)]);
+        service = ServiceProcess::start(&instance, &["--state-dir", path_str(&state)]);
         assert_eq!(service.client().unwrap().status().unwrap().generation, 1);
     }
 }
@@ -139,7 +135,7 @@ fn rust_log_sets_the_level_and_a_value_that_names_none_is_said() {
     let dir = tempfile::tempdir().unwrap();
     let state = dir.path().join("state");
     let (_, model) = save_smooth_model(dir.path(), 5);
-    let args = ["--state-dir", p(&state), "--model", p(&model)];
+    let args = ["--state-dir", path_str(&state), "--model", path_str(&model)];
     // At warn, the start and the stop (info) are not logged.
     let instance = unique_instance("quiet");
     let service = ServiceProcess::start_with_env(&instance, &args, &[("RUST_LOG", "warn")]);
@@ -212,7 +208,7 @@ fn a_client_budget_of_0_never_answers_overloaded() {
         &unique_instance("budget1"),
         &[
             "--state-dir",
-            p(&dir.path().join("a")),
+            path_str(&dir.path().join("a")),
             "--client-budget",
             "1",
         ],
@@ -223,7 +219,7 @@ fn a_client_budget_of_0_never_answers_overloaded() {
         &unique_instance("budget0"),
         &[
             "--state-dir",
-            p(&dir.path().join("b")),
+            path_str(&dir.path().join("b")),
             "--client-budget",
             "0",
         ],
@@ -252,7 +248,10 @@ fn an_event_mode_service_without_its_wake_up_says_it_sleeps() {
     let _listener = wake.listener_builder().create().unwrap();
     let dir = tempfile::tempdir().unwrap();
     let state = dir.path().join("state");
-    let service = ServiceProcess::start(&instance, &["--wait", "event", "--state-dir", p(&state)]);
+    let service = ServiceProcess::start(
+        &instance,
+        &["--wait", "event", "--state-dir", path_str(&state)],
+    );
     let mut client = service.client().unwrap();
     assert_eq!(
         client.status().unwrap().wait_mode,
@@ -286,7 +285,7 @@ fn start_as_under_systemd(
             "--instance",
             instance,
             "--state-dir",
-            p(state),
+            path_str(state),
             "--wait",
             "event",
         ])

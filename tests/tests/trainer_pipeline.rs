@@ -5,27 +5,8 @@
 use hexacomp_core::Geometry;
 use hexacomp_core::stats::PoseErrorNorm;
 use hexacomp_formats::{read_corrections, read_measurements, read_poses};
-use hexacomp_tests::run;
+use hexacomp_tests::{assert_says, run, text, trainer_in, trainer_ok};
 use hexacomp_virtual::{DEFAULT_MACHINE_SEED, ErrorModel, ErrorVariant, VirtualPlatform};
-
-fn text(bytes: &[u8]) -> String {
-    String::from_utf8_lossy(bytes).into_owned()
-}
-
-fn trainer(dir: &std::path::Path, args: &[&str]) -> std::process::Output {
-    hexacomp_tests::trainer_in(dir, args)
-}
-
-/// [`trainer`], asserting success; returns stderr.
-fn trainer_ok(dir: &std::path::Path, args: &[&str]) -> String {
-    let output = trainer(dir, args);
-    assert!(
-        output.status.success(),
-        "{args:?}: {}",
-        text(&output.stderr)
-    );
-    text(&output.stderr)
-}
 
 #[test]
 fn plan_simulate_solve_identify_produce_the_design_formats() {
@@ -189,10 +170,9 @@ fn bad_measurement_files_are_refused_with_file_line_and_column() {
             d.join("c.csv").to_str().unwrap(),
         ],
     );
-    assert!(
-        text(&output.stderr).contains("nan.csv:3: column x: \"NaN\" is not a finite number"),
-        "{}",
-        text(&output.stderr)
+    assert_says(
+        &output.stderr,
+        "nan.csv:3: column x: \"NaN\" is not a finite number",
     );
 }
 
@@ -255,7 +235,7 @@ fn gross_errors_are_excluded_by_line_and_a_file_of_them_is_refused() {
         }
     }
     std::fs::write(d.join("inches.csv"), inches.join("\n") + "\n").unwrap();
-    let output = trainer(
+    let output = trainer_in(
         d,
         &["solve", "--measurements", "inches.csv", "--out", "c.csv"],
     );
@@ -306,7 +286,7 @@ fn a_tracker_campaign_is_registered_and_solved_in_the_base_frame() {
         ],
     );
     // The nominal fiducials: the six of the built-in geometry.
-    let output = trainer(
+    let output = trainer_in(
         d,
         &[
             "register",
@@ -328,7 +308,7 @@ fn a_tracker_campaign_is_registered_and_solved_in_the_base_frame() {
         printed.contains("a measured target is known to"),
         "{printed}"
     );
-    let inspected = text(&trainer(d, &["inspect", "registration.toml"]).stdout);
+    let inspected = text(&trainer_in(d, &["inspect", "registration.toml"]).stdout);
     assert!(
         inspected.contains("6 fiducials used: RMS")
             && inspected.contains("fiducials of geometry prototype")
@@ -373,16 +353,12 @@ fn a_tracker_campaign_is_registered_and_solved_in_the_base_frame() {
     assert!(largest > 0.0, "the registration changed nothing");
 
     // Without the registration the same file is refused as a whole.
-    let output = trainer(
+    let output = trainer_in(
         d,
         &["solve", "--measurements", "tracker.csv", "--out", "x.csv"],
     );
     assert!(!output.status.success());
-    assert!(
-        text(&output.stderr).contains("give --registration"),
-        "{}",
-        text(&output.stderr)
-    );
+    assert_says(&output.stderr, "give --registration");
 }
 
 #[test]
@@ -400,7 +376,7 @@ fn a_refused_registration_writes_nothing_and_leaves_the_old_one() {
     )
     .unwrap();
     std::fs::write(d.join("registration.toml"), "the previous registration").unwrap();
-    let output = trainer(
+    let output = trainer_in(
         d,
         &[
             "register",
@@ -483,7 +459,7 @@ fn gaps_and_a_probe_in_pi_angles_are_solved_and_reported() {
         prototype.replace("targets = [", "targets = [[0.0, 0.0, 60.0], "),
     )
     .unwrap();
-    let output = trainer(
+    let output = trainer_in(
         d,
         &[
             "--geometry",
@@ -555,7 +531,7 @@ fn gaps_and_a_probe_in_pi_angles_are_solved_and_reported() {
             .fold(0.0, f64::max)
     };
     assert!(largest_difference("probe-dq.csv") < 1e-6);
-    let output = trainer(
+    let output = trainer_in(
         d,
         &[
             "solve",

@@ -6,33 +6,8 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
+use hexacomp_tests::{json_file, text, trainer_fails, trainer_in, trainer_ok_stdout};
 use serde_json::Value;
-
-fn text(bytes: &[u8]) -> String {
-    String::from_utf8_lossy(bytes).into_owned()
-}
-
-/// Runs the trainer in `dir`, asserting success; its stdout.
-fn trainer_ok(dir: &Path, args: &[&str]) -> String {
-    let output = hexacomp_tests::trainer_in(dir, args);
-    assert!(
-        output.status.success(),
-        "{args:?}: {}",
-        text(&output.stderr)
-    );
-    text(&output.stdout)
-}
-
-/// Runs the trainer in `dir`, asserting failure; its stderr.
-fn trainer_fails(dir: &Path, args: &[&str]) -> String {
-    let output = hexacomp_tests::trainer_in(dir, args);
-    assert!(!output.status.success(), "{args:?} succeeded");
-    text(&output.stderr)
-}
-
-fn report(path: &Path) -> Value {
-    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
-}
 
 /// The raw attained poses by pose name, in file order.
 fn raw_poses(path: &Path) -> BTreeMap<String, Vec<[f64; 6]>> {
@@ -135,9 +110,9 @@ fn worst(json: &Value, key: &str) -> f64 {
 fn a_calibrated_model_improves_ap_tenfold_rp_holds_and_the_report_agrees_with_the_raw_poses() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    trainer_ok(d, &["calibrate", "--out-dir", "cal"]);
-    trainer_ok(d, &["verify", "--out", "before.csv"]);
-    let printed = trainer_ok(
+    trainer_ok_stdout(d, &["calibrate", "--out-dir", "cal"]);
+    trainer_ok_stdout(d, &["verify", "--out", "before.csv"]);
+    let printed = trainer_ok_stdout(
         d,
         &[
             "verify",
@@ -154,8 +129,8 @@ fn a_calibrated_model_improves_ap_tenfold_rp_holds_and_the_report_agrees_with_th
         ],
     );
     let (before, after) = (
-        report(&d.join("before.json")),
-        report(&d.join("after.json")),
+        json_file(&d.join("before.json")),
+        json_file(&d.join("after.json")),
     );
     let names: Vec<&str> = after["poses"]
         .as_array()
@@ -206,7 +181,7 @@ fn a_calibrated_model_improves_ap_tenfold_rp_holds_and_the_report_agrees_with_th
     // The monthly check against what verify proved: the same machine and model keep the
     // promise; compensation lost, or a machine that changed (another draw of its errors, as after
     // a crash), do not.
-    let said = trainer_ok(
+    let said = trainer_ok_stdout(
         d,
         &[
             "check",
@@ -232,7 +207,7 @@ fn a_calibrated_model_improves_ap_tenfold_rp_holds_and_the_report_agrees_with_th
             "5",
         ],
     ] {
-        let output = hexacomp_tests::trainer_in(d, other);
+        let output = trainer_in(d, other);
         assert!(!output.status.success(), "{other:?}");
         assert!(
             text(&output.stdout).starts_with("retrain: "),
@@ -247,8 +222,8 @@ fn a_tracker_away_from_the_base_needs_its_registration_and_then_gives_the_base_f
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     let at = "2500,-1500,-800,0.3,-0.2,135";
-    trainer_ok(d, &["plan", "--count", "3", "--out", "plan.csv"]);
-    trainer_ok(
+    trainer_ok_stdout(d, &["plan", "--count", "3", "--out", "plan.csv"]);
+    trainer_ok_stdout(
         d,
         &[
             "simulate",
@@ -262,7 +237,7 @@ fn a_tracker_away_from_the_base_needs_its_registration_and_then_gives_the_base_f
             "measured.csv",
         ],
     );
-    trainer_ok(
+    trainer_ok_stdout(
         d,
         &[
             "register",
@@ -283,7 +258,7 @@ fn a_tracker_away_from_the_base_needs_its_registration_and_then_gives_the_base_f
     );
     assert!(refused.contains("give --registration"), "{refused}");
     assert!(!d.join("t.csv").exists() && !d.join("t.json").exists());
-    trainer_ok(
+    trainer_ok_stdout(
         d,
         &[
             &[
@@ -299,7 +274,7 @@ fn a_tracker_away_from_the_base_needs_its_registration_and_then_gives_the_base_f
         ]
         .concat(),
     );
-    trainer_ok(d, &[&["verify", "--out", "base.csv"][..], &short].concat());
+    trainer_ok_stdout(d, &[&["verify", "--out", "base.csv"][..], &short].concat());
     // The same attained poses (the noise is keyed on the pose and cycle), seen through the
     // registration: they differ by its error only, micrometres, not the metres between frames.
     let (tracker, base) = (
@@ -324,7 +299,7 @@ fn a_tracker_away_from_the_base_needs_its_registration_and_then_gives_the_base_f
 fn bad_input_is_refused_with_its_cause_and_nothing_written() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    trainer_ok(
+    trainer_ok_stdout(
         d,
         &[
             "verify",
