@@ -126,11 +126,9 @@ pub fn test_cube(geometry: &Geometry) -> Result<TestCube> {
         });
     }
     if !(largest >= 1.0 && fits(1.0)) {
-        return Err(Error::InvalidSetting(format!(
-            "no test cube fits the task workspace within the stroke (not even 1 mm at \
-             [0, 0, {}] mm): check the geometry's workspace and leg range",
-            centre.z
-        )));
+        return Err(Error::NoTestCube {
+            centre_z_mm: centre.z,
+        });
     }
     let (mut inside, mut outside) = (1.0, largest);
     while outside - inside > 1e-3 * inside {
@@ -191,10 +189,7 @@ fn orientation_poses(geometry: &Geometry, p1: &[f64; 6]) -> Result<Vec<TestPose>
                 }
                 turn /= 2.0;
             }
-            Err(Error::InvalidSetting(format!(
-                "no orientation pose O{} about P1 is within the stroke",
-                k + 1
-            )))
+            Err(Error::NoOrientationPose { pose: k + 1 })
         })
         .collect()
 }
@@ -215,10 +210,10 @@ pub fn cycle_poses(
         .iter()
         .find(|p| !inverse_kinematics(geometry, &Pose::from_mm_deg(p.commanded)).all_in_stroke())
     {
-        return Err(Error::InvalidSetting(format!(
-            "the test pose {} {:?} needs legs outside the stroke: check the geometry's workspace",
-            outside.name, outside.commanded
-        )));
+        return Err(Error::PoseOutsideStroke {
+            pose: outside.name.clone(),
+            commanded: outside.commanded,
+        });
     }
     if options.extra > 0 {
         let mut sampler = WorkspaceSampler::new(geometry, options.seed, SamplerOptions::default())?;
@@ -279,9 +274,7 @@ fn sample_deviation(values: impl Iterator<Item = f64>, mean: f64, n: usize) -> f
 pub fn characteristics(commanded: &[f64; 6], attained: &[[f64; 6]]) -> Result<PoseCharacteristics> {
     let n = attained.len();
     if n < 2 {
-        return Err(Error::InsufficientData(format!(
-            "ISO 9283 needs at least two attained poses per pose; {n} given"
-        )));
+        return Err(Error::TooFewAttained { given: n });
     }
     let mean = |k: usize| attained.iter().map(|p| p[k]).sum::<f64>() / n as f64;
     let position = DVec3::new(mean(0), mean(1), mean(2));

@@ -87,7 +87,11 @@ impl PoseTest<'_> {
     ) -> Result<()> {
         let options = &self.options;
         if options.readings == 0 {
-            return Err(Error::InvalidSetting("readings must be ≥ 1".into()));
+            return Err(Error::OutOfRange {
+                setting: "readings",
+                value: 0.0,
+                valid: "must be ≥ 1",
+            });
         }
         let approach = |machine: &mut dyn Machine, cycle: usize| -> Result<()> {
             match &self.approach {
@@ -161,8 +165,10 @@ pub fn characteristics_of(
                 .filter(|a| a.pose == pose.name)
                 .map(|a| a.pose_mm_deg)
                 .collect();
-            characteristics(&pose.commanded, &at)
-                .map_err(|e| Error::InsufficientData(format!("pose {}: {e}", pose.name)))
+            characteristics(&pose.commanded, &at).map_err(|e| Error::AtPose {
+                pose: pose.name.clone(),
+                cause: Box::new(e),
+            })
         })
         .collect()
 }

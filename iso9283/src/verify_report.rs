@@ -130,16 +130,16 @@ impl VerifyReport {
 
     /// Reads a report written by `verify --json`; `file` names it in errors.
     pub fn from_json(text: &str, file: &str) -> Result<Self> {
-        let report: Self = serde_json::from_str(text).map_err(|e| {
-            Error::InvalidSetting(format!(
-                "{file}: not a report of hexacomp-trainer verify: {e}"
-            ))
+        let report: Self = serde_json::from_str(text).map_err(|e| Error::NotAReport {
+            file: file.to_string(),
+            cause: e.to_string(),
         })?;
         if report.standard != STANDARD {
-            return Err(Error::InvalidSetting(format!(
-                "{file}: a report of {:?}, not of {STANDARD:?}",
-                report.standard
-            )));
+            return Err(Error::OtherStandard {
+                file: file.to_string(),
+                standard: report.standard,
+                expected: STANDARD,
+            });
         }
         Ok(report)
     }
@@ -159,16 +159,15 @@ impl VerifyReport {
         if same {
             Ok(())
         } else {
-            Err(Error::InvalidSetting(format!(
-                "{file}: it tested other poses ({}) than this run ({}); give a run of the same \
-                 geometry and pose options",
-                names(&self.poses),
-                poses
+            Err(Error::OtherPoses {
+                file: file.to_string(),
+                reported: names(&self.poses),
+                run: poses
                     .iter()
                     .map(|p| p.name.as_str())
                     .collect::<Vec<_>>()
-                    .join(", ")
-            )))
+                    .join(", "),
+            })
         }
     }
 
@@ -302,7 +301,7 @@ fn deg(value: f64) -> String {
 /// The readable report of `after`, with `before` beside it when given.
 ///
 /// # Errors
-/// [`Error::Chart`] when a pose's chart cannot be drawn.
+/// [`Error::Report`] when a pose's chart cannot be drawn.
 pub fn html(after: &VerifyReport, before: Option<&VerifyReport>) -> Result<String> {
     let mut page = String::new();
     let _ = write!(
@@ -323,60 +322,7 @@ pub fn html(after: &VerifyReport, before: Option<&VerifyReport>) -> Result<Strin
         .map(|r| ("Before", r))
         .chain([(if before.is_some() { "After" } else { "Run" }, after)])
     {
-        let c = &report.conditions;
-        let _ = writeln!(
-            page,
-            "<h2>{label}</h2>\n<p>{}; {} cycles, {} readings per pose, {} s dwell; model: {}; \
-             registration: {}; air {} °C, machine {} °C; instrument MPE {}; ended {}.</p>",
-            escape(&c.rig),
-            c.cycles,
-            c.readings,
-            c.dwell_s,
-            escape(c.model.as_deref().unwrap_or("none")),
-            escape(c.registration.as_deref().unwrap_or("none")),
-            c.air_temperature_c.map_or("–".into(), |t| t.to_string()),
-            c.machine_temperature_c
-                .map_or("–".into(), |t| t.to_string()),
-            c.instrument_mpe_um
-                .map_or("not stated".into(), |[a, b]| format!("{a} µm + {b} µm/m")),
-            escape(&report.created)
-        );
-        page.push_str(
-            "<table><tr><th>pose</th><th>n</th><th>AP_P</th><th>AP_a</th><th>AP_b</th>\
-             <th>AP_c</th><th>RP_l</th><th>RP_a</th><th>RP_b</th><th>RP_c</th></tr>\n",
-        );
-        for pose in &report.poses {
-            let f = &pose.figures;
-            let _ = writeln!(
-                page,
-                "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td>\
-                 <td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
-                escape(&pose.name),
-                f.cycles,
-                um(f.ap_p_mm),
-                deg(f.ap_a_deg),
-                deg(f.ap_b_deg),
-                deg(f.ap_c_deg),
-                um(f.rp_l_mm),
-                deg(f.rp_a_deg),
-                deg(f.rp_b_deg),
-                deg(f.rp_c_deg)
-            );
-        }
-        page.push_str("</table>\n");
-        if !report.missed.is_empty() {
-            page.push_str("<p>Not measured (left out of their pose's figures):</p><ul>\n");
-            for m in &report.missed {
-                let _ = writeln!(
-                    page,
-                    "<li>{} in cycle {}: {}</li>",
-                    escape(&m.pose),
-                    m.cycle,
-                    escape(&m.why)
-                );
-            }
-            page.push_str("</ul>\n");
-        }
+        run_section(&mut page, label, report);
     }
     if let Some(before) = before {
         let _ = writeln!(
@@ -390,6 +336,76 @@ pub fn html(after: &VerifyReport, before: Option<&VerifyReport>) -> Result<Strin
             um(after.worst_rp_l_mm())
         );
     }
+    pose_charts(&mut page, after, before)?;
+    page.push_str("</body></html>\n");
+    Ok(page)
+}
+
+/// One run's section of the page: its conditions, its table of characteristics and the
+/// readings it missed.
+fn run_section(page: &mut String, label: &str, report: &VerifyReport) {
+    let c = &report.conditions;
+    let _ = writeln!(
+        page,
+        "<h2>{label}</h2>\n<p>{}; {} cycles, {} readings per pose, {} s dwell; model: {}; \
+         registration: {}; air {} °C, machine {} °C; instrument MPE {}; ended {}.</p>",
+        escape(&c.rig),
+        c.cycles,
+        c.readings,
+        c.dwell_s,
+        escape(c.model.as_deref().unwrap_or("none")),
+        escape(c.registration.as_deref().unwrap_or("none")),
+        c.air_temperature_c.map_or("–".into(), |t| t.to_string()),
+        c.machine_temperature_c
+            .map_or("–".into(), |t| t.to_string()),
+        c.instrument_mpe_um
+            .map_or("not stated".into(), |[a, b]| format!("{a} µm + {b} µm/m")),
+        escape(&report.created)
+    );
+    page.push_str(
+        "<table><tr><th>pose</th><th>n</th><th>AP_P</th><th>AP_a</th><th>AP_b</th>\
+         <th>AP_c</th><th>RP_l</th><th>RP_a</th><th>RP_b</th><th>RP_c</th></tr>\n",
+    );
+    for pose in &report.poses {
+        let f = &pose.figures;
+        let _ = writeln!(
+            page,
+            "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td>\
+             <td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+            escape(&pose.name),
+            f.cycles,
+            um(f.ap_p_mm),
+            deg(f.ap_a_deg),
+            deg(f.ap_b_deg),
+            deg(f.ap_c_deg),
+            um(f.rp_l_mm),
+            deg(f.rp_a_deg),
+            deg(f.rp_b_deg),
+            deg(f.rp_c_deg)
+        );
+    }
+    page.push_str("</table>\n");
+    if !report.missed.is_empty() {
+        page.push_str("<p>Not measured (left out of their pose's figures):</p><ul>\n");
+        for m in &report.missed {
+            let _ = writeln!(
+                page,
+                "<li>{} in cycle {}: {}</li>",
+                escape(&m.pose),
+                m.cycle,
+                escape(&m.why)
+            );
+        }
+        page.push_str("</ul>\n");
+    }
+}
+
+/// The table of each pose's chart of attained points, before and after side by side.
+fn pose_charts(
+    page: &mut String,
+    after: &VerifyReport,
+    before: Option<&VerifyReport>,
+) -> Result<()> {
     page.push_str("<h2>Attained points around each commanded pose</h2>\n<table>\n");
     for (k, pose) in after.poses.iter().enumerate() {
         page.push_str("<tr>");
@@ -403,6 +419,6 @@ pub fn html(after: &VerifyReport, before: Option<&VerifyReport>) -> Result<Strin
         );
         page.push_str("</tr>\n");
     }
-    page.push_str("</table>\n</body></html>\n");
-    Ok(page)
+    page.push_str("</table>\n");
+    Ok(())
 }

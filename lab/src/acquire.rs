@@ -33,10 +33,11 @@ pub fn as_reported(
     reporting: &Reporting,
 ) -> Result<()> {
     if !(0.0..=1.0).contains(&reporting.missed_share) {
-        return Err(Error::InvalidSetting(format!(
-            "share of configurations with a target missed {}: a number in [0, 1] is needed",
-            reporting.missed_share
-        )));
+        return Err(Error::OutOfRange {
+            setting: "share of configurations with a target missed",
+            value: reporting.missed_share,
+            valid: "must be a number in [0, 1]",
+        });
     }
     let into_instrument = reporting.instrument.inverse();
     let mut rng = ChaCha8Rng::seed_from_u64(reporting.seed ^ 0x6d69_7373_6564);

@@ -18,13 +18,29 @@ pub enum Error {
     #[error(transparent)]
     Core(#[from] hexacomp_core::Error),
 
-    /// A setting is out of its valid range.
-    #[error("invalid setting: {0}")]
-    InvalidSetting(String),
+    /// A setting is outside its valid range.
+    #[error("invalid setting: {setting} = {value} {valid}")]
+    OutOfRange {
+        /// The setting, as its option is named.
+        setting: &'static str,
+        /// The value given.
+        value: f64,
+        /// What is valid.
+        valid: &'static str,
+    },
 
-    /// The data cannot support the requested computation (too few configurations, none usable).
-    #[error("insufficient data: {0}")]
-    InsufficientData(String),
+    /// An evaluation without a training size.
+    #[error("invalid setting: at least one training size is needed")]
+    NoTrainingSize,
+
+    /// An error of the calibration at one training size.
+    #[error("insufficient data: at {configurations} configurations: {cause}")]
+    AtSize {
+        /// The training size.
+        configurations: usize,
+        /// What went wrong.
+        cause: hexacomp_calibration::Error,
+    },
 }
 
 /// `Result` with this crate's [`enum@Error`].

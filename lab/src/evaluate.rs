@@ -227,7 +227,7 @@ pub fn evaluate(
         .training_sizes
         .iter()
         .max()
-        .ok_or_else(|| Error::InvalidSetting("at least one training size is needed".into()))?;
+        .ok_or(Error::NoTrainingSize)?;
     progress(&format!(
         "measuring {largest} configurations on the virtual machine"
     ));
@@ -466,7 +466,10 @@ impl<'a> Campaign<'a> {
             CROSS_VALIDATION_FOLDS,
             &|_| {},
         )
-        .map_err(|e| Error::InsufficientData(format!("at {n} configurations: {e}")))?;
+        .map_err(|cause| Error::AtSize {
+            configurations: n,
+            cause,
+        })?;
         let identification = resolution.as_ref().map_or(PHYSICAL, |r| r.options);
         let physical = identify(self.geometry, &solved, &identification)?.model;
         let alternative_bases = resolution

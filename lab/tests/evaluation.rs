@@ -481,8 +481,5 @@ fn measured_errors_are_the_reached_ones_plus_the_instruments_noise() {
 fn no_training_size_is_refused() {
     let g = Geometry::prototype();
     let result = evaluate(&g, &options(vec![], ErrorModel::default()), &|_| {});
-    assert!(matches!(
-        result,
-        Err(hexacomp_lab::Error::InvalidSetting(_))
-    ));
+    assert!(matches!(result, Err(hexacomp_lab::Error::NoTrainingSize)));
 }
