@@ -3,7 +3,7 @@
 //! wrong as a whole), so that the model trained on what is kept is, blind on fresh poses of the
 //! same machine, within 10 % of the model trained on the clean file.
 //!
-//! The fast tests run in CI on the default machine. The whole table of docs/calibration.md
+//! The fast tests run in CI on the default machine. The whole table of docs/commands.md ("Gross errors")
 //! ("Gross errors": every kind on several virtual machines) is the ignored test
 //! `the_gross_error_table`:
 //! `cargo test --release -p hexacomp-trainer --test gross_errors -- --ignored --nocapture`.
@@ -192,7 +192,7 @@ fn check(machine: &Machine, kind: GrossError, clean_mm: f64) -> String {
             );
             if excluded.is_empty() && kind.may_pass() {
                 // Below what the checks are required to find: reported, not asserted (the
-                // table of docs/calibration.md gives what it costs).
+                // table of docs/commands.md gives what it costs).
                 return format!("kept; {cost}");
             }
             assert_eq!(excluded, [rows[ROW].id.clone()], "{kind:?}");
@@ -260,7 +260,7 @@ fn one_typo_in_150_rows_costs_at_most_a_tenth_of_the_accuracy() {
     check(&machine, GrossError::CoordinateTypo, clean_mm);
 }
 
-/// The table of docs/calibration.md: every kind on several virtual machines.
+/// The table of docs/commands.md ("Gross errors"): every kind on several virtual machines.
 #[test]
 #[ignore = "trains 10 models per machine (minutes); run for the docs table"]
 fn the_gross_error_table() {

@@ -54,7 +54,7 @@ pub struct RigArgs {
     /// The program and fixed arguments (split as a shell does: quote a path with spaces)
     /// are run for every reading as `PROGRAM ARGS… ID X Y Z A B C READING`; it prints one
     /// CSV line, the targets p1x..pNz in the instrument's frame (empty cells: not seen) or,
-    /// with --probe, the pose x,y,z,a,b,c (docs/measuring.md). A program that cannot be
+    /// with --probe, the pose x,y,z,a,b,c (docs/commands.md, "campaign"). A program that cannot be
     /// started stops the run.
     #[arg(
         help_heading = "Instrument",
@@ -66,7 +66,7 @@ pub struct RigArgs {
     /// With --instrument file: the file the tracker's software appends its readings to.
     ///
     /// One CSV line each as --instrument-command prints them (a fiducial's: x,y,z); lines
-    /// appended while the machine moved are skipped (docs/measuring.md).
+    /// appended while the machine moved are skipped (docs/commands.md, "campaign").
     #[arg(
         help_heading = "Instrument",
         long,

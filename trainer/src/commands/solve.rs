@@ -29,7 +29,7 @@ use super::measurements_input::MeasurementsInput;
 /// cannot be solved or does not converge, whose commanded legs disagree with the pose, whose
 /// correction exceeds --max-correction, whose fit residual is more than --residual-factor × the
 /// median, or whose targets are far from the geometry identified from the configurations
-/// (docs/calibration.md, "Gross errors").
+/// (docs/commands.md, "Gross errors").
 /// When more than --max-excluded-share of the file would be excluded, the file is refused and
 /// nothing is written: the data as a whole must be wrong. An existing output is replaced only by
 /// a complete new one.
