@@ -52,7 +52,7 @@ pub enum LineError {
         /// What they hold ("a pose x,y,z,a,b,c", "3 targets × x,y,z").
         holding: String,
     },
-    /// A cell that is not a finite number of at most [`MAX_COORDINATE_MM`] in size.
+    /// A cell that is not a finite number of at most 10⁹ mm (1000 km) in size.
     NotANumber {
         /// The cell.
         cell: String,
