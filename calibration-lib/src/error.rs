@@ -10,10 +10,6 @@ pub enum Error {
     #[error(transparent)]
     Core(#[from] hexacomp_core::Error),
 
-    /// A CSV file could not be read or written, or one of its rows is invalid.
-    #[error(transparent)]
-    Format(#[from] hexacomp_formats::Error),
-
     /// A setting is outside its valid range.
     #[error("invalid setting: {setting} = {value} {valid}")]
     OutOfRange {

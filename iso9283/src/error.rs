@@ -68,7 +68,7 @@ pub enum Error {
     },
 
     /// An error of one test pose.
-    #[error("insufficient data: pose {pose}: {cause}")]
+    #[error("pose {pose}: {cause}")]
     AtPose {
         /// The pose's name.
         pose: String,

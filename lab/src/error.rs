@@ -34,7 +34,7 @@ pub enum Error {
     NoTrainingSize,
 
     /// An error of the calibration at one training size.
-    #[error("insufficient data: at {configurations} configurations: {cause}")]
+    #[error("at {configurations} configurations: {cause}")]
     AtSize {
         /// The training size.
         configurations: usize,

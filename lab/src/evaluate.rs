@@ -242,7 +242,7 @@ pub fn evaluate(
         let models = campaign.models_at(n)?;
         let errors = campaign.drive_every_method(&models)?;
         if n == largest {
-            inputs = campaign.input_comparison(&errors)?;
+            inputs = campaign.input_comparison(n, &errors)?;
         }
         sizes.push(campaign.size_result(n, models, errors));
     }
@@ -529,9 +529,11 @@ impl<'a> Campaign<'a> {
             .collect()
     }
 
-    /// The decoupled networks with each input (the one trained on, then the other), reached.
+    /// The decoupled networks trained on the first `n` configurations with each input (the one
+    /// trained on, then the other), reached.
     fn input_comparison(
         &self,
+        n: usize,
         errors: &[(Method, ValidationErrors)],
     ) -> Result<Vec<(NetworkInput, PoseErrorStats)>> {
         let input = self.options.train.input;
@@ -539,7 +541,6 @@ impl<'a> Campaign<'a> {
             NetworkInput::Equivalent => NetworkInput::Commanded,
             NetworkInput::Commanded => NetworkInput::Equivalent,
         };
-        let n = self.measurements.len();
         let alternative = self.fit(&Self::rows(&self.robust, n), Architecture::Decoupled, other)?;
         let own = errors
             .iter()

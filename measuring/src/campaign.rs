@@ -44,13 +44,15 @@ pub trait Machine {
 }
 
 /// Why a reading failed.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum ReadError {
     /// This reading failed (no answer in time, a line of the wrong width, a beam lost): retried,
     /// then the configuration is a gap.
+    #[error("{0}")]
     Failed(String),
     /// The instrument cannot work at all (its program cannot be started): the campaign stops
     /// before recording anything for the configuration.
+    #[error("{0}")]
     Broken(String),
 }
 
@@ -150,7 +152,7 @@ pub struct Attempt<T = Observation> {
     /// The attempt's number for that reading, from 1.
     pub attempt: usize,
     /// What the instrument reported (its frame), or why it failed.
-    pub outcome: std::result::Result<T, String>,
+    pub outcome: std::result::Result<T, ReadError>,
 }
 
 /// The readings of one configuration (or of one fiducial's point).
@@ -766,7 +768,7 @@ pub fn read_repeatedly<T: Clone>(
                 }
                 Err(ReadError::Failed(why)) => {
                     readings.failure = Some(why.clone());
-                    Err(why)
+                    Err(ReadError::Failed(why))
                 }
                 Err(ReadError::Broken(why)) => {
                     return Err(Error::InstrumentBroken {

@@ -85,7 +85,7 @@ pub enum Error {
     },
 
     /// An error of the machine at one configuration.
-    #[error("the machine: configuration {configuration}: {cause}")]
+    #[error("configuration {configuration}: {cause}")]
     AtConfiguration {
         /// The configuration driven to.
         configuration: String,
@@ -287,20 +287,28 @@ pub enum Error {
         last_reason: String,
     },
 
+    /// The registration's fiducials, measured again, moved beyond the limit: the registration
+    /// does not bring the run's readings into the base frame.
+    #[error("{0}")]
+    FiducialsMoved(Box<crate::fiducial_check::Movement>),
+
     /// A campaign's record or one of its logs could not be written; the rows before it are on
     /// disk and the campaign stops.
     #[error(
-        "{}: cannot record {what}: {message} (the rows before it are on disk; run again to \
-         continue)",
-        path.display()
+        "{}: cannot {what}: {message} ({}; run again to continue)",
+        path.display(),
+        if *rows_kept { "the rows before it are on disk" } else { "the campaign stops" }
     )]
     RecordNotWritten {
         /// The record or log file.
         path: std::path::PathBuf,
-        /// What was being recorded ("configuration 17", "the reference r3").
+        /// What was being written ("record configuration 17", "log the reference R3").
         what: String,
         /// Why it could not be written.
         message: String,
+        /// Whether the record's rows before it are on disk (a configuration's row or readings;
+        /// not said of a reference's log line).
+        rows_kept: bool,
     },
 }
 

@@ -132,12 +132,7 @@ impl FiducialCheck {
     /// moved and what to do (`written`: the file holding the fiducials as measured now;
     /// `one_frame`: the record is in the frame of the instrument as it stood all along, so a
     /// registration made from `written` is the record's).
-    pub fn decide(
-        &self,
-        limit_mm: f64,
-        written: &str,
-        one_frame: bool,
-    ) -> Option<std::result::Result<String, String>> {
+    pub fn decide(&self, limit_mm: f64, written: &str, one_frame: bool) -> Option<Result<String>> {
         let deviation = self.deviation()?;
         Some(self.judge(&deviation, limit_mm, written, one_frame))
     }
@@ -173,7 +168,7 @@ impl FiducialCheck {
         limit_mm: f64,
         written: &str,
         one_frame: bool,
-    ) -> std::result::Result<String, String> {
+    ) -> Result<String> {
         let lost = self.lost_list();
         if deviation.largest_mm <= limit_mm {
             return Ok(format!(
@@ -188,43 +183,86 @@ impl FiducialCheck {
             .filter(|f| f.point.weight > 0.0)
             .max_by(|a, b| a.moved.length().total_cmp(&b.moved.length()))
             .expect("a deviation has a fiducial");
-        let shape = if deviation.together() {
-            format!(
-                "they moved together by ({:.4}, {:.4}, {:.4}) mm in the instrument's frame: the \
-                 tracker stands elsewhere than where it was registered",
-                deviation.shift.x, deviation.shift.y, deviation.shift.z
-            )
-        } else {
-            format!(
-                "they moved differently (up to {:.4} mm apart from their mean movement): the \
-                 tracker turned, or a fiducial's nest moved",
-                deviation.uneven_mm
-            )
+        Err(Error::FiducialsMoved(Box::new(Movement {
+            largest_mm: deviation.largest_mm,
+            fiducial: worst.point.name.clone(),
+            limit_mm,
+            together: deviation.together().then_some(deviation.shift.to_array()),
+            uneven_mm: deviation.uneven_mm,
+            lost,
+            written: written.to_string(),
+            one_frame,
+        })))
+    }
+}
+
+/// How the registration's fiducials moved beyond the limit ([`Error::FiducialsMoved`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Movement {
+    /// The largest movement of a fiducial of positive weight, mm.
+    pub largest_mm: f64,
+    /// The fiducial that moved the most.
+    pub fiducial: String,
+    /// The limit, mm.
+    pub limit_mm: f64,
+    /// The shift they moved by together (the instrument's frame, mm), if they did.
+    pub together: Option<[f64; 3]>,
+    /// How far apart from their mean movement they moved, mm.
+    pub uneven_mm: f64,
+    /// ` (not measured: …)`, or nothing.
+    pub lost: String,
+    /// The file holding the fiducials as measured now.
+    pub written: String,
+    /// Whether the record is in the frame of the instrument as it stood all along.
+    pub one_frame: bool,
+}
+
+impl std::fmt::Display for Movement {
+    /// What moved, how, and what to do.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let Movement {
+            largest_mm,
+            fiducial,
+            limit_mm,
+            together,
+            uneven_mm,
+            lost,
+            written,
+            one_frame,
+        } = self;
+        let shape = match together {
+            Some([x, y, z]) => format!(
+                "they moved together by ({x:.4}, {y:.4}, {z:.4}) mm in the instrument's frame: the \
+                 tracker stands elsewhere than where it was registered"
+            ),
+            None => format!(
+                "they moved differently (up to {uneven_mm:.4} mm apart from their mean movement): \
+                 the tracker turned, or a fiducial's nest moved"
+            ),
         };
-        let advice = if one_frame {
+        let advice = if *one_frame {
             format!(
-                "The references held since the campaign began, so the tracker stood where it \
-                 stands now all along: register again from the fiducials measured now \
-                 (hexacomp-trainer register --measured {written} …) and give that registration \
-                 to solve and calibrate with this record"
+                "The references held since the campaign began, so the tracker stood where it stands \
+                 now all along: register again from the fiducials measured now (hexacomp-trainer \
+                 register --measured {written} …) and give that registration to solve and calibrate \
+                 with this record"
             )
         } else {
             format!(
                 "The record's frame changed during the campaign (registered again, or a drift \
-                 accepted): the rows recorded under this registration were brought into it \
-                 through a registration that does not hold. Find them by the registration in \
-                 the readings log (ix..ic), delete them from the record and measure them again \
-                 under a new registration (register --measured {written} locates the tracker as \
-                 it stands now)"
+                 accepted): the rows recorded under this registration were brought into it through \
+                 a registration that does not hold. Find them by the registration in the readings \
+                 log (ix..ic), delete them from the record and measure them again under a new \
+                 registration (register --measured {written} locates the tracker as it stands now)"
             )
         };
-        Err(format!(
-            "the fiducials moved up to {:.4} mm since the registration ({} the most; limit \
-             {limit_mm} mm): {shape}{lost}. The registration does not bring this run's readings \
-             into the base frame. {advice}. If something knocked a fiducial only for the \
-             moment, delete {written} and run again to measure them again",
-            deviation.largest_mm, worst.point.name
-        ))
+        write!(
+            f,
+            "the fiducials moved up to {largest_mm:.4} mm since the registration ({fiducial} \
+             the most; limit {limit_mm} mm): {shape}{lost}. The registration does not bring \
+             this run's readings into the base frame. {advice}. If something knocked a fiducial \
+             only for the moment, delete {written} and run again to measure them again"
+        )
     }
 }
 
@@ -301,7 +339,11 @@ mod tests {
             ),
         )
         .unwrap();
-        let error = check.decide(0.05, "f.csv", true).unwrap().unwrap_err();
+        let error = check
+            .decide(0.05, "f.csv", true)
+            .unwrap()
+            .unwrap_err()
+            .to_string();
         assert!(
             error.contains("up to 0.2000 mm")
                 && error.contains("together by (0.2000, 0.0000, 0.0000) mm in the instrument's")
@@ -314,13 +356,21 @@ mod tests {
             &read_again(&r, [[0.0; 3], [0.0, 0.1, 0.0], [0.0; 3], [0.0; 3]]),
         )
         .unwrap();
-        let error = check.decide(0.05, "f.csv", true).unwrap().unwrap_err();
+        let error = check
+            .decide(0.05, "f.csv", true)
+            .unwrap()
+            .unwrap_err()
+            .to_string();
         assert!(
             error.contains("F2 the most") && error.contains("moved differently"),
             "{error}"
         );
         // A record whose frame changed: the file locates the tracker now, not the record.
-        let error = check.decide(0.05, "f.csv", false).unwrap().unwrap_err();
+        let error = check
+            .decide(0.05, "f.csv", false)
+            .unwrap()
+            .unwrap_err()
+            .to_string();
         assert!(
             error.contains("frame changed during the campaign")
                 && !error.contains("give that registration to solve"),

@@ -43,7 +43,7 @@ use hexacomp_report::table::Table;
 
 /// Calibrate in one command: measure, solve, train and identify, evaluate, write the models.
 ///
-/// Calibrate in one command: plan → measure (the virtual platform, or --measurements from a real
+/// Plan → measure (the virtual platform, or --measurements from a real
 /// device) → solve the robust joint corrections → train coupled and decoupled networks with
 /// hidden-node selection, and identify the physical model (geometry, a lead-screw curve per
 /// leg, compliance under the weight) and carry it into networks → evaluate → write the models.

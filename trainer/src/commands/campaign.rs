@@ -584,8 +584,9 @@ fn record_configuration(
         .append(row, combined, temperatures)
         .map_err(|e| Error::RecordNotWritten {
             path: readings_log.path().to_path_buf(),
-            what: format!("the readings of configuration {}", row.id),
+            what: format!("log the readings of configuration {}", row.id),
             message: e.to_string(),
+            rows_kept: true,
         })?;
     let measured_at = humantime::format_rfc3339_seconds(SystemTime::now()).to_string();
     journal
@@ -600,8 +601,9 @@ fn record_configuration(
         )
         .map_err(|e| Error::RecordNotWritten {
             path: out.to_path_buf(),
-            what: format!("configuration {}", row.id),
+            what: format!("record configuration {}", row.id),
             message: e.to_string(),
+            rows_kept: true,
         })
 }
 
@@ -634,8 +636,9 @@ fn log_reference(
     };
     log.append(reference).map_err(|e| Error::RecordNotWritten {
         path: log.path().to_path_buf(),
-        what: format!("the reference {}", reference.id),
+        what: format!("log the reference {}", reference.id),
         message: e.to_string(),
+        rows_kept: false,
     })
 }
 

@@ -119,7 +119,7 @@ impl ReadingsLog {
                     let kept = kept.map_or(String::new(), |k| u8::from(k).to_string());
                     (observation.clone(), kept, String::new())
                 }
-                Err(why) => (self.nothing_seen.clone(), String::new(), why.clone()),
+                Err(why) => (self.nothing_seen.clone(), String::new(), why.to_string()),
             };
             let mut cells = vec![
                 row.id.clone(),
