@@ -8,7 +8,7 @@ mod both_forms;
 mod common;
 
 use both_forms::{compensate_legs, compensate_pose};
-use hexacomp_core::compensator::{Compensated, PointStatus};
+use hexacomp_core::compensator::{self, Compensated, Corrections, PointStatus};
 use hexacomp_core::model::{Model, NetworkInput, Networks, Provenance};
 use hexacomp_core::network::{Network, Normalisation};
 use hexacomp_core::{Geometry, Pose, inverse_kinematics};
@@ -406,5 +406,241 @@ fn status_names_are_the_documented_file_words() {
     ];
     for (status, name) in PointStatus::ALL.into_iter().zip(names) {
         assert_eq!(status.name(), name, "{status:?}");
+    }
+}
+
+/// A form of `reference` whose corrections lie `shift` mm from the reference's, within its
+/// declared error `bound` (a serving form's, as `Corrections` allows), but for leg `nan_leg`,
+/// whose correction it cannot compute (not finite, as a fused form's may be where the
+/// reference's is). Where the compensator trusts it, a point's unclamped corrections are its
+/// bits; where a status is too close to call, the reference's.
+struct Shifted {
+    reference: Model,
+    shift: f64,
+    bound: f64,
+    nan_leg: Option<usize>,
+}
+
+impl Corrections for Shifted {
+    fn raw_corrections(&self, q: &[f64; 6]) -> [f64; 6] {
+        let mut c = self.reference.raw_corrections(q).map(|c| c + self.shift);
+        if let Some(leg) = self.nan_leg {
+            c[leg] = f64::NAN;
+        }
+        c
+    }
+    fn error_bound_mm(&self) -> f64 {
+        self.bound
+    }
+    fn reference(&self) -> &Model {
+        &self.reference
+    }
+}
+
+/// Who answered a point: the reference (`true`) or the shifted form (`false`), told by the
+/// correction of a leg other than `leg`, left unclamped and away from the stroke ends.
+fn answered_by_reference(c: &Compensated, leg: usize, reference: f64, shifted: f64) -> bool {
+    let other = (leg + 1) % 6;
+    assert_ne!(reference.to_bits(), shifted.to_bits());
+    let corrected = [
+        PointStatus::Ok,
+        PointStatus::Clamped,
+        PointStatus::OutsideTrainedRange,
+    ];
+    assert!(corrected.contains(&c.status), "{c:?}");
+    match c.corrections[other] {
+        v if v.to_bits() == reference.to_bits() => true,
+        v if v.to_bits() == shifted.to_bits() => false,
+        v => panic!("correction {v} is neither form's"),
+    }
+}
+
+#[test]
+fn within_twice_the_error_bound_of_a_correction_bound_the_reference_decides() {
+    // Corrections 0.1 mm on every leg (the reference's, exactly: a constant network), the
+    // served form's 0.1 + 5e-10 mm with an error bound of 1e-9 mm. One leg's correction bound
+    // is placed 0.9 or 1.1 times twice the error bound from the served correction, above or
+    // below it, on either side (the correction inside its bounds or beyond one).
+    let g = Geometry::prototype();
+    let (bound, shift) = (1e-9, 5e-10);
+    let q = [350.0; 6];
+    let served = 0.1 + shift;
+    for leg in 0..6 {
+        for (factor, by_reference) in [(0.9, true), (1.1, false)] {
+            let d = factor * 2.0 * bound;
+            for (end, at) in [
+                (0, served - d),
+                (0, served + d),
+                (1, served + d),
+                (1, served - d),
+            ] {
+                let mut reference = constant_model(&g, [0.1; 6], [-1.0, 1.0]);
+                reference.correction_bounds[leg][end] = at;
+                let form = Shifted {
+                    reference,
+                    shift,
+                    bound,
+                    nan_leg: None,
+                };
+                let c = compensator::compensate_legs(&g, Some(&form), &q);
+                assert_eq!(
+                    answered_by_reference(&c, leg, 0.1, served),
+                    by_reference,
+                    "leg {}, bound {end} at {at} ({factor} × 2 × error bound): {c:?}",
+                    leg + 1
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn within_twice_the_error_bound_and_four_ulp_of_a_stroke_end_the_reference_decides() {
+    // One leg, corrected by ±0.1 mm (served: + `shift`) towards a stroke end placed beyond the
+    // corrected leg by 0.9 or 1.1 times twice the error bound (1e-9 mm), or, with an error
+    // bound of 1e-15 mm, by four or eight ulp of the leg (the rounding of q + Δq the
+    // compensator allows for).
+    let g = Geometry::prototype();
+    for (bound, shift) in [(1e-9, 5e-10), (1e-15, 5e-16)] {
+        for leg in 0..6 {
+            for top in [false, true] {
+                let mut q: [f64; 6] = [350.0; 6];
+                q[leg] = if top { 429.5 } else { 280.5 };
+                let mut offsets = [0.1; 6];
+                offsets[leg] = if top { 0.1 } else { -0.1 };
+                let corrected = q[leg] + (offsets[leg] + shift);
+                let ulp = corrected.next_up() - corrected;
+                let distances = if bound > 1e-12 {
+                    [(1.8 * bound, true), (2.2 * bound, false)]
+                } else {
+                    [(4.0 * ulp, true), (8.0 * ulp, false)]
+                };
+                for (d, by_reference) in distances {
+                    let mut narrow = g.clone();
+                    if top {
+                        narrow.leg_range[1] = corrected + d;
+                    } else {
+                        narrow.leg_range[0] = corrected - d;
+                    }
+                    let form = Shifted {
+                        reference: constant_model(&g, offsets, [-1.0, 1.0]),
+                        shift,
+                        bound,
+                        nan_leg: None,
+                    };
+                    let c = compensator::compensate_legs(&narrow, Some(&form), &q);
+                    assert_eq!(
+                        answered_by_reference(&c, leg, 0.1, 0.1 + shift),
+                        by_reference,
+                        "leg {} at {corrected}, stroke {:?}, error bound {bound:e}: {c:?}",
+                        leg + 1,
+                        narrow.leg_range
+                    );
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn a_clamped_correction_is_judged_by_its_clamped_leg_against_the_stroke_ends() {
+    // One leg's correction, ±0.1 mm (served: + 5e-10 mm), is clamped to a bound ±0.05 mm
+    // (towards the nominal leg): the leg that would be commanded is `q ± 0.05`, and a stroke
+    // end 1e-9 mm (within twice the error bound) beyond it leaves the decision to the reference.
+    // A stroke end on the unclamped leg, 0.05 mm further, is not close: the served form answers.
+    let g = Geometry::prototype();
+    let (bound, shift) = (1e-9, 5e-10);
+    for leg in 0..6 {
+        for top in [false, true] {
+            let mut q: [f64; 6] = [350.0; 6];
+            q[leg] = if top { 429.5 } else { 280.5 };
+            let (raw, limit) = if top { (0.1, 0.05) } else { (-0.1, -0.05) };
+            let mut offsets = [0.1; 6];
+            offsets[leg] = raw;
+            let served = raw + shift;
+            let clamped_leg = q[leg] + limit;
+            for (end, by_reference) in [(1e-9, true), ((served - limit).abs(), false)] {
+                let mut narrow = g.clone();
+                let mut reference = constant_model(&g, offsets, [-1.0, 1.0]);
+                if top {
+                    reference.correction_bounds[leg][1] = limit;
+                    narrow.leg_range[1] = clamped_leg + end;
+                } else {
+                    reference.correction_bounds[leg][0] = limit;
+                    narrow.leg_range[0] = clamped_leg - end;
+                }
+                let form = Shifted {
+                    reference,
+                    shift,
+                    bound,
+                    nan_leg: None,
+                };
+                let c = compensator::compensate_legs(&narrow, Some(&form), &q);
+                assert_eq!(c.status, PointStatus::Clamped, "{c:?}");
+                assert_eq!(c.corrections[leg], limit);
+                assert_eq!(
+                    answered_by_reference(&c, leg, 0.1, 0.1 + shift),
+                    by_reference,
+                    "leg {} clamped to {clamped_leg}, stroke {:?}: {c:?}",
+                    leg + 1,
+                    narrow.leg_range
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn a_served_correction_that_is_not_finite_leaves_the_point_to_the_reference() {
+    // The reference's corrections are finite there: the point is compensated by them, not
+    // refused as invalid input. A form that is the reference (error bound 0) is not asked again.
+    let g = Geometry::prototype();
+    let q = [350.0; 6];
+    for leg in 0..6 {
+        let form = Shifted {
+            reference: constant_model(&g, [0.1; 6], [-1.0, 1.0]),
+            shift: 5e-10,
+            bound: 1e-9,
+            nan_leg: Some(leg),
+        };
+        let c = compensator::compensate_legs(&g, Some(&form), &q);
+        assert_eq!(c.status, PointStatus::Ok, "leg {}", leg + 1);
+        assert_eq!(c.corrections, [0.1; 6]);
+    }
+}
+
+#[test]
+fn poses_are_compensated_into_as_many_slots_as_the_shorter_side_has() {
+    // Odd and even counts, more slots than poses and fewer: slot i is compensate_pose of pose i,
+    // and a slot without a pose is left as it was.
+    let g = Geometry::prototype();
+    let m = constant_model(&g, [0.1, -0.2, 0.3, -0.4, 0.5, 2.0], [-1.0, 1.0]);
+    let poses: Vec<Pose> = (0..5)
+        .map(|i| {
+            let i = i as f64;
+            Pose::from_mm_deg([10.0 * i, -5.0 * i, 280.0 + 8.0 * i, i, -0.5 * i, 2.0 * i])
+        })
+        .collect();
+    // Never an answer: corrections are finite or zero.
+    let untouched = Compensated {
+        legs: [-1.0; 6],
+        corrections: [f64::INFINITY; 6],
+        status: PointStatus::NoModel,
+        uncertainty_mm: None,
+    };
+    for (pose_count, slots) in [(5, 5), (5, 3), (4, 6), (1, 1), (2, 2)] {
+        let mut out = vec![untouched; slots];
+        compensator::compensate_poses(&g, Some(&m), &poses[..pose_count], &mut out);
+        for (i, got) in out.iter().enumerate() {
+            let expected = if i < pose_count {
+                compensator::compensate_pose(&g, Some(&m), &poses[i])
+            } else {
+                untouched
+            };
+            assert_eq!(
+                got, &expected,
+                "{pose_count} poses, {slots} slots, slot {i}"
+            );
+        }
     }
 }

@@ -8,8 +8,8 @@
 
 use std::cell::RefCell;
 
-use hexacomp_core::compensator::{Compensated, PointStatus, compensate_pose};
-use hexacomp_core::fused::FusedModel;
+use hexacomp_core::compensator::{self, Compensated, Corrections, PointStatus, compensate_pose};
+use hexacomp_core::fused::{FusedModel, MAX_ERROR_MM};
 use hexacomp_core::model::{Model, NetworkInput, Networks, Provenance};
 use hexacomp_core::network::{Network, Normalisation};
 use hexacomp_core::sampling::{SamplerOptions, WorkspaceSampler};
@@ -254,4 +254,101 @@ fn at_a_stroke_end_the_reference_decides_the_status() {
     // The scenario happened: points whose corrected legs differ between the forms, decided at
     // the stroke end by that leg alone.
     assert!(found >= 3, "{found}");
+}
+
+#[test]
+fn through_the_compensators_trait_the_reference_has_no_error_and_the_fused_form_its_bound() {
+    // `Corrections::error_bound_mm` is how far a form's corrections may lie from the reference's
+    // (0: it is the reference). The reference lies exactly 0 mm from itself; the fused form's
+    // bound covers its differences seen at workspace points and stays within 1 nm, above which
+    // the reference answers instead (bound 0, the same bits as the reference).
+    let g = Geometry::prototype();
+    for seed in 0..8 {
+        let model = random_model(&g, seed, seed % 2 == 0, 2.0);
+        assert_eq!(Corrections::error_bound_mm(&model), 0.0, "seed {seed}");
+        let fused = FusedModel::new(&model);
+        let bound = Corrections::error_bound_mm(&fused);
+        assert_eq!(bound, fused.error_bound_mm(), "seed {seed}");
+        assert!(
+            bound > 0.0 && bound <= MAX_ERROR_MM,
+            "seed {seed}: {bound:e}"
+        );
+        let poses = WorkspaceSampler::new(&g, seed, SamplerOptions::default())
+            .unwrap()
+            .samples(50)
+            .unwrap();
+        for pose in &poses {
+            let q = inverse_kinematics(&g, pose).lengths;
+            let (fast, reference) = (fused.raw_corrections(&q), model.raw_corrections(&q));
+            for k in 0..6 {
+                assert!(
+                    (fast[k] - reference[k]).abs() <= bound,
+                    "{q:?}, leg {}",
+                    k + 1
+                );
+            }
+        }
+    }
+    // Output weights scaled by 1e11 (up to 5e9 mm): a bound far beyond 1 nm, so the fused form
+    // leaves every point to the reference and has none of its own.
+    let mut large = random_model(&g, 1, true, 2.0);
+    if let Networks::Coupled(network) = &large.networks {
+        let mut weights = network.weights().to_vec();
+        let w2 = network.hidden() * 6 + network.hidden();
+        for w in &mut weights[w2..w2 + 6 * network.hidden()] {
+            *w *= 1e11;
+        }
+        large.networks =
+            Networks::Coupled(Network::from_weights(network.hidden(), 6, weights).unwrap());
+    }
+    large.validate().unwrap();
+    let fused_large = FusedModel::new(&large);
+    assert_eq!(Corrections::error_bound_mm(&fused_large), 0.0);
+}
+
+#[test]
+fn away_from_every_threshold_the_fused_form_serves_its_own_corrections() {
+    // The reference is asked only where a fused correction lies within twice the bound of a
+    // correction bound or of a stroke end (module doc of `fused`). Elsewhere the compensated
+    // point carries the fused evaluation's own bits, which differ from the reference's in the
+    // last bit at many points: there the answer shows which of the two computed it.
+    let g = Geometry::prototype();
+    let mut told_apart = 0;
+    for seed in 0..24 {
+        let model = random_model(&g, seed, seed % 2 == 0, 2.0);
+        let fused = FusedModel::new(&model);
+        let [lo, hi] = g.leg_range;
+        let poses = WorkspaceSampler::new(&g, seed, SamplerOptions::default())
+            .unwrap()
+            .samples(50)
+            .unwrap();
+        for pose in &poses {
+            let q = inverse_kinematics(&g, pose).lengths;
+            let own = fused.raw_corrections(&q);
+            // Far (1e-9 mm, a thousand times the bound and more) from every threshold.
+            let far = (0..6).all(|k| {
+                let [cl, ch] = model.correction_bounds[k];
+                let leg = q[k] + own[k];
+                own[k] - cl > 1e-9 && ch - own[k] > 1e-9 && leg - lo > 1e-9 && hi - leg > 1e-9
+            });
+            if !far {
+                continue;
+            }
+            let home = inverse_kinematics(&g, &g.home_pose()).lengths;
+            let alone = compensator::compensate_legs(&g, Some(&fused), &q);
+            let paired = compensator::compensate_legs_pair(&g, Some(&fused), [&q, &home])[0];
+            for c in [alone, paired] {
+                assert_eq!(
+                    c.corrections.map(f64::to_bits),
+                    own.map(f64::to_bits),
+                    "{q:?}"
+                );
+                assert_eq!(c.legs, std::array::from_fn(|k| q[k] + own[k]), "{q:?}");
+            }
+            told_apart += usize::from(own != model.raw_corrections(&q));
+        }
+    }
+    eprintln!("{told_apart} points where the two forms' corrections differ");
+    // The scenario happened: points where the two forms' corrections differ.
+    assert!(told_apart > 50, "{told_apart}");
 }

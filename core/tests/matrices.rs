@@ -161,7 +161,8 @@ fn unit_wrench_is_unit_force_along_the_leg_with_its_moment_about_a() {
 
 #[test]
 fn condition_of_pt_stays_in_single_digits_inside_the_workspace() {
-    // docs/calibration.md: the robust regularisation (c = 1e3) acts only near singularities.
+    // docs/accuracy.md ("The robust solve"): the regularisation (c = 1e3) acts only near
+    // singularities.
     let (g, poses) = poses(500);
     let worst = poses
         .iter()
@@ -212,6 +213,26 @@ fn condition_number_is_the_ratio_of_extreme_singular_values() {
     // Fewer rows than columns (two targets: six equations, but one rotation unobserved)
     // counts as singular too.
     assert_eq!(condition_number(&DMatrix::identity(5, 6)), f64::INFINITY);
+    // Six rows are enough: a square matrix of orthogonal columns of those norms (a Householder
+    // reflection I − 2vvᵀ/vᵀv, orthogonal, scaling its columns) has the same condition number.
+    let v = nalgebra::DVector::from_vec(vec![1.0, -2.0, 0.5, 3.0, -1.0, 2.0]);
+    let reflection = DMatrix::<f64>::identity(6, 6) - (&v * v.transpose()) * (2.0 / v.dot(&v));
+    let square = reflection * DMatrix::from_diagonal(&nalgebra::DVector::from_vec(norms.to_vec()));
+    let gram = square.transpose() * &square;
+    for i in 0..6 {
+        for j in 0..6 {
+            let expected = if i == j { norms[i] * norms[i] } else { 0.0 };
+            assert!(
+                (gram[(i, j)] - expected).abs() < 1e-12,
+                "square MᵀM[{i}][{j}]"
+            );
+        }
+    }
+    assert!(
+        (condition_number(&square) - 10.0).abs() < 1e-12,
+        "{}",
+        condition_number(&square)
+    );
     // And PT at workspace poses: the same number as from the eigenvalues of (PT)ᵀ(PT).
     let (g, poses) = poses(50);
     for pose in poses {

@@ -78,7 +78,13 @@ fn as_in_pairs_of_poses<M: Corrections>(
             "{pose:?} in a pair: {paired:?}, alone {alone:?}"
         );
     }
-    let mut batch = [alone; 3];
+    // Filled with what is never an answer (corrections are finite or zero), so that a slot
+    // left as it was is seen.
+    let mut batch = [Compensated {
+        legs: [-1.0; 6],
+        corrections: [f64::INFINITY; 6],
+        ..alone
+    }; 3];
     compensator::compensate_poses(geometry, model, &[home, *pose, *pose], &mut batch);
     for got in &batch[1..] {
         assert!(
