@@ -4,7 +4,8 @@
 
 use std::os::unix::process::CommandExt;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
+use std::process::{Command, ExitStatus, Stdio};
+use std::time::{Duration, Instant};
 
 /// The ```sh blocks of `markdown`, in order (the other fences — console, text — are not run).
 fn shell_blocks(markdown: &str) -> Vec<String> {
@@ -38,6 +39,23 @@ fn binaries() -> PathBuf {
         .to_path_buf()
 }
 
+/// How long the guide may run: about 2 minutes here, on 2 busy cores with debug binaries.
+const GUIDE_PATIENCE: Duration = Duration::from_secs(900);
+
+/// The child's exit status, or `None` when it is still running after `patience`.
+fn wait_at_most(child: &mut std::process::Child, patience: Duration) -> Option<ExitStatus> {
+    let start = Instant::now();
+    loop {
+        if let Some(status) = child.try_wait().expect("waiting for the guide") {
+            return Some(status);
+        }
+        if start.elapsed() > patience {
+            return None;
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
 #[test]
 fn the_shell_blocks_are_read_in_order_and_other_fences_are_not() {
     let markdown = "text\n```sh\na\nb\n```\n```console\nc\n```\n```sh\nd\n```\n";
@@ -67,30 +85,44 @@ fn every_command_of_the_guide_runs_as_written_on_the_virtual_machine() {
         std::env::var("PATH").unwrap_or_default()
     );
     // Its own process group: a service the guide starts in the background is stopped with it.
-    let child = Command::new("bash")
+    // The output goes to files, not pipes: a background process that outlives a failed step
+    // would hold a pipe open, and reading it to its end would wait for ever.
+    let (stdout_path, stderr_path) = (dir.path().join("guide.out"), dir.path().join("guide.err"));
+    let mut child = Command::new("bash")
         .args(["-euo", "pipefail", "-c", &script])
         .current_dir(dir.path())
         .env("PATH", path)
         .stdin(Stdio::null())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
+        .stdout(std::fs::File::create(&stdout_path).unwrap())
+        .stderr(std::fs::File::create(&stderr_path).unwrap())
         .process_group(0)
         .spawn()
         .expect("running bash");
     let group = child.id() as i32;
-    let output = child.wait_with_output().expect("waiting for the guide");
+    let status = wait_at_most(&mut child, GUIDE_PATIENCE);
     // SAFETY: kill has no memory preconditions; a negative pid names the guide's own process
     // group, which holds nothing but what the guide started (gone already, if it stopped all).
     unsafe { libc::kill(-group, libc::SIGKILL) };
-    let stdout = String::from_utf8_lossy(&output.stdout);
-    let stderr = String::from_utf8_lossy(&output.stderr);
+    let stdout = std::fs::read_to_string(&stdout_path).unwrap_or_default();
+    let stderr = std::fs::read_to_string(&stderr_path).unwrap_or_default();
+    let status = status
+        .unwrap_or_else(|| panic!("the guide ran past {GUIDE_PATIENCE:?}:\n{stdout}\n{stderr}"));
     assert!(
-        output.status.success(),
-        "the guide failed ({}):\n--- stdout\n{stdout}\n--- stderr\n{stderr}",
-        output.status
+        status.success(),
+        "the guide failed ({status}):\n--- stdout\n{stdout}\n--- stderr\n{stderr}"
     );
     // What the guide says happens, happened.
-    assert!(stdout.contains("accepted as generation 1"), "{stdout}");
+    let output = format!("{stdout}{stderr}");
+    for promised in [
+        "accepted as generation 1",
+        "measured 50 configurations (0 recorded before, 0 gaps)",
+        "still good",
+    ] {
+        assert!(
+            output.contains(promised),
+            "the guide did not say {promised:?}:\n{output}"
+        );
+    }
     for file in [
         "geometry.toml",
         "registration.toml",

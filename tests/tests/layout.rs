@@ -134,6 +134,9 @@ fn reachable(edges: &BTreeSet<Edge>, from: &str) -> BTreeSet<String> {
     seen
 }
 
+/// The libraries and programs a real machine runs. The `hexacomp-trainer` binary composes every
+/// library, the lab too (its `evaluate`, `survey` and `simulate` commands and `--machine
+/// virtual`), but what it runs on a real machine is these libraries' code.
 #[test]
 fn the_real_machine_path_does_not_depend_on_the_lab_or_the_virtual_platform() {
     let edges = metadata().workspace_edges;
@@ -188,4 +191,59 @@ fn the_core_depends_only_on_what_the_run_time_numerics_and_the_model_file_need()
         "hexacomp-core gained {unexpected:?}: the run-time core must stay small (the service and \
          the C library link it); if it is needed, say why in the commit and add it here"
     );
+}
+
+/// The non-blank lines of `dir`'s Rust files, each cut at a top-level `#[cfg(test)]` module.
+fn code_lines(dir: &Path) -> usize {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return 0;
+    };
+    entries
+        .map(|entry| entry.expect("a directory entry").path())
+        .map(|path| {
+            if path.is_dir() {
+                return code_lines(&path);
+            }
+            if path.extension().is_none_or(|e| e != "rs") {
+                return 0;
+            }
+            let text = std::fs::read_to_string(&path).expect("a source file");
+            let code = text
+                .split("\n#[cfg(test)]\nmod ")
+                .next()
+                .unwrap_or_default();
+            code.lines().filter(|l| !l.trim().is_empty()).count()
+        })
+        .sum()
+}
+
+#[test]
+fn no_crate_holds_more_than_30_percent_of_the_code() {
+    let root = workspace_root();
+    let metadata = metadata();
+    let lines: BTreeMap<String, usize> = metadata
+        .dependencies
+        .keys()
+        .map(|crate_name| {
+            let dir = std::fs::read_dir(&root)
+                .unwrap()
+                .map(|e| e.unwrap().path())
+                .find(|dir| {
+                    std::fs::read_to_string(dir.join("Cargo.toml")).is_ok_and(|toml| {
+                        toml.contains(&format!("[package]\nname = \"hexacomp-{crate_name}\"\n"))
+                    })
+                })
+                .unwrap_or_else(|| panic!("no folder holds hexacomp-{crate_name}"));
+            (crate_name.clone(), code_lines(&dir.join("src")))
+        })
+        .collect();
+    let total: usize = lines.values().sum();
+    assert!(total > 10_000, "the code was not read: {lines:?}");
+    for (crate_name, count) in &lines {
+        assert!(
+            *count * 100 <= total * 30,
+            "{crate_name} holds {count} of {total} lines of non-test code, over 30 %: split it by \
+             job"
+        );
+    }
 }
