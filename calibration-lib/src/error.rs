@@ -79,7 +79,7 @@ pub enum Error {
         /// The configuration at fault, where one is.
         configuration: Option<String>,
         /// What does not fit.
-        problem: String,
+        problem: hexacomp_core::observation::Mismatch,
     },
 
     /// A measured configuration does not determine the six leg corrections (too few targets

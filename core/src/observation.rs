@@ -28,6 +28,30 @@ pub enum Observation {
     PoseMissed,
 }
 
+/// Why an observation does not belong to a geometry ([`Observation::check`]).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum Mismatch {
+    /// Another number of targets than the geometry names.
+    #[error(
+        "{measured} measured targets, but geometry {geometry} names {named} (is it the geometry \
+         the campaign was measured with?)"
+    )]
+    TargetCount {
+        /// The targets measured (seen or not).
+        measured: usize,
+        /// The geometry's name.
+        geometry: String,
+        /// The targets it names.
+        named: usize,
+    },
+    /// A number that is not finite.
+    #[error("{what} is not finite")]
+    NotFinite {
+        /// What holds it ("the measured pose").
+        what: &'static str,
+    },
+}
+
 impl Observation {
     /// The measured pose of a [`Observation::Pose`] (mm, rad).
     fn measured_pose(values: &[f64; 6]) -> Pose {
@@ -44,25 +68,27 @@ impl Observation {
 
     /// Checks that the observation belongs to `geometry` (as many targets as it names) and that
     /// its numbers are finite; the error says what does not fit.
-    pub fn check(&self, geometry: &Geometry) -> std::result::Result<(), String> {
+    pub fn check(&self, geometry: &Geometry) -> std::result::Result<(), Mismatch> {
         match self {
             Observation::Targets(targets) => {
                 if targets.len() != geometry.targets.len() {
-                    return Err(format!(
-                        "{} measured targets, but geometry {} names {} (is it the geometry the \
-                         campaign was measured with?)",
-                        targets.len(),
-                        geometry.name,
-                        geometry.targets.len()
-                    ));
+                    return Err(Mismatch::TargetCount {
+                        measured: targets.len(),
+                        geometry: geometry.name.clone(),
+                        named: geometry.targets.len(),
+                    });
                 }
                 if !targets.iter().flatten().all(|p| p.is_finite()) {
-                    return Err("a measured target point is not finite".into());
+                    return Err(Mismatch::NotFinite {
+                        what: "a measured target point",
+                    });
                 }
             }
             Observation::Pose(values) => {
                 if !values.iter().all(|v| v.is_finite()) {
-                    return Err("the measured pose is not finite".into());
+                    return Err(Mismatch::NotFinite {
+                        what: "the measured pose",
+                    });
                 }
             }
             Observation::PoseMissed => {}

@@ -45,7 +45,7 @@ pub use measurements::{
 pub use points_file::{FileSummary, PointsFile, bytes_progress, compensate_file};
 pub use registration::{
     REGISTRATION_FIRST_LINE, REGISTRATION_FORMAT, RegisteredFiducial, RegistrationFile,
-    read_registration,
+    RegistrationProblem, read_registration,
 };
 
 use lines::DataLines;

@@ -96,31 +96,27 @@ impl RegistrationFile {
     /// Checks what a file may hold: this format version, finite numbers, known locked names,
     /// fiducials named once with weights ≥ 0, three or more of them used, and residuals that are
     /// what `instrument_pose` gives (within 1e-6 mm): a pose edited by hand is refused.
-    fn validate(&self) -> std::result::Result<(), String> {
+    fn validate(&self) -> std::result::Result<(), RegistrationProblem> {
         if self.format != REGISTRATION_FORMAT {
-            return Err(format!(
-                "format version {}, this build reads version {REGISTRATION_FORMAT}",
-                self.format
-            ));
+            return Err(RegistrationProblem::Version { found: self.format });
         }
         if !self.instrument_pose.iter().all(|v| v.is_finite()) {
-            return Err("instrument_pose has a number that is not finite".into());
+            return Err(RegistrationProblem::NotFinite {
+                what: "instrument_pose has a number",
+            });
         }
         if let Some(name) = self
             .locked
             .iter()
             .find(|name| !PARAMETER_NAMES.contains(&name.as_str()))
         {
-            return Err(format!(
-                "locked names {name:?}, not one of {}",
-                PARAMETER_NAMES.join(", ")
-            ));
+            return Err(RegistrationProblem::UnknownLocked { name: name.clone() });
         }
         if self.fiducials.len() < 3 {
-            return Err(format!(
-                "{} fiducials: a registration has at least three",
-                self.fiducials.len()
-            ));
+            return Err(RegistrationProblem::TooFewFiducials {
+                count: self.fiducials.len(),
+                of_positive_weight: false,
+            });
         }
         let numbers = [self.tolerance_mm, self.rms_mm, self.max_mm]
             .into_iter()
@@ -134,24 +130,27 @@ impl RegistrationFile {
                     .chain([f.weight])
             }));
         if numbers.into_iter().any(|v| !v.is_finite()) {
-            return Err("a number that is not finite".into());
+            return Err(RegistrationProblem::NotFinite { what: "a number" });
         }
         for (k, f) in self.fiducials.iter().enumerate() {
             if self.fiducials[..k].iter().any(|g| g.name == f.name) {
-                return Err(format!("fiducial {:?} appears twice", f.name));
+                return Err(RegistrationProblem::DuplicateFiducial {
+                    name: f.name.clone(),
+                });
             }
             if f.weight < 0.0 {
-                return Err(format!(
-                    "fiducial {:?} has the negative weight {}",
-                    f.name, f.weight
-                ));
+                return Err(RegistrationProblem::NegativeWeight {
+                    name: f.name.clone(),
+                    weight: f.weight,
+                });
             }
         }
         let used = self.fiducials.iter().filter(|f| f.weight > 0.0).count();
         if used < 3 {
-            return Err(format!(
-                "{used} fiducials of positive weight: a registration uses at least three"
-            ));
+            return Err(RegistrationProblem::TooFewFiducials {
+                count: used,
+                of_positive_weight: true,
+            });
         }
         let pose = self.instrument_pose();
         for f in &self.fiducials {
@@ -159,15 +158,74 @@ impl RegistrationFile {
                 pose.transform_point(DVec3::from_array(f.measured)) - DVec3::from_array(f.nominal);
             let gap = (residual - DVec3::from_array(f.residual)).length();
             if gap > 1e-6 {
-                return Err(format!(
-                    "instrument_pose does not give fiducial {:?}'s residual (off by {gap:.3e} mm): \
-                     the file was edited or damaged; register again",
-                    f.name
-                ));
+                return Err(RegistrationProblem::ResidualMismatch {
+                    name: f.name.clone(),
+                    gap_mm: gap,
+                });
             }
         }
         Ok(())
     }
+}
+
+/// What is wrong with a registration file's contents ([`RegistrationFile`]'s checks).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum RegistrationProblem {
+    /// Another format version than this build reads.
+    #[error("format version {found}, this build reads version {REGISTRATION_FORMAT}")]
+    Version {
+        /// The version the file holds.
+        found: u32,
+    },
+    /// A number that is not finite.
+    #[error("{what} that is not finite")]
+    NotFinite {
+        /// Where ("instrument_pose has a number").
+        what: &'static str,
+    },
+    /// A locked parameter name that is not one of the registration's.
+    #[error("locked names {name:?}, not one of {}", PARAMETER_NAMES.join(", "))]
+    UnknownLocked {
+        /// The name.
+        name: String,
+    },
+    /// Fewer than three fiducials (of positive weight, where so said).
+    #[error(
+        "{count} fiducials{}: a registration {} at least three",
+        if *of_positive_weight { " of positive weight" } else { "" },
+        if *of_positive_weight { "uses" } else { "has" }
+    )]
+    TooFewFiducials {
+        /// How many there are.
+        count: usize,
+        /// Whether only those of positive weight were counted.
+        of_positive_weight: bool,
+    },
+    /// A fiducial named twice.
+    #[error("fiducial {name:?} appears twice")]
+    DuplicateFiducial {
+        /// Its name.
+        name: String,
+    },
+    /// A negative weight.
+    #[error("fiducial {name:?} has the negative weight {weight}")]
+    NegativeWeight {
+        /// The fiducial's name.
+        name: String,
+        /// Its weight.
+        weight: f64,
+    },
+    /// `instrument_pose` does not give a fiducial's recorded residual: the file was edited.
+    #[error(
+        "instrument_pose does not give fiducial {name:?}'s residual (off by {gap_mm:.3e} mm): the \
+         file was edited or damaged; register again"
+    )]
+    ResidualMismatch {
+        /// The fiducial's name.
+        name: String,
+        /// How far the residual is off, mm.
+        gap_mm: f64,
+    },
 }
 
 /// Reads and checks a registration file; errors name the file (and, for TOML syntax, the line
