@@ -1,20 +1,17 @@
 //! Calibrating the virtual platform for the benchmarks that need a model: the trainer's pipeline
 //! on its defaults (plan, simulated measurement, robust joint corrections), then the model
 //! `hexacomp-trainer calibrate` writes as model.hxm on the virtual platform at every size
-//! measured (docs/accuracy.md): the physical model carried into networks, with its position
-//! uncertainty.
+//! measured (docs/accuracy.md): the physical model, with its position uncertainty.
 
 use anyhow::Context;
-use hexacomp_calibration::distill::DistillOptions;
-use hexacomp_calibration::identify::{IdentifyOptions, PHYSICAL, identify};
-use hexacomp_calibration::physical::PhysicalModel;
-use hexacomp_calibration::physical_candidate::{CarriedModel, carried_into_networks};
+use hexacomp_calibration::identify::{PHYSICAL, identify};
+use hexacomp_calibration::physical_candidate::{ServedModel, with_uncertainty};
 use hexacomp_calibration::pipeline::Pipeline;
 use hexacomp_calibration::pitch_resolution::{
     ResolutionChoice, chosen_if_cross_validated, identifications,
 };
 use hexacomp_calibration::plan::PlanOptions;
-use hexacomp_calibration::train::{Architecture, CROSS_VALIDATION_FOLDS, training_work};
+use hexacomp_calibration::train::CROSS_VALIDATION_FOLDS;
 use hexacomp_calibration::uncertainty::Repeatability;
 use hexacomp_core::Geometry;
 use hexacomp_core::model::Model;
@@ -45,13 +42,10 @@ fn error_model() -> ErrorModel {
 /// What a calibration produced.
 #[derive(Debug)]
 pub struct Calibration {
-    /// The physical model as networks, with its uncertainty.
+    /// The physical model, with its uncertainty.
     pub model: Model,
     /// Configurations measured.
     pub configurations: usize,
-    /// How closely the networks command what the physical model does (RMS over fresh poses'
-    /// legs), mm.
-    pub departure_mm: f64,
     /// Seconds the whole calibration took.
     pub seconds: f64,
 }
@@ -69,8 +63,8 @@ fn work_bar(total: u64, what: &str) -> ProgressBar {
     bar
 }
 
-/// Calibrates `platform` on `configurations` planned poses, identifies the physical model and
-/// carries it into networks, with progress bars on standard error.
+/// Calibrates `platform` on `configurations` planned poses and identifies the physical model,
+/// with a progress bar on standard error.
 pub fn calibrate(
     platform: &mut VirtualPlatform,
     configurations: usize,
@@ -91,10 +85,6 @@ pub fn calibrate(
         .solve(&geometry, &measurements)
         .context("solving the virtual platform's corrections")?;
     let kept = solved.kept_of(&measurements);
-    let options = DistillOptions {
-        seed,
-        ..DistillOptions::default()
-    };
     let resolution = choose_resolution(&geometry, &kept, &solved.corrections, seed)?;
     for (basis, why) in resolution.iter().flat_map(|r| &r.failed) {
         eprintln!("{basis} lead-screw coefficients per leg left out: {why}");
@@ -106,28 +96,31 @@ pub fn calibrate(
     let alternative_bases = resolution
         .as_ref()
         .map_or_else(Vec::new, ResolutionChoice::indistinguishable);
-    let carried = carry_into_networks(
+    let cross_validated_mm = resolution
+        .as_ref()
+        .map_or(f64::NAN, |r| r.chosen().cross_validated_rmse_mm);
+    let carried: ServedModel = with_uncertainty(
         &geometry,
         (&physical, &identification),
         &alternative_bases,
-        &kept,
-        &options,
-    )?;
+        (&kept, cross_validated_mm),
+        Repeatability::Known(error_model().repeatability_sigma_mm),
+        seed,
+    )
+    .context("the virtual platform's physical model")?;
     if let Err(e) = &carried.uncertainty {
         eprintln!("the model carries no uncertainty: {e}");
     }
-    let mut model = carried.distilled.model;
-    model.provenance.configurations = kept.len();
+    let mut model = carried.model;
     model.provenance.source = format!(
         "hexacomp-bench {} virtual calibration ({configurations} configurations): physical \
-         model ({} lead-screw coefficients per leg) as networks",
+         model ({} lead-screw coefficients per leg)",
         env!("CARGO_PKG_VERSION"),
         identification.pitch_basis
     );
     Ok(Calibration {
         model,
         configurations,
-        departure_mm: carried.fidelity.rms_mm,
         seconds: start.elapsed().as_secs_f64(),
     })
 }
@@ -154,34 +147,4 @@ fn choose_resolution(
     );
     choosing.finish_and_clear();
     resolution.context("choosing the virtual platform's lead-screw resolution")
-}
-
-/// Carries `physical` into networks with its uncertainty, the virtual machine's repeatability
-/// known (with a progress bar).
-fn carry_into_networks(
-    geometry: &Geometry,
-    physical: (&PhysicalModel, &IdentifyOptions),
-    alternative_bases: &[usize],
-    kept: &[MeasuredConfiguration],
-    options: &DistillOptions,
-) -> anyhow::Result<CarriedModel> {
-    let bar = work_bar(
-        training_work(
-            options.samples + kept.len(),
-            Architecture::Decoupled,
-            &options.train,
-        ),
-        "carrying the physical model into networks",
-    );
-    let carried = carried_into_networks(
-        geometry,
-        physical,
-        alternative_bases,
-        kept,
-        options,
-        Repeatability::Known(error_model().repeatability_sigma_mm),
-        &|n| bar.inc(n),
-    );
-    bar.finish_and_clear();
-    carried.context("carrying the virtual platform's physical model into networks")
 }

@@ -177,12 +177,10 @@ impl Session {
                 let path = args.out_dir.join("model.hxm");
                 calibration.model.save(&path)?;
                 println!(
-                    "calibrated: {} configurations, the physical model as networks of hidden \
-                     nodes {:?} commanding it within {:.4} mm RMS, with its uncertainty; \
-                     {:.1} s → {}",
+                    "calibrated: {} configurations, the physical model ({:.4} mm \
+                     cross-validated), with its uncertainty; {:.1} s → {}",
                     calibration.configurations,
-                    calibration.model.hidden_nodes(),
-                    calibration.departure_mm,
+                    calibration.model.provenance.validation_rmse_mm,
                     calibration.seconds,
                     path.display()
                 );

@@ -188,11 +188,11 @@ pub enum Error {
         cause: Box<Error>,
     },
 
-    /// Too few poses drawn over the workspace lie within the measured legs' range to carry the
-    /// physical model into networks.
+    /// Too few poses drawn over the workspace lie within the measured legs' range to fit the
+    /// physical model's uncertainty at.
     #[error(
         "insufficient data: only {drawn} of {attempts} workspace poses lie within the measured \
-         legs' range; the physical model needs {needed} to be carried into networks"
+         legs' range; the physical model's uncertainty needs {needed} to be fitted at"
     )]
     TooFewPosesInRange {
         /// The poses drawn within the range.
@@ -203,18 +203,11 @@ pub enum Error {
         needed: usize,
     },
 
-    /// The physical model's score is not a finite number.
-    #[error(
-        "invalid setting: the physical model's score is {score_mm} (cross-validated \
-         {cross_validated_mm} mm, networks' departure {departure_mm} mm)"
-    )]
+    /// The physical model's cross-validated error is not a finite number.
+    #[error("invalid setting: the physical model's cross-validated error is {score_mm} mm")]
     ScoreNotFinite {
-        /// The score, mm.
+        /// The cross-validated RMSE, mm.
         score_mm: f64,
-        /// Its cross-validated RMSE, mm.
-        cross_validated_mm: f64,
-        /// The networks' RMS departure from it per leg, mm.
-        departure_mm: f64,
     },
 
     /// A model and the identification options it is propagated with have other lead-screw

@@ -16,7 +16,7 @@
 //! `J·δθ = r` stacked on the prior's rows (`√λ` times each curve's second differences, whose
 //! residuals are those differences' negatives), and lower the sum of both squares.
 //!
-//! Optionally the model is shaped further like the machine ([`crate::physical`]): a lead-screw
+//! Optionally the model is shaped further like the machine ([`hexacomp_core::physical`]): a lead-screw
 //! error curve per leg (`pitch_basis` B-spline coefficients each) and the legs' compliance under
 //! the platform's weight (4 per leg). Both change the loaded leg length, as the offset does: a
 //! pitch coefficient's column of `G` is its basis function at the leg's commanded length, a
@@ -28,7 +28,7 @@ use hexacomp_core::{ForwardOptions, Geometry, LEGS, Pose, forward_kinematics};
 use nalgebra::{DMatrix, DVector, Dyn, SVD};
 
 use crate::error::{Error, Result};
-use crate::physical::{COMPLIANCE_TERMS, PhysicalModel, PitchCurves};
+use hexacomp_core::physical::{COMPLIANCE_TERMS, PhysicalModel, PitchCurves};
 
 /// Number of geometric parameters: 6 × (3 + 3 + 1).
 pub const PARAMETERS: usize = 42;

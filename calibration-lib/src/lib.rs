@@ -10,11 +10,11 @@
 //!   is refused;
 //! - [`train`]: the coupled and decoupled networks (Eq. 10–13), their hidden-node selection by
 //!   cross-validation;
-//! - [`identify`]: identification of the geometric parameters by iterative least squares;
-//!   [`physical`]: the model shaped like the machine (lead-screw curves, compliance under the
-//!   weight); [`pitch_resolution`]: its lead-screw curves' resolution and smoothness chosen by
-//!   cross-validation; [`physical_candidate`]: the physical model scored and carried into
-//!   networks ([`distill`]) for the model file;
+//! - [`identify`]: identification of the geometric parameters, and of the physical model
+//!   (`hexacomp_core::physical`: lead-screw curves, compliance under the weight), by iterative
+//!   least squares; [`pitch_resolution`]: its lead-screw curves' resolution and smoothness
+//!   chosen by cross-validation; [`physical_candidate`]: the physical model scored and written
+//!   as its model file; [`measured_range`]: the legs' range the configurations cover;
 //! - [`uncertainty`], [`residual_noise`]: the 1-σ position uncertainty per point propagated
 //!   from the identification;
 //! - [`pipeline`]: solve → screen → train as one type, which every caller runs.
@@ -24,11 +24,10 @@
 #![warn(missing_docs)]
 
 pub mod corrections;
-pub mod distill;
 pub mod error;
 pub mod identify;
+pub mod measured_range;
 mod parallel;
-pub mod physical;
 pub mod physical_candidate;
 pub mod pipeline;
 pub mod pitch_resolution;

@@ -1,105 +1,79 @@
 //! The physical model as a candidate for the model file: identified with the lead-screw
 //! resolution chosen, and its error cross-validated, on the folds the networks are
-//! ([`crate::pitch_resolution`], beside [`crate::train::cross_validated_rmse`]), and carried
-//! into networks ([`crate::distill`]).
+//! ([`crate::pitch_resolution`], beside [`crate::train::cross_validated_rmse`]), and written as
+//! it is ([`Networks::Physical`]: the service evaluates the model itself, so nothing is lost
+//! between the identification and the machine).
 //!
 //! Its score is comparable with the networks' cross-validated error (Eq. 21,
 //! `√Σ_i RMSE_i²` over the six legs, mm): the physical model is identified without each fold,
 //! and at each of the fold's configurations its correction is compared with the robust one
 //! where that one is exact — at the pose the machine reached, whose nominal legs are the
-//! equivalent legs `q − Δq` (where the networks are compared too). The distilled networks' own
-//! departure from the model (measured on fresh poses) is added in quadrature: the score is that
-//! of what the model file will command.
+//! equivalent legs `q − Δq` (where the networks are compared too).
 
+use hexacomp_core::model::{Model, NetworkInput, Networks, Provenance};
+use hexacomp_core::network::Normalisation;
+use hexacomp_core::physical::{PhysicalCorrections, PhysicalModel};
 use hexacomp_core::records::MeasuredConfiguration;
-use hexacomp_core::{Geometry, LEGS, Pose};
+use hexacomp_core::{Geometry, LEGS, Pose, inverse_kinematics};
 
-use crate::distill::{DistillOptions, Fidelity, distill, fidelity};
 use crate::error::{Error, Result};
 use crate::identify::{IdentifyOptions, identify};
-use crate::physical::PhysicalModel;
+use crate::measured_range::measured_range;
 use crate::pitch_resolution::{ResolutionChoice, identified_on_every_configuration};
-use crate::train::Trained;
+use crate::train::correction_bounds;
 use crate::uncertainty::{Repeatability, UncertaintySource};
-
-/// Poses the distilled networks are checked on.
-const FIDELITY_POSES: usize = 500;
 
 /// The physical model's model file and how it was scored.
 pub struct PhysicalCandidate {
-    /// The networks that carry the model identified on every kept configuration, ready to save.
-    pub distilled: Trained,
+    /// The model identified on every kept configuration, ready to save.
+    pub model: Model,
     /// Eq. 21's `√Σ_i RMSE_i²` of the corrections the model predicts at each configuration
-    /// when identified without its fold, against their robust corrections, mm.
+    /// when identified without its fold, against their robust corrections, mm: its score,
+    /// compared with the networks' cross-validated error on the same folds.
     pub cross_validated_rmse_mm: f64,
     /// The lead-screw resolution the model was identified with, chosen on the same folds, and
     /// how every resolution tried scored.
     pub resolution: ResolutionChoice,
-    /// How closely the networks command what the model does, on fresh poses.
-    pub fidelity: Fidelity,
-    /// The score compared with the networks' cross-validated error on the same folds: the
-    /// cross-validated RMSE and the networks' departure (`√6 ·` its RMS per leg, in Eq. 21's
-    /// units) in quadrature, mm.
-    pub score_mm: f64,
-    /// The uncertainty of networks trained on the same configurations (the distilled networks
-    /// carry theirs already), or why there is none (then neither has one).
+    /// The uncertainty of networks trained on the same configurations (the model carries its
+    /// own already), or why there is none (then neither has one).
     pub networks_uncertainty: Result<NetworksUncertainty>,
-    /// Wall-clock seconds of the identification, the distillation and the uncertainty (the
-    /// choice of the resolution before them not included).
+    /// Wall-clock seconds of the identification and the uncertainty (the choice of the
+    /// resolution before them not included).
     pub seconds: f64,
 }
 
-/// How the physical model is carried into networks and given its uncertainty.
-#[derive(Debug, Clone, PartialEq)]
-pub struct CandidateOptions {
-    /// How the model is carried into networks.
-    pub distill: DistillOptions,
-    /// The machine's repeatability: σ of one leg's length error at every move, mm, and whether
-    /// it is the machine's or assumed.
-    pub repeatability: Repeatability,
-}
-
-/// Identifies, scores and distills the physical model of the kept `measurements` with the
-/// lead-screw resolution `resolution` chose on them
-/// ([`crate::pitch_resolution::chosen_resolution`], on the folds the networks are scored on),
-/// its cross-validated error the chosen one's. The networks carry the model's position
-/// uncertainty for the machine's repeatability, their own departure from the model added.
+/// Identifies the physical model of the kept `measurements` with the lead-screw resolution
+/// `resolution` chose on them ([`crate::pitch_resolution::chosen_resolution`], on the folds
+/// the networks are scored on), its cross-validated error the chosen one's, and gives it its
+/// position uncertainty for legs repeating within `repeatability` ([`with_uncertainty`]).
 pub fn physical_candidate(
     nominal: &Geometry,
     measurements: &[MeasuredConfiguration],
     resolution: ResolutionChoice,
-    options: &CandidateOptions,
-    progress: &(dyn Fn(u64) + Sync),
+    repeatability: Repeatability,
+    seed: u64,
 ) -> Result<PhysicalCandidate> {
     let start = std::time::Instant::now();
     let cross_validated_rmse_mm = resolution.chosen().cross_validated_rmse_mm;
+    if !cross_validated_rmse_mm.is_finite() {
+        return Err(Error::ScoreNotFinite {
+            score_mm: cross_validated_rmse_mm,
+        });
+    }
     let physical = identify(nominal, measurements, &resolution.options)?.model;
-    let carried = carried_into_networks(
+    let served = with_uncertainty(
         nominal,
         (&physical, &resolution.options),
         &resolution.indistinguishable(),
-        measurements,
-        &options.distill,
-        options.repeatability,
-        progress,
+        (measurements, cross_validated_rmse_mm),
+        repeatability,
+        seed,
     )?;
-    let (mut distilled, fidelity) = (carried.distilled, carried.fidelity);
-    let score_mm = (cross_validated_rmse_mm.powi(2) + LEGS as f64 * fidelity.rms_mm.powi(2)).sqrt();
-    if !score_mm.is_finite() {
-        return Err(Error::ScoreNotFinite {
-            score_mm,
-            cross_validated_mm: cross_validated_rmse_mm,
-            departure_mm: fidelity.rms_mm,
-        });
-    }
-    distilled.model.provenance.configurations = measurements.len();
     Ok(PhysicalCandidate {
-        distilled,
+        model: served.model,
         cross_validated_rmse_mm,
         resolution,
-        fidelity,
-        score_mm,
-        networks_uncertainty: carried.uncertainty.map(|source| NetworksUncertainty {
+        networks_uncertainty: served.uncertainty.map(|source| NetworksUncertainty {
             source,
             physical_cross_validated_mm: cross_validated_rmse_mm,
         }),
@@ -107,55 +81,41 @@ pub fn physical_candidate(
     })
 }
 
-/// The physical model carried into networks.
+/// The physical model as the model file holds it, with its uncertainty.
 #[derive(Debug)]
-pub struct CarriedModel {
-    /// The networks, with the model's position uncertainty when it could be fitted.
-    pub distilled: Trained,
-    /// How closely the networks command what the model does, on fresh poses.
-    pub fidelity: Fidelity,
+pub struct ServedModel {
+    /// The model ([`Networks::Physical`]), with its position uncertainty when it could be
+    /// fitted.
+    pub model: Model,
     /// What the uncertainty was fitted from (for other models of the same configurations), or
     /// why it could not be (too few configurations to estimate the noise or place the
-    /// leverage): then the networks carry none.
+    /// leverage): then the model carries none.
     pub uncertainty: Result<UncertaintySource>,
 }
 
-/// Carries `physical`, identified on `measurements` with `identification` (its uncertainty is
-/// propagated with those options' cutoff, compliance terms and smoothness prior), into networks
-/// ([`distill`]) that carry its position uncertainty for legs repeating within `repeatability`
-/// (1 σ per move, mm; more where the residuals' shape shows more,
-/// [`crate::uncertainty::Propagation`]), the networks' own departure from the model and its
-/// spread about the models of the lead-screw resolutions `alternative_bases` added (those the
-/// cross-validation could not tell from the model's,
+/// The model file of `physical` for the `nominal` geometry ([`served`]; `cross_validated_mm`
+/// its cross-validated error), carrying its position uncertainty: `physical`, identified on
+/// `measurements` with `identification` (its
+/// uncertainty is propagated with those options' cutoff, compliance terms and smoothness
+/// prior), for legs repeating within `repeatability` (1 σ per move, mm; more where the
+/// residuals' shape shows more, [`crate::uncertainty::Propagation`]), its spread about the
+/// models of the lead-screw resolutions `alternative_bases` added (those the cross-validation
+/// could not tell from the model's,
 /// [`crate::pitch_resolution::ResolutionChoice::indistinguishable`]; the model's own is
 /// skipped), each identified on `measurements` as the cross-validation scored it, and, where
 /// `identification` has a smoothness prior, the prior's bias, bounded by the same resolution
 /// identified without it ([`identified_on_every_configuration`]). A model among these that
-/// cannot be identified leaves the networks without an uncertainty, as too few configurations
-/// do.
-pub fn carried_into_networks(
+/// cannot be identified leaves the model without an uncertainty, as too few configurations do.
+pub fn with_uncertainty(
     nominal: &Geometry,
     (physical, identification): (&PhysicalModel, &IdentifyOptions),
     alternative_bases: &[usize],
-    measurements: &[MeasuredConfiguration],
-    options: &DistillOptions,
+    (measurements, cross_validated_mm): (&[MeasuredConfiguration], f64),
     repeatability: Repeatability,
-    progress: &(dyn Fn(u64) + Sync),
-) -> Result<CarriedModel> {
+    seed: u64,
+) -> Result<ServedModel> {
     let own = physical.pitch.basis();
-    let measured: Vec<Pose> = measurements
-        .iter()
-        .map(MeasuredConfiguration::pose)
-        .collect();
-    let mut distilled = distill(nominal, physical, &measured, options, progress)?;
-    let fidelity = fidelity(
-        nominal,
-        physical,
-        &distilled.model,
-        &measured,
-        options,
-        FIDELITY_POSES,
-    )?;
+    let mut model = served(nominal, physical, measurements, cross_validated_mm)?;
     // The model without its prior first, where it has one, then the alternatives: identified
     // together, on the machine's cores.
     let without_prior = (identification.smoothness > 0.0).then(|| identification.smoothed(0.0));
@@ -185,18 +145,73 @@ pub fn carried_into_networks(
                 alternatives,
                 measurements,
                 repeatability,
-                options.seed,
+                seed,
             )
         })
         .and_then(|source| {
-            distilled.model.uncertainty = Some(source.fitted(fidelity.rms_mm.powi(2))?);
+            model.uncertainty = Some(source.fitted(0.0)?);
             Ok(source)
         });
-    Ok(CarriedModel {
-        distilled,
-        fidelity,
-        uncertainty,
-    })
+    Ok(ServedModel { model, uncertainty })
+}
+
+/// The model file of `physical`, identified on `measurements`, for the `nominal` geometry (no
+/// uncertainty; `cross_validated_mm` its cross-validated error, Eq. 21, mm): its trained range the nominal legs of the configurations' poses and their
+/// commanded legs, its correction bounds from the corrections it commands there (as
+/// [`correction_bounds`] widens measured ones).
+pub fn served(
+    nominal: &Geometry,
+    physical: &PhysicalModel,
+    measurements: &[MeasuredConfiguration],
+    cross_validated_mm: f64,
+) -> Result<Model> {
+    let poses: Vec<Pose> = measurements
+        .iter()
+        .map(MeasuredConfiguration::pose)
+        .collect();
+    let nominal_legs: Vec<[f64; LEGS]> = poses
+        .iter()
+        .map(|pose| inverse_kinematics(nominal, pose).lengths)
+        .collect();
+    let corrections: Vec<[f64; LEGS]> = poses
+        .iter()
+        .zip(&nominal_legs)
+        .map(|(pose, q)| {
+            let command = physical.command(pose);
+            std::array::from_fn(|i| command[i] - q[i])
+        })
+        .collect();
+    let range = measured_range(nominal, &poses);
+    let training_range = std::array::from_fn(|leg| {
+        measurements.iter().fold(range[leg], |[lo, hi], m| {
+            [lo.min(m.legs[leg]), hi.max(m.legs[leg])]
+        })
+    });
+    let created_unix_s = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs());
+    let model = Model {
+        networks: Networks::Physical(Box::new(PhysicalCorrections::new(
+            nominal,
+            physical.clone(),
+        )?)),
+        input: NetworkInput::Equivalent,
+        normalisation: Normalisation::of(&nominal_legs)?,
+        training_range,
+        correction_bounds: correction_bounds(&corrections),
+        geometry: nominal.fingerprint(),
+        provenance: Provenance {
+            created_unix_s,
+            configurations: measurements.len(),
+            training_samples: measurements.len(),
+            validation_samples: 0,
+            validation_rmse_mm: cross_validated_mm,
+            source: String::new(),
+        },
+        uncertainty: None,
+    };
+    model.validate()?;
+    Ok(model)
 }
 
 /// The position uncertainty of networks trained on the configurations the physical model was

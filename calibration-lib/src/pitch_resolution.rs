@@ -16,8 +16,8 @@ use hexacomp_core::{ForwardOptions, Geometry, LEGS, forward_kinematics};
 use crate::error::{Error, Result};
 use crate::identify::{IdentifyOptions, identify};
 use crate::parallel::in_parallel;
-use crate::physical::PhysicalModel;
 use crate::train::{can_cross_validate, commanded_legs, folds};
+use hexacomp_core::physical::PhysicalModel;
 
 /// The lead-screw resolutions tried: B-spline coefficients per leg's curve (a knot every 30,
 /// 16.7 and 11.5 mm of the prototype's 150 mm stroke: the stroke over `n − 3` spacings).

@@ -60,14 +60,14 @@ use hexacomp_core::uncertainty::{FEATURES, PositionUncertainty, WHITENING_ENTRIE
 use hexacomp_core::{Geometry, LEGS, Pose};
 use nalgebra::{DMatrix, Matrix3, SMatrix};
 
-use crate::distill::{draw, measured_range};
 use crate::error::{Error, Result};
 use crate::identify::{
     IdentifyOptions, LEG_OFFSET_COLUMNS, ScaledSvd, SmoothnessPrior, leg_sensitivities, linearise,
     scaled_svd,
 };
-use crate::physical::PhysicalModel;
+use crate::measured_range::{draw, measured_range};
 use crate::residual_noise::{ResidualNoise, ShapeSplit, expected_squares, split_by_shape};
+use hexacomp_core::physical::PhysicalModel;
 
 /// A repeatability is refused when its expected share of the residuals' variance is more than
 /// this many times what they hold: far beyond their own scatter (of 40 draws of a machine

@@ -51,6 +51,18 @@ pub trait Corrections {
     {
         q.map(|q| self.raw_corrections(q))
     }
+    /// The raw corrections at the nominal legs `q` (mm) of `pose` (mm, rad): those of
+    /// [`Corrections::raw_corrections`], which a physical model computes from the pose
+    /// ([`Model::raw_corrections_at_pose`]).
+    #[inline]
+    fn raw_corrections_at_pose(&self, q: &[f64; LEGS], pose: &Pose) -> [f64; LEGS] {
+        let reference = self.reference();
+        if reference.is_physical() {
+            reference.raw_corrections_at_pose(q, pose)
+        } else {
+            self.raw_corrections(q)
+        }
+    }
     /// The model these corrections are of.
     fn reference(&self) -> &Model;
 }
@@ -264,7 +276,13 @@ pub fn compensate_pose<M: Corrections>(
     model: Option<&M>,
     pose: &Pose,
 ) -> Compensated {
-    legs_compensated(geometry, model, nominal_legs(geometry, pose))
+    match nominal_legs(geometry, pose) {
+        Ok(q) => match needs_model(geometry, model, &q) {
+            Ok(model) => corrected(geometry, model, &q, model.raw_corrections_at_pose(&q, pose)),
+            Err(answer) => answer,
+        },
+        Err(invalid) => invalid,
+    }
 }
 
 /// The answer for a pose once its nominal legs are known ([`compensate_legs`]), or the answer to
@@ -287,6 +305,10 @@ pub fn compensate_pose_pair<M: Corrections>(
     model: Option<&M>,
     [p0, p1]: [&Pose; 2],
 ) -> [Compensated; 2] {
+    // A physical model has no pair evaluation, and takes the poses.
+    if model.is_some_and(|m| m.reference().is_physical()) {
+        return [p0, p1].map(|pose| compensate_pose(geometry, model, pose));
+    }
     match (nominal_legs(geometry, p0), nominal_legs(geometry, p1)) {
         (Ok(q0), Ok(q1)) => compensate_legs_pair(geometry, model, [&q0, &q1]),
         (legs0, legs1) => [legs0, legs1].map(|legs| legs_compensated(geometry, model, legs)),

@@ -17,8 +17,8 @@
 //!
 //! [`FusedModel::error_bound_mm`] bounds the difference for every input, from the weights
 //! (about 1e-14 mm for the models trained here; the property test sees 5.7e-14 mm at most in
-//! the legs, one ulp of a 400 mm leg). A model whose bound would exceed [`MAX_ERROR_MM`] (1 nm)
-//! is evaluated by the reference. The statuses are the reference's at every point: where a
+//! the legs, one ulp of a 400 mm leg). A model whose bound would exceed [`MAX_ERROR_MM`] (1 nm),
+//! and a physical model (nothing to fuse), are evaluated by the reference. The statuses are the reference's at every point: where a
 //! fused correction lies within twice its bound of a correction bound or of a stroke end, or is
 //! not finite, the compensation asks the reference (`compensator::compensate_legs`).
 //!
@@ -109,6 +109,8 @@ impl FusedModel {
                     output_biases[leg] = output_bias(network, 0);
                 }
             }
+            // Nothing to fuse: the reference evaluates it (`error_bound_mm` is `None`).
+            Networks::Physical(_) => {}
         }
         let blocks: Vec<Block> = nodes
             .chunks(LANES)
@@ -130,7 +132,7 @@ impl FusedModel {
             output_biases,
             kernel: Kernel::detect(),
             reference: model.clone(),
-            error_bound_mm: Some(bound).filter(|b| *b <= MAX_ERROR_MM),
+            error_bound_mm: Some(bound).filter(|b| *b <= MAX_ERROR_MM && !model.is_physical()),
         }
     }
 

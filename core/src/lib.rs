@@ -10,6 +10,8 @@
 //! - [`screw`]: the paper's matrices `W`, `T = W⁻ᵀ` (Eq. 3), `P` (Eq. 4) and `cond(PT)`;
 //! - [`sampling`]: seeded uniform poses over the task workspace;
 //! - [`network`], [`model`]: the trained networks, their normalisation and the model file;
+//! - [`physical`]: the physical model (identified geometry, lead-screw curves, compliance) and
+//!   its corrections as a model file holds them;
 //! - [`fused`], [`activation`]: a model's serving form, its networks fused into one layer
 //!   evaluated four hidden nodes at a time with a vectorisable `tanh`;
 //! - [`observation`]: what an instrument measured of a configuration (targets, some perhaps not
@@ -37,6 +39,7 @@ pub mod kinematics;
 pub mod model;
 pub mod network;
 pub mod observation;
+pub mod physical;
 pub mod pose;
 pub mod records;
 pub mod rigid_fit;

@@ -3,8 +3,10 @@
 //! File layout: 8 magic bytes `HXCMODEL`, the format version (u16, little-endian), the payload
 //! length (u32 LE), the payload, and a CRC-64/XZ (u64 LE) of everything before it. The payload
 //! is the postcard-encoded [`Model`] without its uncertainty (version 1), followed in version 2
-//! by the postcard-encoded [`PositionUncertainty`]. A model without an uncertainty is written as
-//! version 1, so that builds that read only version 1 keep reading it. A model binds itself to
+//! by the postcard-encoded [`PositionUncertainty`], in version 3 by an optional one (postcard's
+//! `Option`). Networks without an uncertainty are written as version 1 and with one as version
+//! 2, so that builds that read only those keep reading them; a physical model
+//! ([`Networks::Physical`], which no earlier build knows) as version 3. A model binds itself to
 //! the fingerprint of the geometry it was trained for.
 
 use std::path::Path;
@@ -14,25 +16,33 @@ use serde::{Deserialize, Serialize};
 use crate::error::{Error, ModelFileProblem, Result};
 use crate::geometry::{Fingerprint, Geometry, LEGS};
 use crate::network::{Network, Normalisation};
+use crate::physical::PhysicalCorrections;
+use crate::pose::Pose;
 use crate::uncertainty::PositionUncertainty;
 
 /// Magic bytes at the start of every model file.
 pub const MAGIC: &[u8; 8] = b"HXCMODEL";
-/// The newest model-file format version, which this build writes for a model with an
-/// uncertainty; it reads it and every earlier one.
-pub const FORMAT_VERSION: u16 = 2;
-/// The format version of a model without an uncertainty (the first).
+/// The newest model-file format version, which this build writes for a physical model; it
+/// reads it and every earlier one.
+pub const FORMAT_VERSION: u16 = 3;
+/// The format version of networks with an uncertainty.
+const FORMAT_WITH_UNCERTAINTY: u16 = 2;
+/// The format version of networks without an uncertainty (the first).
 const FORMAT_WITHOUT_UNCERTAINTY: u16 = 1;
 const HEADER: usize = 8 + 2 + 4;
 const CHECKSUM: crc::Crc<u64> = crc::Crc::<u64>::new(&crc::CRC_64_XZ);
 
-/// How the joint-correction function is split into networks (Sec. 3.2, Fig. 3–4).
+/// What computes the joint corrections: the paper's networks (Sec. 3.2, Fig. 3–4), or the
+/// physical model itself.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub enum Networks {
     /// One network with six outputs.
     Coupled(Network),
     /// Six single-output networks, one per leg.
     Decoupled(Vec<Network>),
+    /// The identified physical model, evaluated as it is (format version 3; its model's
+    /// `input` and `normalisation` are not used).
+    Physical(Box<PhysicalCorrections>),
 }
 
 /// Which leg lengths the networks take as input.
@@ -67,7 +77,9 @@ pub struct Provenance {
     /// Samples held out to choose the hidden-node count.
     pub validation_samples: usize,
     /// Holdout validation RMSE of the chosen size (Eq. 18, or Eq. 21 for decoupled), mm. For a
-    /// physical model carried into networks: against the model's corrections.
+    /// physical model: its cross-validated error against the measurements (Eq. 21's units;
+    /// files of earlier builds, whose physical model was carried into networks: the networks'
+    /// error against the model's corrections).
     pub validation_rmse_mm: f64,
     /// Free text: the tool, its version, the source files.
     pub source: String,
@@ -112,26 +124,46 @@ impl Model {
                     n.evaluate(&x, &mut out[leg..=leg]);
                 }
             }
+            Networks::Physical(physical) => out = physical.at_legs(q),
         }
         out
     }
 
+    /// [`Model::raw_corrections`] at the nominal legs `q` (mm) of `pose` (mm, rad): a physical
+    /// model takes the pose rather than finding it from the legs (the same corrections to
+    /// rounding, without the forward kinematics). Allocation-free.
+    #[inline]
+    pub fn raw_corrections_at_pose(&self, q: &[f64; LEGS], pose: &Pose) -> [f64; LEGS] {
+        match &self.networks {
+            Networks::Physical(physical) => physical.at_pose(pose, q),
+            _ => self.raw_corrections(q),
+        }
+    }
+
+    /// Whether the corrections are the physical model's ([`Networks::Physical`]).
+    pub fn is_physical(&self) -> bool {
+        matches!(self.networks, Networks::Physical(_))
+    }
+
     /// An upper bound, valid for every input, on how fast any raw correction changes with the
     /// legs (mm per mm of leg travel, Euclidean norm): corrections at legs `d` mm apart differ
-    /// by at most `max_slope() · d` mm. See [`Network::max_slope`].
+    /// by at most `max_slope() · d` mm. See [`Network::max_slope`]; for a physical model an
+    /// estimate, not a bound ([`PhysicalCorrections::max_slope`]).
     pub fn max_slope(&self) -> f64 {
         let span = &self.normalisation.span;
         match &self.networks {
             Networks::Coupled(n) => n.max_slope(span),
             Networks::Decoupled(nets) => nets.iter().map(|n| n.max_slope(span)).fold(0.0, f64::max),
+            Networks::Physical(physical) => physical.max_slope(),
         }
     }
 
-    /// Hidden nodes of each network.
+    /// Hidden nodes of each network (none for a physical model).
     pub fn hidden_nodes(&self) -> Vec<usize> {
         match &self.networks {
             Networks::Coupled(n) => vec![n.hidden()],
             Networks::Decoupled(nets) => nets.iter().map(Network::hidden).collect(),
+            Networks::Physical(_) => Vec::new(),
         }
     }
 
@@ -154,6 +186,16 @@ impl Model {
                     )));
                 }
                 nets.iter().try_for_each(Network::validate)?;
+            }
+            Networks::Physical(physical) => {
+                physical.validate()?;
+                if physical.nominal_fingerprint() != self.geometry {
+                    return Err(Error::InvalidModel(format!(
+                        "the physical model's nominal geometry is {}, the model's {}",
+                        physical.nominal_fingerprint(),
+                        self.geometry
+                    )));
+                }
             }
         }
         let n = &self.normalisation;
@@ -182,11 +224,13 @@ impl Model {
         Ok(())
     }
 
-    /// The format version the model's file has: [`FORMAT_VERSION`] with an uncertainty, 1
-    /// without (what a file read with or without one had).
+    /// The format version the model's file has: [`FORMAT_VERSION`] for a physical model; for
+    /// networks 2 with an uncertainty, 1 without (what a file read with or without one had).
     pub fn format_version(&self) -> u16 {
-        if self.uncertainty.is_some() {
+        if self.is_physical() {
             FORMAT_VERSION
+        } else if self.uncertainty.is_some() {
+            FORMAT_WITH_UNCERTAINTY
         } else {
             FORMAT_WITHOUT_UNCERTAINTY
         }
@@ -195,12 +239,15 @@ impl Model {
     /// The model-file bytes, in [`Model::format_version`].
     pub fn to_bytes(&self) -> Vec<u8> {
         let mut payload = postcard::to_stdvec(self).expect("a model always serialises");
-        if let Some(uncertainty) = &self.uncertainty {
-            payload.extend(
-                postcard::to_stdvec(uncertainty).expect("an uncertainty always serialises"),
-            );
-        }
         let version = self.format_version();
+        let uncertainty = match version {
+            FORMAT_VERSION => postcard::to_stdvec(&self.uncertainty),
+            _ => self
+                .uncertainty
+                .as_ref()
+                .map_or(Ok(Vec::new()), postcard::to_stdvec),
+        };
+        payload.extend(uncertainty.expect("an uncertainty always serialises"));
         let mut bytes = Vec::with_capacity(HEADER + payload.len() + 8);
         bytes.extend_from_slice(MAGIC);
         bytes.extend_from_slice(&version.to_le_bytes());
@@ -251,13 +298,29 @@ impl Model {
         let corrupt = |e: postcard::Error| ModelFileProblem::Corrupt(e.to_string());
         let (mut model, rest): (Model, _) =
             postcard::take_from_bytes(&body[HEADER..]).map_err(corrupt)?;
-        let rest = if version == FORMAT_VERSION {
-            let (uncertainty, rest) = postcard::take_from_bytes(rest).map_err(corrupt)?;
-            model.uncertainty = Some(uncertainty);
-            rest
-        } else {
-            rest
+        let rest = match version {
+            FORMAT_VERSION => {
+                let (uncertainty, rest) = postcard::take_from_bytes(rest).map_err(corrupt)?;
+                model.uncertainty = uncertainty;
+                rest
+            }
+            FORMAT_WITH_UNCERTAINTY => {
+                let (uncertainty, rest) = postcard::take_from_bytes(rest).map_err(corrupt)?;
+                model.uncertainty = Some(uncertainty);
+                rest
+            }
+            _ => rest,
         };
+        if model.is_physical() != (version == FORMAT_VERSION) {
+            return Err(ModelFileProblem::Corrupt(format!(
+                "format version {version} with {}",
+                if model.is_physical() {
+                    "a physical model (version 3 only)"
+                } else {
+                    "networks (versions 1 and 2 only)"
+                }
+            )));
+        }
         if !rest.is_empty() {
             return Err(ModelFileProblem::Corrupt(format!(
                 "{} bytes after the format version {version} payload",

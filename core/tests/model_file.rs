@@ -37,8 +37,9 @@ fn a_model_with_an_uncertainty_is_version_2_and_one_without_stays_version_1() {
         ..plain.clone()
     };
     let bytes = with.to_bytes();
-    assert_eq!(u16::from_le_bytes([bytes[8], bytes[9]]), FORMAT_VERSION);
-    assert_eq!(FORMAT_VERSION, 2);
+    // Networks with an uncertainty stay version 2 (version 3 is the physical model's).
+    assert_eq!(u16::from_le_bytes([bytes[8], bytes[9]]), 2);
+    assert_eq!(FORMAT_VERSION, 3);
     let read = Model::from_bytes(&bytes).unwrap();
     assert_eq!(read, with);
     assert_eq!(read.format_version(), 2);

@@ -10,7 +10,7 @@
 
 use hexacomp_core::compensator::compensate_pose;
 use hexacomp_core::kinematics::pose_from_targets;
-use hexacomp_core::model::NetworkInput;
+use hexacomp_core::model::{Model, NetworkInput};
 use hexacomp_core::records::{JointCorrection, MeasuredConfiguration};
 use hexacomp_core::sampling::{SamplerOptions, WorkspaceSampler};
 use hexacomp_core::stats::{PoseErrorNorm, PoseErrorStats};
@@ -19,16 +19,15 @@ use hexacomp_virtual::{ErrorModel, VirtualPlatform};
 
 use crate::error::{Error, Result};
 use hexacomp_calibration::corrections::{Checks, Outcome, SolverOptions};
-use hexacomp_calibration::distill::DistillOptions;
 use hexacomp_calibration::identify::{IdentifyOptions, PHYSICAL, identify};
-use hexacomp_calibration::physical::PhysicalModel;
-use hexacomp_calibration::physical_candidate::carried_into_networks;
+use hexacomp_calibration::physical_candidate::with_uncertainty;
 use hexacomp_calibration::pipeline::Pipeline;
 use hexacomp_calibration::pitch_resolution::{ResolutionChoice, chosen_if_cross_validated};
 use hexacomp_calibration::plan::PlanOptions;
 use hexacomp_calibration::screening::ScreeningOptions;
 use hexacomp_calibration::train::{Architecture, CROSS_VALIDATION_FOLDS, TrainOptions, Trained};
 use hexacomp_calibration::uncertainty::{Coverage, Repeatability};
+use hexacomp_core::physical::PhysicalModel;
 
 /// A compensation method of the comparison.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -38,14 +37,12 @@ pub enum Method {
     /// Inverse kinematics of the identified geometry (the paper's POE-based comparison).
     ModelBased,
     /// The identified physical model: geometry, a lead-screw curve per leg and the legs'
-    /// compliance under the weight ([`hexacomp_calibration::physical`]).
+    /// compliance under the weight ([`hexacomp_core::physical`]), as its model file commands
+    /// (what `calibrate` writes by default).
     Physical,
     /// The physical model, and decoupled networks trained on the robust corrections it leaves
     /// (each stage fitted on what the one before left).
     PhysicalResidual,
-    /// The physical model carried into decoupled networks ([`hexacomp_calibration::distill`]): what a model
-    /// file holds of it.
-    PhysicalNetworks,
     /// Coupled network on corrections solved with λ = 0 (the paper's ordinary compensator).
     OrdinaryCoupled,
     /// Coupled network on robust corrections.
@@ -63,12 +60,11 @@ pub enum Method {
 
 impl Method {
     /// Every method, in table order.
-    pub const ALL: [Method; 10] = [
+    pub const ALL: [Method; 9] = [
         Method::Uncompensated,
         Method::ModelBased,
         Method::Physical,
         Method::PhysicalResidual,
-        Method::PhysicalNetworks,
         Method::OrdinaryCoupled,
         Method::RobustCoupled,
         Method::RobustDecoupled,
@@ -83,7 +79,6 @@ impl Method {
             Method::ModelBased => "model-based",
             Method::Physical => "physical model",
             Method::PhysicalResidual => "physical + networks",
-            Method::PhysicalNetworks => "physical model, as networks",
             Method::OrdinaryCoupled => "ordinary coupled",
             Method::RobustCoupled => "robust coupled",
             Method::RobustDecoupled => "robust decoupled",
@@ -117,8 +112,6 @@ pub struct EvaluationOptions {
     pub instrument_seed: u64,
     /// Network training settings (the input is set per model).
     pub train: TrainOptions,
-    /// How the physical model is carried into networks.
-    pub distill: DistillOptions,
 }
 
 /// How a pose error at a validation pose is obtained.
@@ -299,7 +292,8 @@ struct Models {
     identified: Geometry,
     physical: PhysicalModel,
     resolution: Option<ResolutionChoice>,
-    distilled: Trained,
+    /// The physical model's model file.
+    served: Model,
     residual: Trained,
     ordinary_coupled: Trained,
     coupled: Trained,
@@ -412,7 +406,7 @@ impl<'a> Campaign<'a> {
         )?
         .geometry;
         let robust_rows = Self::rows(&self.robust, n);
-        let (physical, resolution, distilled, solved) = self.physical_at(n, &robust_rows)?;
+        let (physical, resolution, served, solved) = self.physical_at(n, &robust_rows)?;
         let left_by_physical = left_by(&physical, &robust_rows, &solved);
         let input = self.options.train.input;
         Ok(Models {
@@ -428,15 +422,15 @@ impl<'a> Campaign<'a> {
             exact_decoupled: self.fit(&self.exact_rows(n), Architecture::Decoupled, input)?,
             physical,
             resolution,
-            distilled,
+            served,
         })
     }
 
     /// The physical model as `calibrate` makes it from the first `n` configurations: its
     /// lead-screw resolution chosen by cross-validation on the configurations whose robust
     /// corrections were solved (eight with too few to cross-validate), on the folds of the
-    /// training seed (the command's default, 1: `calibrate --seed 1`'s folds), carried into
-    /// networks. No resolution scored at a size ends the evaluation, naming the size. Also the
+    /// training seed (the command's default, 1: `calibrate --seed 1`'s folds), and its model
+    /// file. No resolution scored at a size ends the evaluation, naming the size. Also the
     /// solved configurations' measurements, in `robust_rows`' order.
     fn physical_at(
         &self,
@@ -445,7 +439,7 @@ impl<'a> Campaign<'a> {
     ) -> Result<(
         PhysicalModel,
         Option<ResolutionChoice>,
-        Trained,
+        Model,
         Vec<MeasuredConfiguration>,
     )> {
         let solved: Vec<MeasuredConfiguration> = robust_rows
@@ -475,17 +469,19 @@ impl<'a> Campaign<'a> {
         let alternative_bases = resolution
             .as_ref()
             .map_or_else(Vec::new, ResolutionChoice::indistinguishable);
-        let distilled = carried_into_networks(
+        let cross_validated_mm = resolution
+            .as_ref()
+            .map_or(f64::NAN, |r| r.chosen().cross_validated_rmse_mm);
+        let served = with_uncertainty(
             self.geometry,
             (&physical, &identification),
             &alternative_bases,
-            &solved,
-            &self.options.distill,
+            (&solved, cross_validated_mm),
             Repeatability::Known(self.options.error_model.repeatability_sigma_mm),
-            &|_| {},
+            self.options.train.seed,
         )?
-        .distilled;
-        Ok((physical, resolution, distilled, solved))
+        .model;
+        Ok((physical, resolution, served, solved))
     }
 
     /// The legs `method` commands for `pose` with `models`.
@@ -496,13 +492,12 @@ impl<'a> Campaign<'a> {
         match method {
             Method::Uncompensated => inverse_kinematics(geometry, pose).lengths,
             Method::ModelBased => inverse_kinematics(&models.identified, pose).lengths,
-            Method::Physical => models.physical.command(pose),
+            Method::Physical => compensate_pose(geometry, Some(&models.served), pose).legs,
             Method::PhysicalResidual => {
                 let left = compensate_pose(geometry, Some(&models.residual.model), pose);
                 let modelled = models.physical.command(pose);
                 std::array::from_fn(|i| modelled[i] + left.corrections[i])
             }
-            Method::PhysicalNetworks => networks(&models.distilled),
             Method::OrdinaryCoupled => networks(&models.ordinary_coupled),
             Method::RobustCoupled => networks(&models.coupled),
             Method::RobustDecoupled => networks(&models.decoupled),
@@ -558,7 +553,7 @@ impl<'a> Campaign<'a> {
         ])
     }
 
-    /// One size's result, with the coverage of the distilled model's uncertainty where it
+    /// One size's result, with the coverage of the physical model's uncertainty where it
     /// carries one.
     fn size_result(
         &self,
@@ -574,12 +569,12 @@ impl<'a> Campaign<'a> {
             resolution: models.resolution,
             uncertainty: None,
         };
-        if models.distilled.model.uncertainty.is_some() {
+        if models.served.uncertainty.is_some() {
             size.uncertainty = Some(uncertainty_coverage(
                 self.geometry,
-                &models.distilled.model,
+                &models.served,
                 &self.validation,
-                &size.errors_of(Method::PhysicalNetworks).reached,
+                &size.errors_of(Method::Physical).reached,
             ));
         }
         size

@@ -1,13 +1,12 @@
-//! The physical model as the default model (issue 19): carried into networks faithfully, chosen
-//! by a cross-validation that cannot see the configurations it scores, and better than the
-//! paper's decoupled networks on the virtual platform's error variants.
+//! The physical model as the default model (issue 19): written into its model file as it is,
+//! chosen by a cross-validation that cannot see the configurations it scores, and better than
+//! the paper's decoupled networks on the virtual platform's error variants.
 
 mod common;
 
-use hexacomp_calibration::distill::{DistillOptions, distill, fidelity, measured_range};
 use hexacomp_calibration::identify::identify;
-use hexacomp_calibration::physical::{PhysicalModel, PitchCurves};
-use hexacomp_calibration::physical_candidate::{CandidateOptions, physical_candidate};
+use hexacomp_calibration::measured_range::measured_range;
+use hexacomp_calibration::physical_candidate::{physical_candidate, served};
 use hexacomp_calibration::pipeline::Pipeline;
 use hexacomp_calibration::pitch_resolution::chosen_resolution;
 use hexacomp_calibration::plan::PlanOptions;
@@ -16,6 +15,7 @@ use hexacomp_calibration::train::{
 };
 use hexacomp_calibration::uncertainty::Repeatability;
 use hexacomp_core::compensator::compensate_pose;
+use hexacomp_core::physical::{PhysicalModel, PitchCurves};
 use hexacomp_core::records::JointCorrection;
 use hexacomp_core::sampling::{SamplerOptions, WorkspaceSampler};
 use hexacomp_core::{ForwardOptions, forward_kinematics};
@@ -162,16 +162,15 @@ fn known_model() -> (Geometry, PhysicalModel) {
 }
 
 #[test]
-fn the_distilled_networks_command_what_the_physical_model_does_within_the_measured_range() {
+fn the_model_file_commands_what_the_physical_model_does_within_the_measured_range() {
     let (nominal, model) = known_model();
-    let measured: Vec<Pose> = common::plan_rows(&nominal, 60, 5)
-        .iter()
-        .map(|row| row.pose())
-        .collect();
+    let rows = common::plan_rows(&nominal, 60, 5);
+    let (_, measurements) = common::measure(&nominal, &ErrorModel::default(), 3, 4, &rows);
+    let measured: Vec<Pose> = measurements.iter().map(|m| m.pose()).collect();
     let range = measured_range(&nominal, &measured);
-    let options = DistillOptions::default();
-    let distilled = distill(&nominal, &model, &measured, &options, &|_| {}).unwrap();
-    // By hand, on fresh poses within the range: the model file's command against the model's.
+    let file = served(&nominal, &model, &measurements, 0.02).unwrap();
+    // Written and read back: the file's corrections are the model's.
+    let file = hexacomp_core::model::Model::from_bytes(&file.to_bytes()).unwrap();
     let fresh: Vec<Pose> = WorkspaceSampler::new(&nominal, 99, SamplerOptions::default())
         .unwrap()
         .samples(400)
@@ -186,32 +185,22 @@ fn the_distilled_networks_command_what_the_physical_model_does_within_the_measur
         .collect();
     assert!(fresh.len() > 100, "{} fresh poses in range", fresh.len());
     let mut worst: f64 = 0.0;
-    let mut squared = 0.0;
     let mut modelled_size: f64 = 0.0;
     for pose in &fresh {
-        let file = compensate_pose(&nominal, Some(&distilled.model), pose);
+        let commanded = compensate_pose(&nominal, Some(&file), pose);
         let wanted = model.command(pose);
         let nominal_legs = inverse_kinematics(&nominal, pose).lengths;
         for i in 0..LEGS {
-            let difference = file.legs[i] - wanted[i];
-            worst = worst.max(difference.abs());
-            squared += difference * difference;
+            worst = worst.max((commanded.legs[i] - wanted[i]).abs());
             modelled_size = modelled_size.max((wanted[i] - nominal_legs[i]).abs());
         }
     }
-    let rms = (squared / (LEGS * fresh.len()) as f64).sqrt();
-    // The corrections are tenths of a millimetre; the networks follow them to micrometres.
+    // The corrections are tenths of a millimetre; the file commands them to rounding.
     assert!(modelled_size > 0.2, "{modelled_size}");
-    assert!(rms < 0.002 && worst < 0.015, "rms {rms} max {worst}");
-    // The library's own check agrees in size with this one.
-    let check = fidelity(&nominal, &model, &distilled.model, &measured, &options, 300).unwrap();
-    assert!(
-        check.rms_mm < 0.002 && check.max_mm < 0.015 && check.rms_mm > 0.2 * rms,
-        "{check:?} against rms {rms}"
-    );
-    // The model answers for the measured range (its poses are among the trained ones), not the
-    // whole workspace: the commanded legs reach beyond it by the corrections only.
-    for (leg, [lo, hi]) in distilled.model.training_range.iter().enumerate() {
+    assert!(worst < 1e-9, "max {worst}");
+    // The model answers for the measured range, not the whole workspace: the commanded legs
+    // reach beyond it by the corrections only.
+    for (leg, [lo, hi]) in file.training_range.iter().enumerate() {
         let [measured_lo, measured_hi] = range[leg];
         assert!(
             *lo <= measured_lo && *hi >= measured_hi,
@@ -222,31 +211,7 @@ fn the_distilled_networks_command_what_the_physical_model_does_within_the_measur
             "leg {leg}: [{lo}, {hi}] reaches beyond [{measured_lo}, {measured_hi}]"
         );
     }
-}
-
-#[test]
-fn a_measured_range_no_workspace_pose_fills_cannot_be_distilled_and_says_so() {
-    let (nominal, model) = known_model();
-    // One measured pose: a range of zero width.
-    let measured = [nominal.home_pose()];
-    let Err(error) = distill(
-        &nominal,
-        &model,
-        &measured,
-        &DistillOptions {
-            samples: 50,
-            ..DistillOptions::default()
-        },
-        &|_| {},
-    ) else {
-        panic!("a range no workspace pose fills was distilled");
-    };
-    assert!(
-        error
-            .to_string()
-            .contains("within the measured legs' range"),
-        "{error}"
-    );
+    assert_eq!(file.provenance.validation_rmse_mm, 0.02);
 }
 
 #[test]
@@ -279,11 +244,14 @@ fn the_physical_models_cross_validation_predicts_each_fold_without_it() {
             &|_| {},
         )
     };
-    let options = CandidateOptions {
-        distill: common::cheap_distill(),
-        repeatability: Repeatability::Known(0.004),
-    };
-    let candidate = physical_candidate(&g, &kept, choose(5).unwrap(), &options, &|_| {}).unwrap();
+    let candidate = physical_candidate(
+        &g,
+        &kept,
+        choose(5).unwrap(),
+        Repeatability::Known(0.004),
+        1,
+    )
+    .unwrap();
     // In sample, by hand: the model identified on all thirty, compared where each robust
     // correction is exact (the pose reached, the nominal legs q − Δq).
     let all = identify(&g, &kept, &candidate.resolution.options)
@@ -308,8 +276,11 @@ fn the_physical_models_cross_validation_predicts_each_fold_without_it() {
         cross_validated > 1.1 * in_sample,
         "cross-validated {cross_validated} against {in_sample} in sample"
     );
-    // The score adds the networks' departure to it.
-    assert!(candidate.score_mm >= cross_validated);
+    // The model file states it.
+    assert_eq!(
+        candidate.model.provenance.validation_rmse_mm,
+        cross_validated
+    );
     // No folds, or one, cannot score it.
     for folds in [0, 1] {
         assert!(choose(folds).is_err(), "{folds} folds");
@@ -329,7 +300,6 @@ fn evaluated(variant: ErrorVariant) -> Vec<SizeResult> {
         noise_seed: 1,
         instrument_seed: 2,
         train: TrainOptions::default(),
-        distill: DistillOptions::default(),
     };
     evaluate(&Geometry::prototype(), &options, &|_| {})
         .unwrap()
@@ -337,13 +307,13 @@ fn evaluated(variant: ErrorVariant) -> Vec<SizeResult> {
 }
 
 #[test]
-fn the_physical_model_as_networks_beats_the_papers_decoupled_networks_at_50_and_150_and_knows_its_uncertainty()
- {
+fn the_physical_model_beats_the_papers_decoupled_networks_at_50_and_150_and_knows_its_uncertainty()
+{
     for variant in [ErrorVariant::Paper, ErrorVariant::StrongPitch] {
         for size in evaluated(variant) {
             let position = |method| size.stats(method, Protocol::Reached).position_mm;
             let (ours, paper, floor) = (
-                position(Method::PhysicalNetworks),
+                position(Method::Physical),
                 position(Method::RobustDecoupled),
                 position(Method::Floor),
             );

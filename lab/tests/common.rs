@@ -4,10 +4,9 @@
 #![allow(dead_code)]
 
 use glam::DVec3;
-use hexacomp_calibration::distill::DistillOptions;
 use hexacomp_calibration::pipeline::{Calibration, Pipeline};
 use hexacomp_calibration::plan::{PlanOptions, numbered_rows, plan};
-use hexacomp_calibration::train::{Architecture, TrainOptions};
+use hexacomp_calibration::train::Architecture;
 use hexacomp_core::Geometry;
 use hexacomp_core::compensator::compensate_pose;
 use hexacomp_core::observation::Observation;
@@ -105,19 +104,4 @@ pub fn blind_decoupled(
             })
             .collect();
     (PoseErrorStats::of(&errors), calibration)
-}
-
-/// Distillation settings that run in a fraction of a second: for tests of what surrounds the
-/// networks, not of their fit.
-pub fn cheap_distill() -> DistillOptions {
-    DistillOptions {
-        samples: 40,
-        seed: 1,
-        train: TrainOptions {
-            hidden_sizes: vec![2],
-            restarts: 1,
-            max_iterations: 10,
-            ..DistillOptions::default().train
-        },
-    }
 }

@@ -7,8 +7,8 @@
 mod common;
 
 use hexacomp_calibration::corrections::{Checks, Outcome, SolverOptions, solve_all};
-use hexacomp_calibration::distill::{DistillOptions, distill};
 use hexacomp_calibration::identify::{IdentifyOptions, PHYSICAL, identify};
+use hexacomp_calibration::physical_candidate::served;
 use hexacomp_calibration::pitch_resolution::chosen_if_cross_validated;
 use hexacomp_calibration::train::{Architecture, CROSS_VALIDATION_FOLDS, TrainOptions, train};
 use hexacomp_core::compensator::compensate_pose;
@@ -38,16 +38,6 @@ fn options(sizes: Vec<usize>, error_model: ErrorModel) -> EvaluationOptions {
             hidden_sizes: vec![1, 2, 3],
             restarts: 1,
             ..TrainOptions::default()
-        },
-        distill: DistillOptions {
-            samples: 60,
-            seed: 8,
-            train: TrainOptions {
-                hidden_sizes: vec![2, 4],
-                restarts: 1,
-                max_iterations: 30,
-                ..TrainOptions::default()
-            },
         },
     }
 }
@@ -166,11 +156,8 @@ fn redo(g: &Geometry, o: &EvaluationOptions) -> Redone {
             })
             .collect();
         let residual = fit(&left, Architecture::Decoupled, input);
-        // The physical model carried into networks over the poses the prefix measured.
-        let measured: Vec<Pose> = measurements[..n].iter().map(|m| m.pose()).collect();
-        let distilled = distill(g, &physical, &measured, &o.distill, &|_| {})
-            .unwrap()
-            .model;
+        // The physical model's model file.
+        let file = served(g, &physical, &measurements[..n], f64::NAN).unwrap();
         let ordinary_coupled = fit(&first(&ordinary, n), Architecture::Coupled, input);
         let coupled = fit(&first(&robust, n), Architecture::Coupled, input);
         let decoupled = fit(&first(&robust, n), Architecture::Decoupled, input);
@@ -204,7 +191,10 @@ fn redo(g: &Geometry, o: &EvaluationOptions) -> Redone {
                 Method::ModelBased,
                 drive(&|p| inverse_kinematics(&identified, p).lengths),
             ),
-            (Method::Physical, drive(&|p| physical.command(p))),
+            (
+                Method::Physical,
+                drive(&|p| compensate_pose(g, Some(&file), p).legs),
+            ),
             (
                 Method::PhysicalResidual,
                 drive(&|p| {
@@ -212,10 +202,6 @@ fn redo(g: &Geometry, o: &EvaluationOptions) -> Redone {
                     let left = compensate_pose(g, Some(&residual), p).corrections;
                     std::array::from_fn(|i| modelled[i] + left[i])
                 }),
-            ),
-            (
-                Method::PhysicalNetworks,
-                drive(&|p| compensate_pose(g, Some(&distilled), p).legs),
             ),
             (
                 Method::OrdinaryCoupled,

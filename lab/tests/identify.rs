@@ -4,9 +4,7 @@ mod common;
 
 use hexacomp_calibration::Error;
 use hexacomp_calibration::identify::{IdentifyOptions, PARAMETERS, PHYSICAL, identify};
-use hexacomp_calibration::physical_candidate::{
-    CandidateOptions, carried_into_networks, physical_candidate,
-};
+use hexacomp_calibration::physical_candidate::{physical_candidate, with_uncertainty};
 use hexacomp_calibration::pitch_resolution::{
     PITCH_RESOLUTIONS, SMOOTHNESS_WEIGHTS, chosen_resolution, identifications,
 };
@@ -230,18 +228,9 @@ fn the_lead_screw_resolution_is_chosen_by_held_out_error_and_follows_a_short_per
         choice.scores[0].cross_validated_rmse_mm > 1.2 * chosen.cross_validated_rmse_mm,
         "{choice:?}"
     );
-    // The physical candidate is identified, scored and carried with the chosen resolution.
-    let candidate = physical_candidate(
-        &g,
-        &kept,
-        choice.clone(),
-        &CandidateOptions {
-            distill: common::cheap_distill(),
-            repeatability: Repeatability::Known(0.004),
-        },
-        &|_| {},
-    )
-    .unwrap();
+    // The physical candidate is identified and scored with the chosen resolution.
+    let candidate =
+        physical_candidate(&g, &kept, choice.clone(), Repeatability::Known(0.004), 1).unwrap();
     assert_eq!(candidate.resolution, choice);
     assert_eq!(
         candidate.cross_validated_rmse_mm,
@@ -250,32 +239,25 @@ fn the_lead_screw_resolution_is_chosen_by_held_out_error_and_follows_a_short_per
     assert!(candidate.networks_uncertainty.is_ok());
     // An alternative resolution that cannot be identified (two coefficients: at least four are
     // needed) leaves the model without an uncertainty, naming it, and the model is still
-    // carried; another resolution widens the uncertainty, and the model's own among the
+    // written; another resolution widens the uncertainty, and the model's own among the
     // alternatives is skipped (it would add nothing and count as one more choice).
     let physical = identify(&g, &kept, &choice.options).unwrap().model;
     let carried = |bases: &[usize]| {
-        carried_into_networks(
+        with_uncertainty(
             &g,
             (&physical, &choice.options),
             bases,
-            &kept,
-            &common::cheap_distill(),
+            (&kept, 0.02),
             Repeatability::Known(0.004),
-            &|_| {},
+            1,
         )
         .unwrap()
     };
     let failed = carried(&[2]);
     let why = failed.uncertainty.unwrap_err().to_string();
     assert!(why.contains("2 lead-screw coefficients"), "{why}");
-    assert!(failed.distilled.model.uncertainty.is_none());
-    let uncertainty = |bases: &[usize]| {
-        carried(bases)
-            .distilled
-            .model
-            .uncertainty
-            .expect("an uncertainty")
-    };
+    assert!(failed.model.uncertainty.is_none());
+    let uncertainty = |bases: &[usize]| carried(bases).model.uncertainty.expect("an uncertainty");
     let own = chosen.pitch_basis;
     let other = if own == 12 { 16 } else { 12 };
     let alone = uncertainty(&[]);

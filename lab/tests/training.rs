@@ -515,7 +515,7 @@ fn the_seed_draws_the_initial_weights_and_not_only_the_split() {
     // Not merely the rounding of another summation order: other weights altogether.
     let weights = |m: &Model| match &m.networks {
         Networks::Coupled(n) => n.weights().to_vec(),
-        Networks::Decoupled(_) => unreachable!("coupled"),
+        _ => unreachable!("coupled"),
     };
     let (wa, wc) = (weights(&a), weights(&c));
     let largest = (0..wa.len())

@@ -70,6 +70,12 @@ struct ServingModel {
 /// A one-line summary of a model for the status report.
 pub fn summarise(model: &hexacomp_core::model::Model) -> String {
     let p = &model.provenance;
+    if model.is_physical() {
+        return format!(
+            "physical model, {} configurations, {:.4} mm cross-validated; {}",
+            p.configurations, p.validation_rmse_mm, p.source
+        );
+    }
     format!(
         "hidden {:?}, {} legs, {} configurations, validation RMSE {:.4} mm; {}",
         model.hidden_nodes(),

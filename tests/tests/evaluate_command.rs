@@ -2,7 +2,6 @@
 
 use std::process::Command;
 
-use hexacomp_calibration::distill::DistillOptions;
 use hexacomp_calibration::pitch_resolution::PITCH_RESOLUTIONS;
 use hexacomp_calibration::train::TrainOptions;
 use hexacomp_core::Geometry;
@@ -70,7 +69,6 @@ fn the_evaluate_command_prints_the_tables_of_the_largest_size_and_writes_the_fig
         noise_seed: 2,
         instrument_seed: 3,
         train: TrainOptions::default(),
-        distill: DistillOptions::default(),
     };
     let evaluation = evaluate(&g, &o, &|_| {}).unwrap();
     let largest = &evaluation.sizes[0];

@@ -190,7 +190,7 @@ fn bad_model_files_are_refused_each_with_its_reason() {
         (
             "newer.hxm",
             newer,
-            "format version 9, this build reads versions 1 to 2",
+            "format version 9, this build reads versions 1 to 3",
         ),
         ("text.hxm", b"id,q1\n".to_vec(), "not a hexacomp model file"),
     ];
@@ -281,6 +281,8 @@ fn calibrate_runs_the_whole_pipeline_and_summarises() {
     let out_dir = dir.path().join("cal");
     let report = ok(&[
         "calibrate",
+        "--arch",
+        "physical,coupled,decoupled",
         "--count",
         "60",
         "--validation",
@@ -304,18 +306,15 @@ fn calibrate_runs_the_whole_pipeline_and_summarises() {
     // machine, whose errors have the physical model's form, the physical model wins and is the
     // model file.
     for (name, says) in [
-        ("coupled", "holdout validation RMSE"),
-        ("decoupled", "holdout validation RMSE"),
-        ("physical", "departure from the model"),
+        ("coupled", "hidden nodes"),
+        ("decoupled", "hidden nodes"),
+        ("physical", "identified and cross-validated in"),
     ] {
         let line = report
             .lines()
             .find(|l| l.starts_with(&format!("  {name} ")) && l.contains("cross-validated"))
             .unwrap_or_else(|| panic!("no cross-validated {name} summary in\n{report}"));
-        assert!(
-            line.contains("hidden nodes") && line.contains(says),
-            "{line}"
-        );
+        assert!(line.contains(says), "{line}");
     }
     assert!(
         report.contains("model.hxm = the physical model"),
@@ -383,7 +382,7 @@ fn calibrate_runs_the_whole_pipeline_and_summarises() {
             .parse()
             .unwrap()
     };
-    let physical = reached_mean("physical model (as networks)");
+    let physical = reached_mean("physical model ");
     let floor = reached_mean("floor (exact legs, with the machine's repeatability)");
     assert!(
         floor < physical && physical < row[0],
@@ -400,7 +399,7 @@ fn calibrate_runs_the_whole_pipeline_and_summarises() {
     }
     let line = report
         .lines()
-        .find(|l| l.starts_with("physical model (as networks)"))
+        .find(|l| l.starts_with("physical model "))
         .unwrap();
     let cells: Vec<&str> = line.split_whitespace().collect();
     let share: f64 = cells[cells.len() - 2].parse().unwrap();
@@ -461,6 +460,53 @@ fn calibrate_runs_the_whole_pipeline_and_summarises() {
         let refused = trainer(&["calibrate", bad, "--out-dir", path_str(&out_dir)]);
         assert!(!refused.status.success());
         assert_says(&refused.stderr, "is not a repeatability in mm");
+    }
+}
+
+/// By default `calibrate` fits the physical model alone and writes it as it is: a version-3
+/// model file that `inspect` shows with its cross-validated accuracy, and whose corrections at a
+/// pose are the model's own, the same from the pose as from its nominal legs.
+#[test]
+fn calibrate_by_default_writes_the_physical_model_itself() {
+    let dir = tempfile::tempdir().unwrap();
+    let out_dir = dir.path().join("cal");
+    let report = ok(&[
+        "calibrate",
+        "--count",
+        "60",
+        "--validation",
+        "10",
+        "--out-dir",
+        path_str(&out_dir),
+    ]);
+    assert!(!report.contains("Levenberg"), "networks trained:\n{report}");
+    for file in ["model-coupled.hxm", "model-decoupled.hxm"] {
+        assert!(!out_dir.join(file).exists(), "{file} written");
+    }
+    let geometry = Geometry::prototype();
+    let model = Model::load(&out_dir.join("model.hxm"), &geometry).unwrap();
+    assert!(model.is_physical());
+    assert_eq!(model.format_version(), 3);
+    assert!(model.uncertainty.is_some());
+    let inspect = ok(&["inspect", path_str(&out_dir.join("model.hxm"))]);
+    assert!(
+        inspect.contains("mm cross-validated (Eq. 21, against the measurements)"),
+        "{inspect}"
+    );
+    let pose = hexacomp_core::Pose::from_mm_deg([10.0, -5.0, 330.0, 1.0, -2.0, 3.0]);
+    let from_pose = compensate_pose(&geometry, Some(&model), &pose);
+    let q = hexacomp_core::inverse_kinematics(&geometry, &pose).lengths;
+    let from_legs = compensate_legs(&geometry, Some(&model), &q);
+    assert_eq!(from_pose.status, from_legs.status);
+    for i in 0..6 {
+        assert!(
+            (from_pose.legs[i] - from_legs.legs[i]).abs() < 1e-9,
+            "leg {i}: {from_pose:?} {from_legs:?}"
+        );
+        assert!(
+            from_pose.corrections[i].abs() > 1e-3,
+            "leg {i}: {from_pose:?}"
+        );
     }
 }
 

@@ -10,7 +10,7 @@ use crate::session::{PathArgs, Session, SetupArgs, VariantKind};
 use crate::stream::{Pacing, StreamOptions, stream};
 
 /// The one-command demo: calibrate the virtual prototype (plan, simulated measurement, robust
-/// joint corrections, the physical model carried into networks with its uncertainty: the model
+/// joint corrections, the physical model with its uncertainty: the model
 /// `hexacomp-trainer calibrate` chooses there), start the service without a model, hot-swap the
 /// calibrated model in, stream an interpolated path at the interpolation rate through it, and
 /// print the path accuracy of the virtual machine before and after compensation, the service's

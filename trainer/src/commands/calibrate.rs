@@ -4,10 +4,9 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::Context;
-use hexacomp_calibration::distill::DistillOptions;
 use hexacomp_calibration::identify::{IdentifyOptions, identify};
 use hexacomp_calibration::physical_candidate::{
-    CandidateOptions, NetworksUncertainty, PhysicalCandidate, physical_candidate,
+    NetworksUncertainty, PhysicalCandidate, physical_candidate,
 };
 use hexacomp_calibration::pipeline::{Pipeline, Solved};
 use hexacomp_calibration::pitch_resolution::{
@@ -16,11 +15,12 @@ use hexacomp_calibration::pitch_resolution::{
 use hexacomp_calibration::plan::PlanOptions;
 use hexacomp_calibration::residual_noise::ShapeSplit;
 use hexacomp_calibration::train::{
-    Architecture, CROSS_VALIDATION_FOLDS, TrainOptions, Trained, can_cross_validate,
-    commanded_legs, cross_validated_rmse, training_work,
+    Architecture, CROSS_VALIDATION_FOLDS, TrainOptions, can_cross_validate, commanded_legs,
+    cross_validated_rmse,
 };
 use hexacomp_calibration::uncertainty::{Coverage, Repeatability};
 use hexacomp_core::compensator::compensate_pose;
+use hexacomp_core::model::Model;
 use hexacomp_core::records::MeasuredConfiguration;
 use hexacomp_core::sampling::{SamplerOptions, WorkspaceSampler};
 use hexacomp_core::stats::PoseErrorStats;
@@ -41,18 +41,17 @@ use super::measurements_input::MeasurementsInput;
 use super::{ResultsFolder, write_bytes};
 use hexacomp_report::table::Table;
 
-/// Calibrate in one command: measure, solve, train and identify, evaluate, write the models.
+/// Calibrate in one command: measure, solve, identify (or train), evaluate, write the models.
 ///
 /// Plan → measure (the virtual platform, or --measurements from a real
-/// device) → solve the robust joint corrections → train coupled and decoupled networks with
-/// hidden-node selection, and identify the physical model (geometry, a lead-screw curve per
-/// leg, compliance under the weight) and carry it into networks → evaluate → write the models.
+/// device) → solve the robust joint corrections → identify the physical model (geometry, a
+/// lead-screw curve per leg, compliance under the weight), and with --arch train the paper's
+/// coupled or decoupled networks with hidden-node selection → evaluate → write the models.
 ///
-/// Writes into --out-dir: poses.csv, measurements.csv, corrections.csv, model-coupled.hxm,
-/// model-decoupled.hxm and their selection curves (SVG), model-physical.hxm, and model.hxm, the
-/// one of the three that predicts best the configurations it was not fitted on (5-fold
-/// cross-validation on the same folds; for the physical model the networks' departure from the
-/// model is added). On the virtual platform the models are also
+/// Writes into --out-dir: poses.csv, measurements.csv, corrections.csv, model-physical.hxm
+/// (with --arch also model-coupled.hxm, model-decoupled.hxm and their selection curves, SVG),
+/// and model.hxm, the one of them that predicts best the configurations it was not fitted on
+/// (5-fold cross-validation on the same folds). On the virtual platform the models are also
 /// checked on fresh poses against the uncompensated machine, the model-based baseline and the
 /// floor (the machine's exact legs, driven with its repeatability). Ends with a summary and the
 /// time each stage took.
@@ -81,10 +80,12 @@ pub struct CalibrateArgs {
         conflicts_with = "measurements"
     )]
     validation: usize,
+    /// The models to fit and compare, comma-separated: the physical model, and the paper's
+    /// coupled and decoupled networks (`--arch physical,coupled,decoupled` compares all three;
+    /// the networks take some seconds each).
+    #[arg(long, value_enum, value_delimiter = ',', default_value = "physical")]
+    arch: Vec<Method>,
     /// Network input of the coupled and decoupled networks (see `train --help`).
-    ///
-    /// The physical model's networks always take the equivalent legs, where they are
-    /// trained exactly.
     #[arg(help_heading = "Advanced", long, value_enum, default_value_t = InputArg::Equivalent)]
     input: InputArg,
     /// The machine's repeatability, mm: σ of one leg's length error at every move.
@@ -117,7 +118,23 @@ pub struct CalibrateArgs {
     screening: MeasuredScreeningArgs,
 }
 
+/// A model `calibrate` can fit.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum Method {
+    /// The physical model: geometry, a lead-screw curve per leg, compliance (the default).
+    Physical,
+    /// The paper's coupled network (one network, six outputs).
+    Coupled,
+    /// The paper's decoupled networks (one per leg).
+    Decoupled,
+}
+
 impl CalibrateArgs {
+    /// Whether --arch asks for `method`.
+    fn wants(&self, method: Method) -> bool {
+        self.arch.contains(&method)
+    }
+
     /// The files this command reads and writes.
     pub fn files(&self) -> super::Files<'_> {
         super::Files {
@@ -210,15 +227,19 @@ pub fn run(geometry: &Geometry, args: &CalibrateArgs) -> anyhow::Result<()> {
     write_outcomes(&dir.join("corrections.csv"), &kept)?;
     stages.record("solve corrections", start);
 
-    let mut candidates = train_both(
+    let physical_possible = cross_validated(&solved);
+    let networks = networks_to_train(args, physical_possible);
+    let mut candidates = train_networks(
         geometry,
         &pipeline,
         &solved,
-        measurements.len(),
+        (measurements.len(), &networks),
         dir,
         &mut stages,
     )?;
-    let fresh_move = if cross_validated(&solved) {
+    let fresh_move = if !args.wants(Method::Physical) {
+        None
+    } else if physical_possible {
         let start = Instant::now();
         let fresh_move = add_physical(
             geometry,
@@ -234,6 +255,12 @@ pub fn run(geometry: &Geometry, args: &CalibrateArgs) -> anyhow::Result<()> {
         say_too_few_for_physical(&solved);
         None
     };
+    if candidates.is_empty() {
+        println!("training the paper's networks instead");
+        let both = [Architecture::Coupled, Architecture::Decoupled];
+        let source = (measurements.len(), &both[..]);
+        candidates = train_networks(geometry, &pipeline, &solved, source, dir, &mut stages)?;
+    }
     let best = save_models(&candidates, dir)?;
 
     let check = if args.measurements.is_none() {
@@ -253,7 +280,7 @@ pub fn run(geometry: &Geometry, args: &CalibrateArgs) -> anyhow::Result<()> {
         best.name,
         args.out_dir.display()
     );
-    if let Some(u) = &best.trained.model.uncertainty {
+    if let Some(u) = &best.model.uncertainty {
         print_uncertainty(u, repeatability, fresh_move);
     }
     stages.print(total);
@@ -297,8 +324,22 @@ fn pipeline(args: &CalibrateArgs) -> Pipeline {
     }
 }
 
+/// The networks to train: those --arch asks for, and both where the physical model is asked
+/// for alone but cannot be cross-validated (then there would be no model).
+fn networks_to_train(args: &CalibrateArgs, physical_possible: bool) -> Vec<Architecture> {
+    let only_physical = !args.wants(Method::Coupled) && !args.wants(Method::Decoupled);
+    [
+        (Method::Coupled, Architecture::Coupled),
+        (Method::Decoupled, Architecture::Decoupled),
+    ]
+    .into_iter()
+    .filter(|(method, _)| args.wants(*method) || (only_physical && !physical_possible))
+    .map(|(_, architecture)| architecture)
+    .collect()
+}
+
 /// Adds the physical model to the `candidates` and gives the networks its uncertainty; a
-/// physical model that cannot be identified or carried into networks leaves the choice to the
+/// physical model that cannot be identified leaves the choice to the
 /// networks, and says why. Returns σ of each leg's length at a fresh move the uncertainty takes
 /// (mm), and whether it holds more than the repeatability.
 fn add_physical(
@@ -318,7 +359,7 @@ fn add_physical(
             );
             for network in candidates.iter_mut() {
                 match uncertainty.of_networks(network.score_mm) {
-                    Ok(u) => network.trained.model.uncertainty = Some(u),
+                    Ok(u) => network.model.uncertainty = Some(u),
                     Err(e) => {
                         println!("the {} networks carry no uncertainty: {e}", network.name)
                     }
@@ -344,8 +385,8 @@ fn say_too_few_for_physical(solved: &Solved) {
     println!(
         "physical model left out: {} configurations are too few to cross-validate it on \
          {CROSS_VALIDATION_FOLDS} folds (two per fold to hold out besides those holding a leg's \
-         shortest or longest length, never held out); the networks are compared by their \
-         holdout validation RMSE",
+         shortest or longest length, never held out); without another model asked for, the \
+         paper's networks are trained instead, compared by their holdout validation RMSE",
         solved.corrections.len()
     );
 }
@@ -355,15 +396,14 @@ fn say_too_few_for_physical(solved: &Solved) {
 fn save_models<'a>(candidates: &'a [Candidate], dir: &Path) -> anyhow::Result<&'a Candidate> {
     for candidate in candidates {
         candidate
-            .trained
             .model
             .save(&dir.join(format!("model-{}.hxm", candidate.name)))?;
     }
     let best = candidates
         .iter()
         .min_by(|a, b| a.score_mm.total_cmp(&b.score_mm))
-        .expect("the networks are candidates");
-    best.trained.model.save(&dir.join("model.hxm"))?;
+        .expect("a model is fitted: the physical one, or networks where it cannot be");
+    best.model.save(&dir.join("model.hxm"))?;
     Ok(best)
 }
 
@@ -485,7 +525,7 @@ struct Candidate {
     /// Its row in the check on fresh poses.
     label: &'static str,
     /// The model.
-    trained: Trained,
+    model: Model,
     /// Its error on configurations it was not fitted on ([`CROSS_VALIDATION_FOLDS`]-fold cross-validation,
     /// Eq. 21; the holdout validation RMSE when there are too few to cross-validate), mm: what
     /// the candidates are compared by.
@@ -509,18 +549,18 @@ fn source(configurations: usize) -> String {
     )
 }
 
-/// Trains the coupled and the decoupled networks on the solved corrections, writing each
-/// model's selection curve into `dir`.
-fn train_both(
+/// Trains the networks of `architectures` on the solved corrections of `configurations`,
+/// writing each model's selection curve into `dir`.
+fn train_networks(
     geometry: &Geometry,
     pipeline: &Pipeline,
     solved: &Solved,
-    configurations: usize,
+    (configurations, architectures): (usize, &[Architecture]),
     dir: &Path,
     stages: &mut Stages,
 ) -> anyhow::Result<Vec<Candidate>> {
     let mut candidates = Vec::new();
-    for architecture in [Architecture::Coupled, Architecture::Decoupled] {
+    for &architecture in architectures {
         let start = Instant::now();
         let t = train_with_progress(
             &solved.corrections,
@@ -573,14 +613,14 @@ fn train_both(
                 t.stops
             ),
             score_mm,
-            trained: t,
+            model: t.model,
         });
     }
     Ok(candidates)
 }
 
 /// Identifies the physical model on the kept configurations, cross-validates it on the folds
-/// the networks are, and carries it into networks (for model-physical.hxm).
+/// the networks are, and gives it its uncertainty (for model-physical.hxm).
 fn physical(
     geometry: &Geometry,
     pipeline: &Pipeline,
@@ -588,32 +628,24 @@ fn physical(
     measurements: &[MeasuredConfiguration],
     repeatability: Repeatability,
 ) -> anyhow::Result<(Candidate, hexacomp_calibration::Result<NetworksUncertainty>)> {
-    let options = CandidateOptions {
-        distill: DistillOptions::default(),
-        repeatability,
-    };
     let kept = solved.kept_of(measurements);
     let choosing = Instant::now();
     let resolution = choose_resolution(geometry, pipeline, solved, &kept)?;
     let choosing = choosing.elapsed().as_secs_f64();
-    // The drawn poses and the measured configurations' own.
-    let poses = options.distill.samples + solved.corrections.len();
-    let bar = work_bar(
-        training_work(poses, Architecture::Decoupled, &options.distill.train),
-        "identifying the physical model, carrying it into networks".into(),
-    );
-    let identified = physical_candidate(geometry, &kept, resolution, &options, &|n| bar.inc(n));
-    bar.finish_and_clear();
-    let mut candidate = identified?;
-    let model = &mut candidate.distilled.model;
-    model.provenance.source = format!(
-        "{}: physical model ({} lead-screw coefficients per leg, smoothness {}) as networks, \
-         {} poses, cross-validated {:.4} mm",
+    let mut candidate = physical_candidate(
+        geometry,
+        &kept,
+        resolution,
+        repeatability,
+        pipeline.train.seed,
+    )?;
+    candidate.model.provenance.source = format!(
+        "{}: physical model ({} lead-screw coefficients per leg, smoothness {}), \
+         cross-validated {:.4} mm",
         source(measurements.len()),
         candidate.resolution.options.pitch_basis,
         candidate.resolution.options.smoothness,
-        poses,
-        candidate.score_mm
+        candidate.cross_validated_rmse_mm
     );
     print_resolution(&candidate);
     if let Ok(uncertainty) = &candidate.networks_uncertainty
@@ -621,34 +653,21 @@ fn physical(
     {
         print_residual_split(uncertainty, split, repeatability);
     }
-    let f = candidate.fidelity;
-    // The departure's RMS enters the score; its largest value is where the networks follow the
-    // model least, at the edge of the measured range.
     println!(
         "physical model: {:.4} mm cross-validated (each configuration predicted by the model \
-         identified without its fold); its networks (hidden nodes {:?}) command it within \
-         {:.4} mm RMS, {:.4} mm at most, on {} fresh poses",
+         identified without its fold); the model file holds the model itself",
         candidate.cross_validated_rmse_mm,
-        candidate.distilled.model.hidden_nodes(),
-        f.rms_mm,
-        f.max_mm,
-        f.poses
     );
     let candidate_of_physical = Candidate {
         name: "physical",
-        label: "physical model (as networks)",
+        label: "physical model",
         summary: format!(
-            "hidden nodes {:?}, cross-validated {:.4} mm with the networks' departure from the \
-             model ({:.4} mm RMS per leg) added; identified, cross-validated and carried into \
-             networks in {:.2} s; {}",
-            candidate.distilled.model.hidden_nodes(),
-            candidate.score_mm,
-            f.rms_mm,
+            "cross-validated {:.4} mm; identified and cross-validated in {:.2} s",
+            candidate.cross_validated_rmse_mm,
             choosing + candidate.seconds,
-            candidate.distilled.stops
         ),
-        score_mm: candidate.score_mm,
-        trained: candidate.distilled,
+        score_mm: candidate.cross_validated_rmse_mm,
+        model: candidate.model,
     };
     Ok((candidate_of_physical, candidate.networks_uncertainty))
 }
@@ -850,7 +869,7 @@ fn check_on_fresh_poses(
         ),
     ];
     for candidate in candidates {
-        let model = &candidate.trained.model;
+        let model = &candidate.model;
         let e = errors(&|p| compensate_pose(geometry, Some(model), p).legs)?;
         let uncertainty = model
             .uncertainty

@@ -2,7 +2,6 @@
 
 use std::path::{Path, PathBuf};
 
-use hexacomp_calibration::distill::DistillOptions;
 use hexacomp_calibration::identify::PHYSICAL;
 use hexacomp_calibration::pitch_resolution::{
     PITCH_RESOLUTIONS, ResolutionScore, SMOOTHNESS_WEIGHTS,
@@ -26,8 +25,8 @@ use hexacomp_report::table::Table;
 /// Compare the compensation methods on the virtual platform, on fresh validation poses that no
 /// training used: uncompensated, the model-based baseline (identified geometry), the physical
 /// model (geometry, a lead-screw curve per leg, compliance under the weight) alone, with
-/// decoupled networks on the corrections it leaves, and carried into networks as `calibrate`
-/// writes it (model-physical.hxm), the ordinary
+/// decoupled networks on the corrections it leaves (the physical model as `calibrate` writes
+/// it, model-physical.hxm), the ordinary
 /// compensator (coupled network, λ = 0), the robust coupled and decoupled compensators, the
 /// decoupled networks trained on the exact corrections (known only in simulation), and the
 /// floor: the exact legs of each pose, driven with the machine's repeatability, which no method
@@ -95,7 +94,6 @@ pub fn run(geometry: &Geometry, args: &EvaluateArgs) -> anyhow::Result<()> {
             input: args.input.into(),
             ..Default::default()
         },
-        distill: DistillOptions::default(),
     };
     // Made first: a folder that cannot be replaced is refused before the evaluation's minutes.
     let folder = ResultsFolder::create(&args.out_dir, "evaluate", &FIGURES)?;

@@ -58,8 +58,13 @@ pub fn run(geometry: &Geometry, args: &InspectArgs) -> anyhow::Result<()> {
     let created =
         humantime::format_rfc3339_seconds(UNIX_EPOCH + Duration::from_secs(p.created_unix_s));
     let architecture = match &model.networks {
-        Networks::Coupled(_) => "coupled (one network, six outputs)",
-        Networks::Decoupled(_) => "decoupled (six single-output networks)",
+        Networks::Coupled(_) => "coupled (one network, six outputs)".to_string(),
+        Networks::Decoupled(_) => "decoupled (six single-output networks)".to_string(),
+        Networks::Physical(physical) => format!(
+            "physical model (the identified geometry, lead-screw curves of {} coefficients per \
+             leg, compliance under the weight)",
+            physical.machine().pitch.basis()
+        ),
     };
     let bound = if model.geometry == geometry.fingerprint() {
         format!("matches geometry {}", geometry.name)
@@ -77,15 +82,26 @@ pub fn run(geometry: &Geometry, args: &InspectArgs) -> anyhow::Result<()> {
         model.format_version()
     );
     println!("architecture   {architecture}");
-    println!("hidden nodes   {:?}", model.hidden_nodes());
-    println!("network input  {} legs", model.input.name());
-    println!("geometry       {} ({bound})", model.geometry);
-    println!("created        {created}");
-    println!(
-        "trained on     {} configurations ({} in the final fit, {} held out to choose the size)",
-        p.configurations, p.training_samples, p.validation_samples
-    );
-    println!("validation     RMSE {:.4} mm", p.validation_rmse_mm);
+    if model.is_physical() {
+        println!("geometry       {} ({bound})", model.geometry);
+        println!("created        {created}");
+        println!("identified on  {} configurations", p.configurations);
+        println!(
+            "accuracy       {:.4} mm cross-validated (Eq. 21, against the measurements)",
+            p.validation_rmse_mm
+        );
+    } else {
+        println!("hidden nodes   {:?}", model.hidden_nodes());
+        println!("network input  {} legs", model.input.name());
+        println!("geometry       {} ({bound})", model.geometry);
+        println!("created        {created}");
+        println!(
+            "trained on     {} configurations ({} in the final fit, {} held out to choose the \
+             size)",
+            p.configurations, p.training_samples, p.validation_samples
+        );
+        println!("validation     RMSE {:.4} mm", p.validation_rmse_mm);
+    }
     println!("source         {}", p.source);
     match &model.uncertainty {
         Some(u) => println!(
