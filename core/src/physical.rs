@@ -27,6 +27,9 @@ use crate::kinematics::inverse_kinematics;
 use crate::pose::Pose;
 use crate::screw::ActuationScrews;
 
+/// Newton steps of a lead-screw curve's inversion ([`PitchCurves::inverse`]).
+const NEWTON_STEPS: usize = 3;
+
 /// Wrenches the compliance is modelled under: the weight's force and its moments.
 pub const COMPLIANCE_TERMS: usize = 4;
 
@@ -125,7 +128,7 @@ impl PitchCurves {
     /// four functions non-zero there in the uniform B-spline's matrix form (to rounding the
     /// same as [`PitchCurves::error`] and [`PitchCurves::slope`], with no division).
     /// Allocation-free.
-    #[inline]
+    #[inline(always)]
     fn error_and_slope(&self, leg: usize, q: f64, inverse_spacing: f64) -> (f64, f64) {
         let coefficients = &self.coefficients[leg];
         let count = coefficients.len();
@@ -143,53 +146,60 @@ impl PitchCurves {
             truncated
         };
         let f = u - k;
-        let coefficient = |j: f64| {
+        // Coefficient k − 1 + d, zero beyond the curve's (a NaN or huge `q` reads none).
+        let first = k - 1.0;
+        let coefficient = |d: f64| {
+            let j = first + d;
             if j >= 0.0 && j < count as f64 {
                 coefficients[j as usize]
             } else {
                 0.0
             }
         };
-        let c = [-1.0, 0.0, 1.0, 2.0].map(|d| coefficient(k + d));
+        let (c0, c1, c2, c3) = (
+            coefficient(0.0),
+            coefficient(1.0),
+            coefficient(2.0),
+            coefficient(3.0),
+        );
         let (f2, f3) = (f * f, f * f * f);
         let g = 1.0 - f;
-        let weights = [
-            g * g * g / 6.0,
-            (3.0 * f3 - 6.0 * f2 + 4.0) / 6.0,
-            (-3.0 * f3 + 3.0 * f2 + 3.0 * f + 1.0) / 6.0,
-            f3 / 6.0,
-        ];
-        let slopes = [
-            -0.5 * g * g,
-            1.5 * f2 - 2.0 * f,
-            -1.5 * f2 + f + 0.5,
-            0.5 * f2,
-        ];
-        let error = (0..4).map(|i| weights[i] * c[i]).sum();
-        let slope = (0..4).map(|i| slopes[i] * c[i]).sum::<f64>() * inverse_spacing;
+        // A sixth as a product: a division would be most of the evaluation's latency.
+        const SIXTH: f64 = 1.0 / 6.0;
+        let error = (g * g * g * c0
+            + (3.0 * f3 - 6.0 * f2 + 4.0) * c1
+            + (-3.0 * f3 + 3.0 * f2 + 3.0 * f + 1.0) * c2
+            + f3 * c3)
+            * SIXTH;
+        let slope = (-0.5 * g * g * c0
+            + (1.5 * f2 - 2.0 * f) * c1
+            + (-1.5 * f2 + f + 0.5) * c2
+            + 0.5 * f2 * c3)
+            * inverse_spacing;
         (error, slope)
     }
 
-    /// The encoder length `q` whose unloaded length `q + p(q)` is `unloaded`, mm, by Newton's
-    /// method from `unloaded − p(unloaded)`: each step squares the error (scaled by the curve's
-    /// curvature, below 1e-3 per mm for lead-screw errors of tenths of a millimetre), so the
-    /// steps stop once one moves `q` by less than 1e-12 mm (two or three for such curves).
+    /// The encoder lengths `q` whose unloaded lengths `q_i + p_i(q_i)` are `unloaded`, mm, by
+    /// Newton's method from `unloaded − p(unloaded)`, the six legs in step (so their steps
+    /// overlap in the pipeline). Each step squares the error, scaled by the curve's curvature
+    /// over `2(1 + p')` (about 1e-3 per mm for lead-screw errors of tenths of a millimetre over
+    /// knots 10–30 mm apart): from a start within 1e-2 mm, two steps leave 1e-17 mm; three are
+    /// taken. Allocation-free.
     #[inline]
-    pub fn inverse(&self, leg: usize, unloaded: f64) -> f64 {
+    pub fn inverse(&self, unloaded: &[f64; LEGS]) -> [f64; LEGS] {
         if self.basis() == 0 {
-            return unloaded;
+            return *unloaded;
         }
-        let (spacing, _) = self.position(unloaded);
+        let (spacing, _) = self.position(unloaded[0]);
         let inverse_spacing = 1.0 / spacing;
-        let mut q = unloaded - self.error_and_slope(leg, unloaded, inverse_spacing).0;
-        for _ in 0..8 {
-            let (error, slope) = self.error_and_slope(leg, q, inverse_spacing);
-            let step = (q + error - unloaded) / (1.0 + slope);
-            q -= step;
-            // A NaN step ends the steps too.
-            if step.abs() <= 1e-12 || step.is_nan() {
-                break;
-            }
+        let mut q: [f64; LEGS] = std::array::from_fn(|i| {
+            unloaded[i] - self.error_and_slope(i, unloaded[i], inverse_spacing).0
+        });
+        for _ in 0..NEWTON_STEPS {
+            q = std::array::from_fn(|i| {
+                let (error, slope) = self.error_and_slope(i, q[i], inverse_spacing);
+                q[i] - (q[i] + error - unloaded[i]) / (1.0 + slope)
+            });
         }
         q
     }
@@ -234,6 +244,22 @@ fn cubic_b_spline(t: f64) -> f64 {
     }
 }
 
+/// Each leg's compression under each unit wrench `w_m` (mm per unit of the wrench's compliance
+/// coefficient) for the force Jacobian `w` (by rows) at a pose of rotation `rotation`; zero at a
+/// singular pose.
+fn compressions(w: [[f64; LEGS]; LEGS], rotation: &glam::DMat3) -> [[f64; COMPLIANCE_TERMS]; LEGS] {
+    // The weight pulls along −z; a centre of mass along platform axis m adds the moment
+    // (R·e_m) × (−z). Column m is −w_m, solved for all four at once.
+    let mut wrenches = [[0.0; COMPLIANCE_TERMS]; LEGS];
+    wrenches[2][0] = 1.0;
+    for (m, axis) in DVec3::AXES.iter().enumerate() {
+        let arm = *rotation * *axis;
+        wrenches[3][m + 1] = arm.y;
+        wrenches[4][m + 1] = -arm.x;
+    }
+    solve_six(w, wrenches).unwrap_or([[0.0; COMPLIANCE_TERMS]; LEGS])
+}
+
 /// `X` with `A·X = B` for a 6 × 6 `A` (rows) and four right-hand sides, by Gaussian
 /// elimination with partial pivoting (a sixth of nalgebra's generic LU's time here); `None`
 /// where a pivot is zero or not finite (a singular pose). Allocation-free.
@@ -249,9 +275,10 @@ fn solve_six(
         if p == 0.0 || !p.is_finite() {
             return None;
         }
+        let inverse_pivot = 1.0 / p;
         let (pivot_a, pivot_b) = (a[col], b[col]);
         for (a_row, b_row) in a.iter_mut().zip(b.iter_mut()).skip(col + 1) {
-            let factor = a_row[col] / p;
+            let factor = a_row[col] * inverse_pivot;
             for (value, above) in a_row.iter_mut().zip(pivot_a).skip(col) {
                 *value -= factor * above;
             }
@@ -262,9 +289,10 @@ fn solve_six(
     }
     let mut x = [[0.0; COMPLIANCE_TERMS]; LEGS];
     for row in (0..LEGS).rev() {
+        let inverse_diagonal = 1.0 / a[row][row];
         for m in 0..COMPLIANCE_TERMS {
             let known: f64 = (row + 1..LEGS).map(|k| a[row][k] * x[k][m]).sum();
-            x[row][m] = (b[row][m] - known) / a[row][row];
+            x[row][m] = (b[row][m] - known) * inverse_diagonal;
         }
     }
     Some(x)
@@ -313,28 +341,33 @@ impl PhysicalModel {
         pose: &Pose,
         unloaded: &[f64; LEGS],
     ) -> [[f64; COMPLIANCE_TERMS]; LEGS] {
-        let compressions = self.compressions(pose);
+        let rotation = pose.rotation();
+        let (_, w) = self.legs_at(pose, &rotation);
+        let compressions = compressions(w, &rotation);
         let middle = 0.5 * (self.geometry.leg_range[0] + self.geometry.leg_range[1]);
         std::array::from_fn(|i| std::array::from_fn(|m| compressions[i][m] * unloaded[i] / middle))
     }
 
-    /// Each leg's compression under each unit wrench `w_m` at `pose` (mm per unit of the
-    /// wrench's compliance coefficient); zero at a singular pose.
-    fn compressions(&self, pose: &Pose) -> [[f64; COMPLIANCE_TERMS]; LEGS] {
-        let screws = ActuationScrews::at(&self.geometry, pose);
-        let rotation = pose.rotation();
-        // The weight pulls along −z; a centre of mass along platform axis m adds the moment
-        // (R·e_m) × (−z). Column m is −w_m, solved for all four at once.
-        let mut wrenches = [[0.0; COMPLIANCE_TERMS]; LEGS];
-        wrenches[2][0] = 1.0;
-        for (m, axis) in DVec3::AXES.iter().enumerate() {
-            let arm = rotation * *axis;
-            wrenches[3][m + 1] = arm.y;
-            wrenches[4][m + 1] = -arm.x;
+    /// The geometry's legs at `pose` (whose rotation matrix is `rotation`): each leg's length
+    /// as [`inverse_kinematics`] gives it (mm), and the force Jacobian `W` by rows (Eq. 3:
+    /// column `i` leg `i`'s unit wrench, the moment about `A` in mm), from the same leg
+    /// vectors.
+    fn legs_at(&self, pose: &Pose, rotation: &glam::DMat3) -> ([f64; LEGS], [[f64; LEGS]; LEGS]) {
+        let g = &self.geometry;
+        let mut lengths = [0.0; LEGS];
+        let mut w = [[0.0; LEGS]; LEGS];
+        for i in 0..LEGS {
+            let lever = *rotation * g.platform_joints[i];
+            let leg = pose.position + lever - g.base_joints[i];
+            let length = leg.length();
+            lengths[i] = length - g.leg_offsets[i];
+            let s = leg / length;
+            let m = lever.cross(s);
+            for (row, value) in [s.x, s.y, s.z, m.x, m.y, m.z].into_iter().enumerate() {
+                w[row][i] = value;
+            }
         }
-        let w: [[f64; LEGS]; LEGS] =
-            std::array::from_fn(|row| std::array::from_fn(|leg| screws.unit_wrench(leg)[row]));
-        solve_six(w, wrenches).unwrap_or([[0.0; COMPLIANCE_TERMS]; LEGS])
+        (lengths, w)
     }
 
     /// The sag of every leg at `pose` for unloaded lengths `unloaded`, mm.
@@ -369,9 +402,10 @@ impl PhysicalModel {
     /// inverted. The sag is linear in the unloaded length (`sag_i = k_i · u_i` at a given
     /// pose), so the unloaded length is `loaded_i / (1 − k_i)`, in closed form. Allocation-free.
     pub fn command(&self, pose: &Pose) -> [f64; LEGS] {
-        let loaded = inverse_kinematics(&self.geometry, pose).lengths;
+        let rotation = pose.rotation();
+        let (loaded, w) = self.legs_at(pose, &rotation);
         let unloaded: [f64; LEGS] = if self.compliant() {
-            let compressions = self.compressions(pose);
+            let compressions = compressions(w, &rotation);
             let middle = 0.5 * (self.geometry.leg_range[0] + self.geometry.leg_range[1]);
             std::array::from_fn(|i| {
                 let k: f64 = (0..COMPLIANCE_TERMS)
@@ -383,7 +417,7 @@ impl PhysicalModel {
         } else {
             loaded
         };
-        std::array::from_fn(|i| self.pitch.inverse(i, unloaded[i]))
+        self.pitch.inverse(&unloaded)
     }
 
     /// Checks the curves and that every compliance coefficient is finite.
@@ -718,7 +752,7 @@ mod tests {
                     curves.slope(leg, q)
                 );
                 // The inverse lands on the unloaded length.
-                let inverse = curves.inverse(leg, q);
+                let inverse = curves.inverse(&[q; LEGS])[leg];
                 assert!(
                     (inverse + curves.error(leg, inverse) - q).abs() < 1e-11,
                     "leg {leg} at {q}"

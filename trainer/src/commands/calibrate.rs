@@ -238,6 +238,10 @@ pub fn run(geometry: &Geometry, args: &CalibrateArgs) -> anyhow::Result<()> {
         &mut stages,
     )?;
     let fresh_move = if !args.wants(Method::Physical) {
+        println!(
+            "the networks carry no uncertainty: it is propagated from the physical model's \
+             identification (add physical to --arch)"
+        );
         None
     } else if physical_possible {
         let start = Instant::now();
