@@ -158,7 +158,7 @@ pub struct SizeResult {
     /// The physical model's lead-screw resolution, chosen by cross-validation (`None`: too few
     /// configurations to cross-validate, eight coefficients).
     pub resolution: Option<ResolutionChoice>,
-    /// How the physical model's networks' uncertainty held on the validation poses (`None`:
+    /// How the physical model's uncertainty held on the validation poses (`None`:
     /// they carry none, too few configurations to fit it).
     pub uncertainty: Option<Coverage>,
 }

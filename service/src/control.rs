@@ -71,9 +71,14 @@ struct ServingModel {
 pub fn summarise(model: &hexacomp_core::model::Model) -> String {
     let p = &model.provenance;
     if model.is_physical() {
+        let accuracy = if p.validation_rmse_mm.is_finite() {
+            format!("{:.4} mm cross-validated", p.validation_rmse_mm)
+        } else {
+            "not cross-validated".to_string()
+        };
         return format!(
-            "physical model, {} configurations, {:.4} mm cross-validated; {}",
-            p.configurations, p.validation_rmse_mm, p.source
+            "physical model, {} configurations, {accuracy}; {}",
+            p.configurations, p.source
         );
     }
     format!(

@@ -297,11 +297,11 @@ fn print_smoothness(evaluation: &Evaluation) {
     }
 }
 
-/// Prints how well the physical model's networks state their uncertainty at every training
+/// Prints how well the physical model states their uncertainty at every training
 /// size: the share within 2σ, the mean σ (mm) and the floor's mean error (mm).
 fn print_uncertainty(evaluation: &Evaluation) {
     println!(
-        "Uncertainty of the physical model's networks: the share of validation poses whose \
+        "Uncertainty of the physical model: the share of validation poses whose \
          position error reached is within 2σ (95.45 % when calibrated), and the mean σ"
     );
     let mut table = Table::new([

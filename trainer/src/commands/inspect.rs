@@ -86,10 +86,14 @@ pub fn run(geometry: &Geometry, args: &InspectArgs) -> anyhow::Result<()> {
         println!("geometry       {} ({bound})", model.geometry);
         println!("created        {created}");
         println!("identified on  {} configurations", p.configurations);
-        println!(
-            "accuracy       {:.4} mm cross-validated (Eq. 21, against the measurements)",
-            p.validation_rmse_mm
-        );
+        if p.validation_rmse_mm.is_finite() {
+            println!(
+                "accuracy       {:.4} mm cross-validated (Eq. 21, against the measurements)",
+                p.validation_rmse_mm
+            );
+        } else {
+            println!("accuracy       not cross-validated (too few configurations)");
+        }
     } else {
         println!("hidden nodes   {:?}", model.hidden_nodes());
         println!("network input  {} legs", model.input.name());
