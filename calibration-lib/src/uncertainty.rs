@@ -11,8 +11,8 @@
 //! pose `x` commanded with the model's legs ([`crate::identify`]'s `G`), and the platform by the
 //! twist `T·G·δθ` (`T` the motion Jacobian, Eq. 3). Every move adds the leg errors `ε`
 //! (variance `w` each: the machine's repeatability, what the model's form misses where the
-//! residuals' shape shows it, [`crate::residual_noise`], the networks' departure from the model
-//! they carry): the pose-error twist has the covariance `T (G C Gᵀ + w I) Tᵀ`, and the position
+//! residuals' shape shows it, [`crate::residual_noise`], and for networks their excess error
+//! over the model's): the pose-error twist has the covariance `T (G C Gᵀ + w I) Tᵀ`, and the position
 //! error its upper-left 3 × 3 block `Σ`.
 //!
 //! Two approximations: `J` holds the pose while a parameter moves the legs, not the sag's

@@ -35,8 +35,8 @@ pub struct PositionUncertainty {
     /// `L⁻¹ / √13`, `L` the Cholesky factor of the configurations' mean `φφᵀ`: lower
     /// triangular, packed by rows (row `r` holds columns `0..=r`), unitless.
     pub whitening: Vec<f64>,
-    /// The variance every point has (the machine's repeatability, the networks' departure
-    /// from the model they carry, the model's own uncertainty at average leverage), mm².
+    /// The variance every point has (the machine's repeatability, for networks their excess
+    /// error over the physical model's, the model's own uncertainty at average leverage), mm².
     pub constant_variance_mm2: f64,
     /// The variance per unit of leverage (the model's uncertainty, growing where the
     /// configurations are sparse or absent), mm².
