@@ -110,23 +110,9 @@ impl PitchCurves {
             .sum()
     }
 
-    /// The slope of leg `leg`'s pitch error at encoder length `q`, mm per mm. Allocation-free.
-    #[inline]
-    pub fn slope(&self, leg: usize, q: f64) -> f64 {
-        if self.basis() == 0 {
-            return 0.0;
-        }
-        let (spacing, t) = self.position(q);
-        let coefficients = &self.coefficients[leg];
-        self.supporting(t)
-            .map(|j| cubic_b_spline_slope(t - j as f64) * coefficients[j])
-            .sum::<f64>()
-            / spacing
-    }
-
     /// Leg `leg`'s pitch error (mm) and its slope (mm per mm) at encoder length `q`, from the
     /// four functions non-zero there in the uniform B-spline's matrix form (to rounding the
-    /// same as [`PitchCurves::error`] and [`PitchCurves::slope`], with no division).
+    /// same as [`PitchCurves::error`], and its derivative, with no division).
     /// Allocation-free.
     #[inline(always)]
     fn error_and_slope(&self, leg: usize, q: f64, inverse_spacing: f64) -> (f64, f64) {
@@ -298,19 +284,6 @@ fn solve_six(
         }
     }
     Some(x)
-}
-
-/// The slope of [`cubic_b_spline`] at `t`.
-fn cubic_b_spline_slope(t: f64) -> f64 {
-    let a = t.abs();
-    let magnitude = if a < 1.0 {
-        -2.0 * a + 1.5 * a * a
-    } else if a < 2.0 {
-        -0.5 * (2.0 - a).powi(2)
-    } else {
-        0.0
-    };
-    magnitude * t.signum()
 }
 
 /// The identified machine.
@@ -768,13 +741,19 @@ mod tests {
                     .map(|(b, c)| b * c)
                     .sum();
                 assert_eq!(curves.error(leg, q), whole, "leg {leg} at {q}");
-                // The slope against a central difference (step 1e-4 mm: truncation ~1e-10).
+                // The serving evaluation: the same error to rounding, and its slope against a
+                // central difference (step 1e-4 mm: truncation ~1e-10).
+                let (spacing, _) = curves.position(q);
+                let (error, slope) = curves.error_and_slope(leg, q, 1.0 / spacing);
+                assert!(
+                    (error - whole).abs() < 1e-15,
+                    "leg {leg} at {q}: {error} {whole}"
+                );
                 let h = 1e-4;
                 let difference = (curves.error(leg, q + h) - curves.error(leg, q - h)) / (2.0 * h);
                 assert!(
-                    (curves.slope(leg, q) - difference).abs() < 1e-8,
-                    "leg {leg} at {q}: {} against {difference}",
-                    curves.slope(leg, q)
+                    (slope - difference).abs() < 1e-8,
+                    "leg {leg} at {q}: {slope} against {difference}"
                 );
                 // The inverse lands on the unloaded length.
                 let inverse = curves.inverse(&[q; LEGS])[leg];
