@@ -18,9 +18,8 @@ use hexacomp_core::{Geometry, LEGS, Pose, inverse_kinematics};
 
 use crate::error::{Error, Result};
 use crate::identify::{IdentifyOptions, identify};
-use crate::measured_range::measured_range;
 use crate::pitch_resolution::{ResolutionChoice, identified_on_every_configuration};
-use crate::train::correction_bounds;
+use crate::train::{correction_bounds, training_range};
 use crate::uncertainty::{Repeatability, UncertaintySource};
 
 /// The physical model's model file and how it was scored.
@@ -181,12 +180,8 @@ pub fn served(
             std::array::from_fn(|i| command[i] - q[i])
         })
         .collect();
-    let range = measured_range(nominal, &poses);
-    let training_range = std::array::from_fn(|leg| {
-        measurements.iter().fold(range[leg], |[lo, hi], m| {
-            [lo.min(m.legs[leg]), hi.max(m.legs[leg])]
-        })
-    });
+    let commanded: Vec<[f64; LEGS]> = measurements.iter().map(|m| m.legs).collect();
+    let training_range = training_range(&nominal_legs, &commanded);
     let created_unix_s = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
         .map_or(0, |d| d.as_secs());

@@ -207,7 +207,10 @@ pub fn leg_range(values: &[[f64; LEGS]], leg: usize) -> [f64; 2] {
 /// The model's training range per leg, mm: the run-time input is the nominal legs, so it covers
 /// both the commanded legs and the network-input legs of every row (they differ by the
 /// corrections when the input is the equivalent legs), whether the row was held out or not.
-fn training_range(inputs: &[[f64; LEGS]], commanded: &[[f64; LEGS]]) -> [[f64; 2]; LEGS] {
+pub(crate) fn training_range(
+    inputs: &[[f64; LEGS]],
+    commanded: &[[f64; LEGS]],
+) -> [[f64; 2]; LEGS] {
     std::array::from_fn(|leg| {
         let ([a, b], [c, d]) = (leg_range(inputs, leg), leg_range(commanded, leg));
         [a.min(c), b.max(d)]
